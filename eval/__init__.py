@@ -1,0 +1,1 @@
+"""Evaluation: metrics over run outputs (metrics.json), tables and plots made from them."""

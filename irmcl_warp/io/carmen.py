@@ -1,0 +1,185 @@
+"""CARMEN logs (``.log``, ``.clf``, optionally ``.gz``): FLASER, ROBOTLASER1 and ODOM lines.
+
+Line formats (CARMEN's logger):
+  FLASER n r_1..r_n x y theta odom_x odom_y odom_theta timestamp [host logger_timestamp]
+  ROBOTLASER1 type start_angle fov angular_res max_range accuracy remission_mode n r_1..r_n
+              m rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta
+              tv rv forward_safety side_safety turn_axis timestamp [host logger_timestamp]
+  ODOM x y theta tv rv accel timestamp [host logger_timestamp]
+Other message types (PARAM, SYNC, NEFF, RAWLASER*, ...) are counted and skipped.
+
+Scans keep the file's (recording) order; the odometry of a scan is the pose its own line carries.
+FLASER scans span 180 deg with angle_increment = pi / (n - 1), as the bags of the same logs declare.
+"""
+
+from __future__ import annotations
+
+import gzip
+import zlib
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.geometry import compose, inverse
+from irmcl_warp.io.beams import BeamPolicy, harmonise_beams, mask_ranges
+from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
+from irmcl_warp.io.errors import LogFormatError, warn_defects
+from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
+
+
+@dataclass
+class _Scan:
+    line: int
+    stamp: float
+    ranges: np.ndarray
+    odom: tuple
+    laser_pose: tuple
+    start_angle: float | None = None
+    fov: float | None = None
+    max_range: float | None = None
+
+
+@dataclass
+class CarmenContents:
+    scans: list = field(default_factory=list)
+    odom_lines: list = field(default_factory=list)  # (stamp, x, y, theta, tv)
+    skipped: Counter = field(default_factory=Counter)
+    truncated_last_line: bool = False
+
+
+def open_text(path: Path):
+    """Open plain or gzip text; gzip is recognised by its magic bytes, not the file name."""
+    with open(path, "rb") as f:
+        magic = f.read(2)
+    if magic == b"\x1f\x8b":
+        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
+    return open(path, "rt", encoding="utf-8", errors="replace")
+
+
+def _floats(path, line_no, tokens, what):
+    try:
+        values = np.array(tokens, dtype=np.float64)
+    except ValueError:
+        bad = next(t for t in tokens if not _is_float(t))
+        raise LogFormatError(path, f"line {line_no}", f"{what}: expected a number, found {bad!r}") from None
+    if not np.all(np.isfinite(values)):
+        raise LogFormatError(path, f"line {line_no}", f"{what}: NaN or infinite value")
+    return values
+
+
+def _is_float(t):
+    try:
+        float(t)
+        return True
+    except ValueError:
+        return False
+
+
+def _need(path, line_no, tokens, count, what):
+    if len(tokens) < count:
+        raise LogFormatError(path, f"line {line_no}", f"{what}: expected at least {count} fields, found {len(tokens)}")
+
+
+def _parse_flaser(path, n_line, tok):
+    _need(path, n_line, tok, 2, "FLASER")
+    n = int(_floats(path, n_line, tok[1:2], "FLASER beam count")[0])
+    _need(path, n_line, tok, 2 + n + 7, f"FLASER with {n} beams (n ranges, 6 pose values, timestamp)")
+    ranges = _floats(path, n_line, tok[2:2 + n], "FLASER ranges")
+    tail = _floats(path, n_line, tok[2 + n:2 + n + 7], "FLASER poses/timestamp")
+    return _Scan(n_line, tail[6], ranges, tuple(tail[3:6]), tuple(tail[0:3]))
+
+
+def _parse_robotlaser(path, n_line, tok):
+    _need(path, n_line, tok, 9, "ROBOTLASER1 header")
+    head = _floats(path, n_line, tok[1:9], "ROBOTLASER1 header")
+    n = int(head[7])
+    _need(path, n_line, tok, 10 + n, f"ROBOTLASER1 with {n} ranges")
+    ranges = _floats(path, n_line, tok[9:9 + n], "ROBOTLASER1 ranges")
+    m = int(_floats(path, n_line, tok[9 + n:10 + n], "ROBOTLASER1 remission count")[0])
+    i = 10 + n + m
+    _need(path, n_line, tok, i + 12, f"ROBOTLASER1 with {n} ranges and {m} remissions")
+    tail = _floats(path, n_line, tok[i:i + 12], "ROBOTLASER1 poses/timestamp")
+    return _Scan(n_line, tail[11], ranges, tuple(tail[3:6]), tuple(tail[0:3]),
+                 start_angle=head[1], fov=head[2], max_range=head[4])
+
+
+def parse_carmen(path) -> CarmenContents:
+    """Parse a CARMEN log into raw records; raises :class:`LogFormatError` naming the line."""
+    path = Path(path)
+    out = CarmenContents()
+    try:
+        with open_text(path) as f:
+            lines = f.readlines()
+    except (EOFError, OSError, zlib.error) as e:
+        raise LogFormatError(path, None, f"cannot read (truncated or corrupt gzip?): {e}") from e
+    last = len(lines)
+    for n_line, line in enumerate(lines, start=1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        kind = tok[0]
+        try:
+            if kind == "FLASER":
+                out.scans.append(_parse_flaser(path, n_line, tok))
+            elif kind == "ROBOTLASER1":
+                out.scans.append(_parse_robotlaser(path, n_line, tok))
+            elif kind == "ODOM":
+                _need(path, n_line, tok, 8, "ODOM")
+                v = _floats(path, n_line, tok[1:8], "ODOM")
+                out.odom_lines.append((v[6], v[0], v[1], v[2], v[3]))
+            else:
+                out.skipped[kind] += 1
+        except LogFormatError:
+            # a log cut off while it was written: drop its unfinished last line, loudly
+            if n_line == last and not line.endswith("\n"):
+                out.truncated_last_line = True
+                continue
+            raise
+    return out
+
+
+def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None = None,
+                beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0, max_step_m: float = 2.0) -> LaserLog:
+    """Read a CARMEN log into a :class:`LaserLog` (scans in file order, odometry from each scan line)."""
+    path = Path(path)
+    c = parse_carmen(path)
+    if not c.scans:
+        raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {dict(c.skipped) or 'none'})")
+    report = DefectReport()
+    report.add("truncated_last_line", int(c.truncated_last_line), "unfinished last line dropped")
+    ranges, kept = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
+                                   beam_policy, report)
+    scans = [c.scans[i] for i in kept]
+    first = scans[0]
+    n_beams = ranges.shape[1]
+    start = first.start_angle if first.start_angle is not None else -np.pi / 2
+    fov = fov_rad if fov_rad is not None else (first.fov if first.fov is not None else np.pi)
+    ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.max_range, report)
+    info = LaserInfo(n_beams, float(start), float(fov / max(n_beams - 1, 1)), 0.0, float(no_return), float(no_return))
+    stamps = np.array([s.stamp for s in scans])
+    odom = np.array([s.odom for s in scans])
+    # the extrinsic is what separates the laser pose from the robot pose on the same line
+    T_base_laser = compose(inverse(np.array(first.odom)), np.array(first.laser_pose))
+    if np.hypot(*T_base_laser[:2]) > 2.0:  # fields hold different frames (corrected vs raw), not an extrinsic
+        T_base_laser = np.zeros(3)
+    T_base_laser = np.round(T_base_laser, 9) + 0.0
+    scan_defects(report, stamps, odom, max_speed_mps=max_speed_mps, max_step_m=max_step_m)
+    if c.odom_lines:
+        od = np.array(c.odom_lines)
+        stamped = od[:, 0] != 0.0  # GMapping's corrected logs interleave path points stamped 0
+        report.add("odom_stamps_backwards", count_stamps_backwards(od[stamped, 0]), "ODOM lines stamped earlier than the one before")
+        report.add("odometry_contradicts_velocity", count_velocity_contradictions(od[:, 1:4], od[:, 4]),
+                   "ODOM steps moving against their own forward velocity")
+    warn_defects(path, report)
+    return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
+
+
+def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, poses[N,3]) of the scans of a CARMEN log, from the pose fields of each scan line:
+    for the GMapping-corrected logs these are the corrected poses."""
+    c = parse_carmen(path)
+    if not c.scans:
+        raise LogFormatError(path, None, "no FLASER or ROBOTLASER1 lines")
+    return np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans])

@@ -1,0 +1,247 @@
+"""ROS1 and ROS2 bags through ``rosbags``: sensor_msgs/LaserScan + nav_msgs/Odometry (or /tf) + /tf_static.
+
+Reading follows ROS conventions: scans ordered by header stamp (as ROS tools replay them); a beam that is
+NaN, +-inf, below range_min or above range_max is "no return" (REP 117) and becomes NaN. The recording
+order comes from ``header.seq`` (ROS1): stamps that go backwards in it are counted, not "fixed".
+Odometry is interpolated at the scan stamps. The base->laser extrinsic is read from /tf_static.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.geometry import interpolate_poses, wrap_angle
+from irmcl_warp.io.beams import BeamPolicy, harmonise_beams
+from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
+from irmcl_warp.io.errors import LogFormatError, warn_defects
+from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
+
+SCAN, ODOM, TF = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
+
+
+def _stamp(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _yaw(q) -> float:
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+@dataclass
+class _Streams:
+    scans: list  # (stamp, seq, ranges, angle_min, angle_inc, range_min, range_max, frame, index)
+    odom: list  # (stamp, seq, x, y, yaw, v)
+    tf: list  # (stamp, parent, child, x, y, yaw)
+    tf_static: list  # (parent, child, x, y, yaw)
+
+
+def _pick_topic(path, conns, msgtype, wanted):
+    topics = sorted({c.topic for c in conns if c.msgtype == msgtype})
+    if wanted:
+        if wanted not in {c.topic for c in conns}:
+            raise LogFormatError(path, None, f"topic {wanted!r} not in bag (has {sorted({c.topic for c in conns})})")
+        return wanted
+    if len(topics) > 1:
+        raise LogFormatError(path, None, f"several {msgtype} topics {topics}: choose one (data.scan_topic / data.odom_topic)")
+    return topics[0] if topics else None
+
+
+def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, str | None]:
+    from rosbags.highlevel import AnyReader
+
+    s = _Streams([], [], [], [])
+    try:
+        reader = AnyReader([path])
+        reader.open()
+    except Exception as e:  # rosbags raises several reader errors for truncated or foreign files
+        raise LogFormatError(path, None, f"cannot open as a ROS1/ROS2 bag: {e}") from e
+    try:
+        scan_topic = _pick_topic(path, reader.connections, SCAN, scan_topic)
+        if scan_topic is None:
+            raise LogFormatError(path, None, f"no {SCAN} topic (topics: {sorted({c.topic for c in reader.connections})})")
+        odom_topic = _pick_topic(path, reader.connections, ODOM, odom_topic)
+        conns = [c for c in reader.connections if c.topic in (scan_topic, odom_topic) or c.msgtype == TF]
+        counters: dict[str, int] = {}
+        messages = reader.messages(connections=conns)
+        while True:
+            try:
+                conn, _, raw = next(messages)
+            except StopIteration:
+                break
+            except Exception as e:
+                raise LogFormatError(path, f"after message {sum(counters.values())}", f"bag is truncated or corrupt: {e}") from e
+            k = counters[conn.topic] = counters.get(conn.topic, -1) + 1
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as e:
+                raise LogFormatError(path, f"message {k} on {conn.topic}", f"cannot deserialize {conn.msgtype}: {e}") from e
+            _collect(s, conn, msg, scan_topic, odom_topic, k)
+    finally:
+        reader.close()
+    return s, scan_topic, odom_topic
+
+
+def _collect(s: _Streams, conn, msg, scan_topic, odom_topic, k):
+    if conn.topic == scan_topic:
+        s.scans.append((_stamp(msg.header), getattr(msg.header, "seq", k), np.asarray(msg.ranges, dtype=np.float64),
+                         msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max, msg.header.frame_id, k))
+    elif conn.topic == odom_topic:
+        p = msg.pose.pose
+        s.odom.append((_stamp(msg.header), getattr(msg.header, "seq", k), p.position.x, p.position.y,
+                       _yaw(p.orientation), msg.twist.twist.linear.x))
+    elif conn.msgtype == TF:
+        for t in msg.transforms:
+            tr, q = t.transform.translation, t.transform.rotation
+            row = (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"), tr.x, tr.y, _yaw(q))
+            if conn.topic == "/tf_static":
+                s.tf_static.append(row)
+            else:
+                s.tf.append((_stamp(t.header),) + row)
+
+
+def _recording_order(stamps, seqs):
+    """Indices in recording order: by header.seq where it is a usable counter, else as read."""
+    seqs = np.asarray(seqs)
+    if len(np.unique(seqs)) == len(seqs) and seqs.any():
+        return np.argsort(seqs, kind="stable")
+    return np.arange(len(stamps))
+
+
+def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = None, base_frame: str | None = None,
+             odom_frame: str | None = None, beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0,
+             max_step_m: float = 2.0) -> LaserLog:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag")
+    s, scan_topic, odom_topic = _read_streams(path, scan_topic, odom_topic)
+    if not s.scans:
+        raise LogFormatError(path, None, f"topic {scan_topic} holds no messages")
+    report = DefectReport()
+    stamps_read = np.array([r[0] for r in s.scans])
+    rec = _recording_order(stamps_read, [r[1] for r in s.scans])
+    report.add("scans_stamps_backwards", count_stamps_backwards(stamps_read[rec]),
+               "scans stamped earlier than the scan recorded before them (header.seq order)")
+    order = np.argsort(stamps_read, kind="stable")
+    scans = [s.scans[i] for i in order]
+    ranges, kept = harmonise_beams(path, [r[2] for r in scans], [f"message {r[8]} on {scan_topic}" for r in scans],
+                                   beam_policy, report)
+    scans = [scans[i] for i in kept]
+    first = scans[0]
+    rmin, rmax = float(first[5]), float(first[6])
+    finite = np.isfinite(ranges)
+    beyond = float(np.max(ranges[finite])) if finite.any() else rmax
+    bad = ~finite | (ranges < rmin) | (ranges >= rmax)  # drivers write range_max for "no echo" too
+    report.add("beams_below_range_min", int(np.sum(finite & (ranges < rmin) & (ranges != 0))), "beams below range_min, masked")
+    ranges = np.where(bad, np.nan, ranges).astype(np.float32)
+    info = LaserInfo(ranges.shape[1], float(first[3]), float(first[4]), rmin, rmax, max(beyond, rmax))
+    stamps = np.array([r[0] for r in scans])
+    laser_frame = first[7].lstrip("/")
+    T_base_laser, base = _extrinsic(s.tf_static, laser_frame, base_frame, report)
+    odom = _odometry_at(path, s, stamps, base, odom_frame, report)
+    scan_defects(report, stamps, odom, max_speed_mps=max_speed_mps, max_step_m=max_step_m)
+    warn_defects(path, report)
+    return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
+
+
+def _extrinsic(tf_static, laser_frame, base_frame, report):
+    for parent, child, x, y, yaw in tf_static:
+        if child == laser_frame and (base_frame is None or parent == base_frame):
+            return np.array([x, y, yaw]), parent
+    report.add("no_laser_extrinsic", 1, f"no /tf_static transform to {laser_frame!r}: identity assumed")
+    return np.zeros(3), base_frame or "base_link"
+
+
+def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report):
+    if s.odom:
+        od = np.array([r for r in s.odom])
+        rec = _recording_order(od[:, 0], od[:, 1])
+        report.add("odom_stamps_backwards", count_stamps_backwards(od[rec, 0]),
+                   "odometry stamped earlier than the message recorded before it")
+        od = od[np.argsort(od[:, 0], kind="stable")]
+        report.add("odometry_contradicts_velocity", count_velocity_contradictions(od[:, 2:5], od[:, 5]),
+                   "odometry steps moving against the message's own forward velocity")
+        src_t, src_p = od[:, 0], od[:, 2:5]
+    else:
+        rows = [r for r in s.tf if r[2] == base and (odom_frame is None or r[1] == odom_frame)]
+        if not rows:
+            raise LogFormatError(path, None, f"no nav_msgs/Odometry topic and no /tf transform to {base!r}")
+        tf = np.array([(r[0], r[3], r[4], r[5]) for r in rows])
+        tf = tf[np.argsort(tf[:, 0], kind="stable")]
+        src_t, src_p = tf[:, 0], tf[:, 1:4]
+    outside = int(np.sum((stamps < src_t[0]) | (stamps > src_t[-1])))
+    report.add("scans_outside_odometry", outside, "scans before the first or after the last odometry; clamped")
+    src_t, first = np.unique(src_t, return_index=True)
+    return interpolate_poses(src_t, src_p[first], stamps)
+
+
+def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom_topic="/odom",
+              odom_frame="odom", base_frame="base_link", laser_frame="laser") -> Path:
+    """Write a LaserLog as a ROS1 bag (``version=1``) or ROS2 bag folder (``version=2``).
+
+    No-return beams are written as +inf (REP 117); odometry as nav_msgs/Odometry and /tf; the extrinsic
+    on /tf_static. Reading the result back with :func:`read_bag` gives the same log.
+    """
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
+    T = ts.types
+    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    Vec3, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+
+    def header(stamp, frame, seq):
+        ns = int(round(stamp * 1e9))
+        t = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        return Header(seq=seq, stamp=t, frame_id=frame) if version == 1 else Header(stamp=t, frame_id=frame)
+
+    def quat(yaw):
+        return Quat(x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2)))
+
+    def tf_msg(stamp, parent, child, pose, seq):
+        tr = T["geometry_msgs/msg/Transform"](translation=Vec3(x=float(pose[0]), y=float(pose[1]), z=0.0),
+                                             rotation=quat(pose[2]))
+        return T[TF](transforms=[T["geometry_msgs/msg/TransformStamped"](header=header(stamp, parent, seq),
+                                                                          child_frame_id=child, transform=tr)])
+
+    def odom_msg(stamp, pose, v, seq):
+        Cov = np.zeros(36)
+        pose_c = T["geometry_msgs/msg/PoseWithCovariance"](pose=T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=float(pose[0]), y=float(pose[1]), z=0.0),
+            orientation=quat(pose[2])), covariance=Cov)
+        tw = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
+            linear=Vec3(x=float(v), y=0.0, z=0.0), angular=Vec3(x=0.0, y=0.0, z=0.0)), covariance=Cov)
+        return T[ODOM](header=header(stamp, odom_frame, seq), child_frame_id=base_frame, pose=pose_c, twist=tw)
+
+    info = log.info
+    ranges = np.where(np.isfinite(log.ranges_m), log.ranges_m, np.inf).astype(np.float32)
+    dt = np.diff(log.stamps, prepend=log.stamps[0] - 1.0)
+    step = np.diff(log.odom[:, :2], axis=0, prepend=log.odom[:1, :2])
+    v = (step[:, 0] * np.cos(log.odom[:, 2]) + step[:, 1] * np.sin(log.odom[:, 2])) / np.maximum(dt, 1e-6)
+
+    if version == 1:
+        from rosbags.rosbag1 import Writer
+        writer, ser = Writer(path), ts.serialize_ros1
+    else:
+        from rosbags.rosbag2 import Writer
+        writer, ser = Writer(path, version=8), ts.serialize_cdr
+    with writer:
+        def conn(topic, msgtype):
+            return writer.add_connection(topic, msgtype, typestore=ts)
+
+        c_static, c_scan, c_odom, c_tf = conn("/tf_static", TF), conn(scan_topic, SCAN), conn(odom_topic, ODOM), conn("/tf", TF)
+        t0 = float(log.stamps.min())
+        writer.write(c_static, int(round(t0 * 1e9)),
+                     ser(tf_msg(t0, base_frame, laser_frame, log.T_base_laser, 0), TF))
+        for i, stamp in enumerate(log.stamps):
+            ns = int(round(stamp * 1e9))
+            scan = T[SCAN](header=header(stamp, laser_frame, i), angle_min=info.angle_min_rad,
+                           angle_max=info.angle_min_rad + info.fov_rad, angle_increment=info.angle_increment_rad,
+                           time_increment=0.0, scan_time=0.0, range_min=info.range_min_m, range_max=info.range_max_m,
+                           ranges=ranges[i], intensities=np.zeros(0, np.float32))
+            writer.write(c_scan, ns, ser(scan, SCAN))
+            writer.write(c_odom, ns, ser(odom_msg(stamp, log.odom[i], v[i], i), ODOM))
+            writer.write(c_tf, ns, ser(tf_msg(stamp, odom_frame, base_frame, log.odom[i], i), TF))
+    return path

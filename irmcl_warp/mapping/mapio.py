@@ -1,0 +1,110 @@
+"""Map files: ROS map_server (PGM + YAML, trinary), ``.npz`` (log-odds, lossless) and a PNG to look at.
+
+map_server convention: the PGM's first row is the top of the map (largest y); ``origin`` is the world
+pose of the lower-left pixel; with negate 0, p_occ = (255 - pixel) / 255; we write 0 = occupied,
+254 = free, 205 = unknown.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.mapping.grid import OccupancyGrid
+
+OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_server's defaults
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write via a temporary file in the same folder and rename: a crash never leaves half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def to_trinary(grid: OccupancyGrid) -> np.ndarray:
+    p = grid.probability
+    img = np.full(p.shape, 205, dtype=np.uint8)
+    img[grid.known & (p >= OCCUPIED_THRESH)] = 0
+    img[grid.known & (p <= FREE_THRESH)] = 254
+    return img[::-1]  # first row = top
+
+
+def save_map(grid: OccupancyGrid, stem) -> dict[str, Path]:
+    """Write ``stem.pgm``, ``stem.yaml``, ``stem.npz`` and ``stem.png``; returns their paths."""
+    stem = Path(stem)
+    img = to_trinary(grid)
+    H, W = img.shape
+    atomic_write_bytes(stem.with_suffix(".pgm"), f"P5\n{W} {H}\n255\n".encode() + img.tobytes())
+    yaml = (f"image: {stem.name}.pgm\nresolution: {grid.resolution_m}\n"
+            f"origin: [{grid.origin_xy[0]}, {grid.origin_xy[1]}, 0.0]\nnegate: 0\n"
+            f"occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\nmode: trinary\n")
+    atomic_write_bytes(stem.with_suffix(".yaml"), yaml.encode())
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, logodds=grid.logodds, origin_xy=np.array(grid.origin_xy), resolution_m=grid.resolution_m)
+    atomic_write_bytes(stem.with_suffix(".npz"), buf.getvalue())
+    buf = io.BytesIO()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.imsave(buf, img, cmap="gray", vmin=0, vmax=255, format="png")
+    atomic_write_bytes(stem.with_suffix(".png"), buf.getvalue())
+    return {k: stem.with_suffix("." + k) for k in ("pgm", "yaml", "npz", "png")}
+
+
+def _read_pgm(path: Path) -> np.ndarray:
+    data = path.read_bytes()
+    tokens, pos = [], 0
+    while len(tokens) < 4:
+        while pos < len(data) and chr(data[pos]).isspace():
+            pos += 1
+        if pos < len(data) and data[pos:pos + 1] == b"#":
+            pos = data.index(b"\n", pos) + 1
+            continue
+        start = pos
+        while pos < len(data) and not chr(data[pos]).isspace():
+            pos += 1
+        if start == pos:
+            raise ValueError(f"{path}: truncated PGM header")
+        tokens.append(data[start:pos].decode("ascii", "replace"))
+    if tokens[0] != "P5":
+        raise ValueError(f"{path}: expected a binary PGM (P5), found {tokens[0]!r}")
+    W, H, maxval = int(tokens[1]), int(tokens[2]), int(tokens[3])
+    pixels = data[pos + 1:]
+    if maxval > 255 or len(pixels) < W * H:
+        raise ValueError(f"{path}: expected {W}x{H} 8-bit pixels, found {len(pixels)} bytes")
+    return np.frombuffer(pixels[:W * H], dtype=np.uint8).reshape(H, W)
+
+
+def load_map(path) -> OccupancyGrid:
+    """Load ``.npz`` (exact) or a map_server ``.yaml`` (+ its PGM; occupancy from the pixel values)."""
+    path = Path(path)
+    if path.suffix == ".npz":
+        with np.load(path) as z:
+            return OccupancyGrid(z["logodds"], tuple(z["origin_xy"].tolist()), float(z["resolution_m"]))
+    from omegaconf import OmegaConf
+
+    meta = OmegaConf.to_container(OmegaConf.load(path))
+    for key in ("image", "resolution", "origin"):
+        if key not in meta:
+            raise ValueError(f"{path}: map YAML lacks {key!r}")
+    img = _read_pgm(path.parent / meta["image"])[::-1].astype(np.float64)
+    p = (255.0 - img) / 255.0 if not meta.get("negate", 0) else img / 255.0
+    logodds = np.zeros(p.shape, dtype=np.float32)
+    logodds[p > meta.get("occupied_thresh", OCCUPIED_THRESH)] = 4.0
+    logodds[p < meta.get("free_thresh", FREE_THRESH)] = -4.0
+    return OccupancyGrid(logodds, (float(meta["origin"][0]), float(meta["origin"][1])), float(meta["resolution"]))
