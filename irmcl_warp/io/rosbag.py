@@ -8,6 +8,7 @@ Odometry is interpolated at the scan stamps. The base->laser extrinsic is read f
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -188,6 +189,10 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
 
     path = Path(path)
     ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
+    if TF not in ts.types:  # rosbags' noetic store lacks tf2_msgs: declare it from its .msg text
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF))
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
     Vec3, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
@@ -221,12 +226,29 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
     step = np.diff(log.odom[:, :2], axis=0, prepend=log.odom[:1, :2])
     v = (step[:, 0] * np.cos(log.odom[:, 2]) + step[:, 1] * np.sin(log.odom[:, 2])) / np.maximum(dt, 1e-6)
 
+    tmp = path.with_name(f".{path.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
     if version == 1:
         from rosbags.rosbag1 import Writer
-        writer, ser = Writer(path), ts.serialize_ros1
+        writer, ser = Writer(tmp), ts.serialize_ros1
     else:
         from rosbags.rosbag2 import Writer
-        writer, ser = Writer(path, version=8), ts.serialize_cdr
+        writer, ser = Writer(tmp, version=8), ts.serialize_cdr
+    try:
+        _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic,
+                   odom_frame, base_frame, laser_frame)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
+        raise
+    if path.is_dir():
+        shutil.rmtree(path)
+    tmp.replace(path)  # written completely, then renamed: never half a bag under the final name
+    return path
+
+
+def _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic, odom_frame,
+               base_frame, laser_frame):
+    info = log.info
     with writer:
         def conn(topic, msgtype):
             return writer.add_connection(topic, msgtype, typestore=ts)
@@ -244,4 +266,23 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
             writer.write(c_scan, ns, ser(scan, SCAN))
             writer.write(c_odom, ns, ser(odom_msg(stamp, log.odom[i], v[i], i), ODOM))
             writer.write(c_tf, ns, ser(tf_msg(stamp, odom_frame, base_frame, log.odom[i], i), TF))
-    return path
+
+
+def read_bag_extrinsic(path, laser_frame: str = "laser", base_frame: str | None = None) -> np.ndarray:
+    """T_base_laser from a bag's /tf_static alone (for CARMEN logs, which carry no extrinsic)."""
+    from rosbags.highlevel import AnyReader
+
+    path = Path(path)
+    try:
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic == "/tf_static"]
+            s = _Streams([], [], [], [])
+            for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+                _collect(s, conn, reader.deserialize(raw, conn.msgtype), None, None, k)
+    except Exception as e:
+        raise LogFormatError(path, None, f"cannot read /tf_static: {e}") from e
+    report = DefectReport()
+    T, _ = _extrinsic(s.tf_static, laser_frame, base_frame, report)
+    if report:
+        raise LogFormatError(path, None, f"no /tf_static transform {base_frame or '<base>'} -> {laser_frame}")
+    return T

@@ -1,0 +1,91 @@
+"""Typed config schemas (Hydra ConfigStore): a key that nothing reads is an error, not a silent no-op.
+
+Units are in the key names. Paths of real data are relative to the data root (``IRMCL_DATA``, by
+default ``../shared/data`` beside the repository).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class DataConfig:
+    name: str = MISSING
+    format: str = MISSING  # sim | carmen | bag
+    path: Optional[str] = None  # scans + odometry
+    laser_frame_path: Optional[str] = None  # a bag whose /tf_static gives base->laser (CARMEN logs carry none)
+    ground_truth_path: Optional[str] = None  # matched CSV, or a GMapping-corrected CARMEN log
+    relations_path: Optional[str] = None  # Kümmerle et al. 2009 relations
+    splits_path: Optional[str] = None  # benchmark split ids (stamps)
+    scan_topic: Optional[str] = None  # bags: auto when the bag has exactly one LaserScan topic
+    odom_topic: Optional[str] = None
+    base_frame: Optional[str] = None
+    odom_frame: Optional[str] = None
+    no_return_m: Optional[float] = None  # CARMEN: auto-detected as the most common maximum range
+    fov_rad: Optional[float] = None  # FLASER carries no FOV; 180 deg unless set
+    beam_policy: str = "error"  # error | reject | resample scans whose beam count differs
+    max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
+    max_step_m: float = 2.0
+
+
+@dataclass
+class SimConfig:
+    seed: int = 0
+    width_m: float = 30.0
+    height_m: float = 16.0
+    corridor_width_m: float = 2.5
+    room_min_width_m: float = 3.5
+    room_max_width_m: float = 6.0
+    door_width_m: float = 1.0
+    furniture_per_room: int = 2
+    repetitive: bool = False  # identical bays: perceptual aliasing
+    visit_prob: float = 0.6
+    speed_mps: float = 0.6
+    turn_rate_rps: float = 0.8
+    rate_hz: float = 5.0
+    duration_s: Optional[float] = None
+    num_beams: int = 360
+    fov_rad: float = 4.71238898  # 270 deg
+    max_range_m: float = 20.0
+    range_noise_std_m: float = 0.02
+    dropout_prob: float = 0.01
+    laser_x_m: float = 0.1
+    odom_alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun alpha1..4
+    start_stamp_s: float = 1000.0
+
+
+@dataclass
+class MappingConfig:
+    kernel: str = "logodds"
+    resolution_m: float = 0.05
+    max_range_m: float = 30.0
+    l_occ: float = 0.85
+    l_free: float = -0.4
+    l_min: float = -4.0
+    l_max: float = 4.0
+
+
+@dataclass
+class RaycastConfig:
+    name: str = "dda"  # dda | distance_field
+    occ_threshold: float = 0.5
+
+
+@dataclass
+class Config:
+    data: DataConfig = field(default_factory=DataConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    raycast: RaycastConfig = field(default_factory=RaycastConfig)
+    exp: str = "default"
+    device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
+
+
+def register() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="config_schema", node=Config)
