@@ -50,11 +50,11 @@ def _room_widths(rng, width, wmin, wmax, repetitive):
     if repetitive:
         n = max(1, int(width // wmin))
         return [width / n] * n
-    widths = []
-    while width - sum(widths) > wmax:
-        widths.append(float(rng.uniform(wmin, wmax)))
-    widths.append(width - sum(widths))
-    return widths
+    widths, left = [], width
+    while left > wmax and left >= 2 * wmin:  # every room, the last one too, is at least wmin wide
+        widths.append(float(rng.uniform(wmin, min(wmax, left - wmin))))
+        left -= widths[-1]
+    return widths + [left]
 
 
 def _furniture(rng, room: Room, count, door_w, repetitive_template=None):
@@ -88,7 +88,8 @@ def office(seed: int, width_m=30.0, height_m=16.0, corridor_width_m=2.5, room_mi
         x = 0.0
         doors = []
         for w in _room_widths(rng, width_m, room_min_width_m, room_max_width_m, repetitive):
-            door_x = x + w / 2 if repetitive else float(rng.uniform(x + door_width_m, x + w - door_width_m))
+            margin = min(door_width_m, w / 2)
+            door_x = x + w / 2 if repetitive else float(rng.uniform(x + margin, x + w - margin))
             rooms.append(Room(x, x + w, y0, y1, door_x, door_y))
             doors.append(door_x)
             if x > 0:

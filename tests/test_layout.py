@@ -1,0 +1,19 @@
+from pathlib import Path
+
+import kernels
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_kernels_package_is_ours_not_the_pypi_one():
+    assert Path(kernels.__file__).resolve().is_relative_to(REPO)
+
+
+def test_every_registry_entry_has_a_reference_twin():
+    from kernels import MAPPING, RAYCAST, SIM
+
+    assert RAYCAST.names() == ["dda", "distance_field"]
+    assert MAPPING.names() == ["logodds"]
+    assert SIM.names() == ["rasterize", "segment_lidar"]
+    for twin in ("raycast", "mapping", "sim"):
+        assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

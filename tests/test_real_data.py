@@ -1,0 +1,66 @@
+"""The readers and the relations metric on the real logs of ../shared/data (IRMCL_DATA)."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from eval.metrics import relations_error
+from irmcl_warp.io import read_bag, read_carmen, read_matched_csv, read_relations
+from irmcl_warp.io.rosbag import read_bag_extrinsic
+
+pytestmark = pytest.mark.data
+
+
+def quiet(fn, *a, **k):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*a, **k)
+
+
+@pytest.mark.parametrize("log, scans, beams", [
+    ("kuemmerle2009/derived/fr079.revfix.clf.gz", 4934, 360),
+    ("kuemmerle2009/derived/intel.fileorder.clf.gz", 13631, 180),
+    ("kuemmerle2009/mit-csail.clf.gz", 1988, 361),
+])
+def test_carmen_logs_counts(data_dir, log, scans, beams):
+    L = quiet(read_carmen, data_dir / log)
+    assert (len(L), L.info.num_beams) == (scans, beams)
+    assert 0.9 < L.valid.mean() < 1.0  # no-return beams masked, most beams kept
+
+
+def test_intel_stamp_defect_is_detected_in_both_files(data_dir):
+    derived = quiet(read_carmen, data_dir / "kuemmerle2009/derived/intel.fileorder.clf.gz")
+    assert derived.defects.counts["scans_stamps_backwards"] == 631
+    bag = quiet(read_bag, data_dir / "kuemmerle2009/bags/intel.bag")
+    assert bag.defects.counts["scans_stamps_backwards"] == 631
+    assert bag.defects.counts["odom_stamps_backwards"] == 602
+    assert len(bag) == 13631
+
+
+def test_fr079_bag_odometry_contradicts_its_velocity(data_dir):
+    bag = quiet(read_bag, data_dir / "kuemmerle2009/bags/fr079.bag")
+    assert len(bag) == 4934 and bag.info.num_beams == 360
+    assert bag.defects.counts["odometry_contradicts_velocity"] > 300  # the README: 328 reversing steps
+    np.testing.assert_allclose(read_bag_extrinsic(data_dir / "kuemmerle2009/bags/fr079.bag"), [0.04, 0, 0], atol=1e-6)
+
+
+def test_relations_of_fr079_against_corrected_poses_and_odometry(data_dir):
+    stamps, poses = read_matched_csv(data_dir / "corrected/matched/fr079.gmapping_corrected_keyframes.csv")
+    assert len(stamps) == 4791
+    rel = read_relations(data_dir / "kuemmerle2009/relations/fr079.relations")
+    m = relations_error(stamps, poses, rel)
+    assert m["relations_used"] == 1672
+    assert abs(m["trans_abs_mean_m"] - 0.058) <= 0.005
+    odo = quiet(read_carmen, data_dir / "kuemmerle2009/derived/fr079.revfix.clf.gz")
+    assert relations_error(odo.stamps, odo.odom, rel)["trans_abs_mean_m"] > 2.0  # several metres
+
+
+def test_killian_relations_match_only_through_g2o_stamps(data_dir):
+    from irmcl_warp.io import read_g2o
+    from irmcl_warp.types import match_stamps
+
+    g = read_g2o(data_dir / "kuemmerle2009/killian.g2o.zip")
+    rel = read_relations(data_dir / "kuemmerle2009/relations/mit-killian.relations")
+    both = (match_stamps(g.laser_stamps, rel.t1) >= 0) & (match_stamps(g.laser_stamps, rel.t2) >= 0)
+    assert both.sum() == 658
