@@ -12,6 +12,9 @@ import pytest
 
 from irmcl_warp.io import data_root
 
+# tests change directory (tmp_path): pin a relative IRMCL_DATA to where the session started
+if os.environ.get("IRMCL_DATA"):
+    os.environ["IRMCL_DATA"] = str(Path(os.environ["IRMCL_DATA"]).resolve())
 HAVE_DATA = (data_root() / "README.md").is_file()
 
 
