@@ -4,16 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-f32 = np.float32
-BIG = f32(1e30)
-
-
-def _boundary(g, d, i):
-    if d > 0:
-        return (f32(i + 1) - g) / d
-    if d < 0:
-        return (g - f32(i)) / (-d)
-    return BIG
+from irmcl_warp.reference.raycast import BIG, _boundary, f32
 
 
 def integrate(logodds, origin, res, poses, ranges, angles, max_range_m, l_occ, l_free, l_min, l_max):
