@@ -57,6 +57,7 @@ def pick_device(requested: str = "auto") -> str:
 RAYCAST = Registry("raycast")
 MAPPING = Registry("mapping")
 SIM = Registry("sim")
+RENDER = Registry("render")
 
 # importing the families registers their entries
-from kernels import mapping, raycast, sim  # noqa: E402,F401
+from kernels import mapping, raycast, render, sim  # noqa: E402,F401
