@@ -30,3 +30,45 @@ def relations_error(stamps, poses, relations, tol_s: float = 1e-4) -> dict:
         "rot_abs_mean_deg": float(e_r.mean()), "rot_abs_std_deg": float(e_r.std()),
         "rot_sq_mean_deg2": float((e_r ** 2).mean()), "rot_sq_std_deg2": float((e_r ** 2).std()),
     }
+
+
+def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float = 0.5) -> dict:
+    """IR-MCL's scan-synthesis metrics (Kuang et al. 2023, Table I; the authors' nof/criteria code),
+    each computed per scan over its valid beams and then averaged over scans:
+
+    * mae_m: mean |rendered - measured| range;  accuracy_pct: % of beams with error < threshold;
+    * chamfer_m: mean nearest-neighbour distance from rendered to measured end points plus the one from
+      measured to rendered (the authors' sum of the two one-way means);
+    * fscore_pct: 2PR / (P + R), P = % rendered end points within threshold of a measured one, R the reverse.
+
+    ``median_error_m`` is the median over all valid beams pooled (beyond the paper). Shapes: [S, B].
+    """
+    from scipy.spatial import cKDTree
+
+    pred_m, meas_m, valid = np.asarray(pred_m, np.float64), np.asarray(meas_m, np.float64), np.asarray(valid, bool)
+    if pred_m.shape != meas_m.shape or valid.shape != meas_m.shape:
+        raise ValueError(f"shapes differ: rendered {pred_m.shape}, measured {meas_m.shape}, valid {valid.shape}")
+    c, s = np.cos(angles_rad), np.sin(angles_rad)
+    per_scan, errors = [], []
+    for k in range(len(meas_m)):
+        v = valid[k]
+        if not v.any():
+            continue
+        p, m = pred_m[k, v], meas_m[k, v]
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"scan {k}: rendered range is not finite")
+        err = np.abs(p - m)
+        errors.append(err)
+        P = np.stack([p * c[v], p * s[v]], -1)
+        M = np.stack([m * c[v], m * s[v]], -1)
+        d_pm = cKDTree(M).query(P)[0]
+        d_mp = cKDTree(P).query(M)[0]
+        prec, rec = (d_pm < threshold_m).mean(), (d_mp < threshold_m).mean()
+        f = 2 * prec * rec / (prec + rec) if prec + rec > 0 else 0.0
+        per_scan.append((err.mean(), 100 * (err < threshold_m).mean(), d_pm.mean() + d_mp.mean(), 100 * f))
+    if not per_scan:
+        raise ValueError("no scan has a valid beam to score")
+    a = np.array(per_scan)
+    return {"mae_m": float(a[:, 0].mean()), "accuracy_pct": float(a[:, 1].mean()), "chamfer_m": float(a[:, 2].mean()),
+            "fscore_pct": float(a[:, 3].mean()), "median_error_m": float(np.median(np.concatenate(errors))),
+            "scans": len(per_scan), "beams": int(sum(len(e) for e in errors))}

@@ -31,6 +31,8 @@ class DataConfig:
     beam_policy: str = "error"  # error | reject | resample scans whose beam count differs
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
+    usable_range_m: Optional[float] = None  # NOF rendering far bound; None = floor(range_max_m) (IR-MCL code)
+    split: str = "interleaved"  # interleaved (train/val/test) | block (train_block/val_block/test_block)
 
 
 @dataclass
@@ -77,11 +79,58 @@ class RaycastConfig:
 
 
 @dataclass
+class ModelConfig:
+    """The NOF (IR-MCL Sec. III-A): 8 layers of 256, batch norm + ReLU, input again after layer 4, L = 10."""
+    num_freqs: int = 10
+    width: int = 256
+    depth: int = 8
+    skip_after: int = 4  # 0 = no skip connection
+
+
+@dataclass
+class RenderConfig:
+    """Rendering ranges from the NOF (IR-MCL code: 256 samples, near 0.02 m, far = sensor range)."""
+    name: str = "warp"  # warp | torch_ref
+    num_samples: int = 256
+    near_m: float = 0.02
+    far_m: Optional[float] = None  # None = data.usable_range_m
+    normalize: bool = True  # divide by the accumulated opacity, as the authors' code does
+    t_min: float = 0.0  # early termination: skip samples with transmittance below this (0 = off)
+    chunk_rays: int = 2048  # rays per forward pass when rendering without gradients
+
+
+@dataclass
+class TrainConfig:
+    """The training recipe; presets in conf/train/ (paper = the authors' fr079 script)."""
+    name: str = "paper"
+    epochs: int = 32
+    batch_rays: int = 1024
+    num_samples: int = 256  # samples per beam while training (evaluation uses render.num_samples)
+    perturb: bool = True
+    lr: float = 1e-4
+    lr_milestones: List[int] = field(default_factory=lambda: [4, 8])
+    lr_gamma: float = 0.5
+    weight_decay: float = 1e-3
+    loss: str = "smooth_l1"  # smooth_l1 (authors' code) | l1 (paper)
+    lambda_opacity: float = 1e-5  # weight of the occupancy regulariser (authors' code)
+    amp: str = "off"  # off | bf16 (CUDA autocast for the MLP; rendering stays float32)
+    tf32: bool = False
+    max_time_s: Optional[float] = None  # stop training after this long (epochs still end cleanly)
+    steps_per_epoch: Optional[int] = None  # None = one pass over the training rays
+    val_scans: int = 100  # validation scans rendered after each epoch (evenly spread)
+    checkpoint_every_s: float = 120.0
+    seed: int = 42
+
+
+@dataclass
 class Config:
     data: DataConfig = field(default_factory=DataConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
     raycast: RaycastConfig = field(default_factory=RaycastConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

@@ -1,0 +1,132 @@
+"""``python -m eval.bench train [--device cuda] [--batch 1024] [--samples 256] [--steps 10]``
+
+Side-by-side speed of NOF training on one device, in one run: rays/s of a whole training step
+(encode + MLP forward, composite, loss, backward, Adam) with the Warp renderer and with
+``render=torch_ref``, for the paper's network (and, with --amp, bf16 autocast), plus the compositing alone
+(forward + backward on random occupancies). Prints a table and writes outputs/bench/train-<device>.json.
+Absolute times count only from a GPU; on a CPU read the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import torch
+
+from irmcl_warp.config import ModelConfig
+from irmcl_warp.nof.model import NOF
+from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
+from irmcl_warp.nof.trainer import opacity_regulariser
+from irmcl_warp.outputs import write_json
+
+MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_after=2),
+          "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8)}
+
+
+def _sync(device):
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+
+
+def _time(fn, device, steps: int, warmup: int = 2) -> float:
+    for _ in range(warmup):
+        fn()
+    _sync(device)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        fn()
+    _sync(device)
+    return (time.perf_counter() - t0) / steps
+
+
+def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False) -> dict:
+    torch.manual_seed(0)
+    model = NOF(MODELS[model_name]).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-4, weight_decay=1e-3)
+    render = make_renderer(renderer_name)
+    origins = torch.rand(batch, 2, device=device) * 20 - 10
+    angle = torch.rand(batch, device=device) * 6.283
+    dirs = torch.stack([torch.cos(angle), torch.sin(angle)], -1)
+    target = torch.rand(batch, device=device) * 10 + 0.5
+
+    def step():
+        z = sample_depths(batch, samples, 0.02, 40.0, True, device=device)
+        ctx = torch.autocast("cuda", dtype=torch.bfloat16) if amp else torch.autocast(device.type, enabled=False)
+        with ctx:
+            pred, _, p = render_rays(model, render, origins, dirs, z)
+        loss = torch.nn.functional.smooth_l1_loss(pred, target) + 1e-5 * opacity_regulariser(p)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+
+    s = _time(step, device, steps)
+    return {"what": "train step", "model": model_name, "renderer": renderer_name, "amp": "bf16" if amp else "off",
+            "batch_rays": batch, "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
+
+
+def bench_composite(renderer_name, batch, samples, steps, device) -> dict:
+    torch.manual_seed(0)
+    p = torch.rand(batch, samples, device=device).pow(3).requires_grad_()
+    z = sample_depths(batch, samples, 0.02, 40.0, True, device=device)
+    render = make_renderer(renderer_name)
+    g = torch.randn(batch, device=device)
+
+    def step():
+        p.grad = None
+        r, _ = render(p, z)
+        (r * g).sum().backward()
+
+    s = _time(step, device, steps)
+    return {"what": "composite fwd+bwd", "model": "-", "renderer": renderer_name, "amp": "off", "batch_rays": batch,
+            "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
+
+
+def run_train_bench(a) -> list[dict]:
+    device = torch.device(a.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    if device.type == "cuda" and a.tf32:
+        torch.backends.cuda.matmul.allow_tf32 = True
+    rows = []
+    for batch in a.batch:
+        for r in ("warp", "torch_ref"):
+            rows.append(bench_composite(r, batch, a.samples, max(a.steps, 5), device))
+        for r in ("warp", "torch_ref"):
+            rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device))
+        if a.amp and device.type == "cuda":
+            for r in ("warp", "torch_ref"):
+                rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, amp=True))
+    name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
+    print(f"\nNOF training speed on {name} ({device}), torch {torch.__version__}, tf32 {a.tf32 and device.type == 'cuda'}")
+    print(f"| what | model | renderer | amp | batch | samples | ms/step | rays/s |\n|---|---|---|---|---|---|---|---|")
+    for x in rows:
+        print(f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
+              f"{x['step_ms']:.2f} | {x['rays_per_s']:,.0f} |")
+    out = Path(a.out) / f"train-{device.type}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows})
+    print(f"-> {out}")
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m eval.bench")
+    sub = ap.add_subparsers(dest="what", required=True)
+    t = sub.add_parser("train", help="rays/s of a NOF training step, Warp vs torch_ref renderer")
+    t.add_argument("--device", default=None)
+    t.add_argument("--model", default="paper", choices=sorted(MODELS))
+    t.add_argument("--batch", type=int, nargs="+", default=[1024])
+    t.add_argument("--samples", type=int, default=256)
+    t.add_argument("--steps", type=int, default=10)
+    t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
+    t.add_argument("--tf32", action="store_true")
+    t.add_argument("--out", default="outputs/bench")
+    a = ap.parse_args(argv)
+    if a.what == "train":
+        run_train_bench(a)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""IR-MCL neural occupancy field: model, rendering, training data."""

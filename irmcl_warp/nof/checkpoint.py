@@ -1,0 +1,33 @@
+"""Checkpoints: ``nof.pt`` (the model to use: weights + the config that builds it + rendering bounds) and
+``last.pt`` (everything needed to resume training). Both are written atomically."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import torch
+
+from irmcl_warp.config import ModelConfig
+from irmcl_warp.nof.model import NOF
+
+
+def atomic_torch_save(obj, path: Path) -> None:
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def load_nof(path, device="cpu"):
+    """(model in eval mode, metadata dict) from a ``nof.pt``; the model is rebuilt from its stored config."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no NOF checkpoint (train one: python -m irmcl_warp.train +exp=<name>)")
+    try:
+        ckpt = torch.load(path, map_location=device, weights_only=False)
+        model = NOF(ModelConfig(**ckpt["model_config"]))
+        model.load_state_dict(ckpt["model"])
+    except (KeyError, RuntimeError, EOFError) as e:
+        raise ValueError(f"{path}: not a usable nof.pt ({type(e).__name__}: {e})") from e
+    return model.to(device).eval(), {k: v for k, v in ckpt.items() if k != "model"}

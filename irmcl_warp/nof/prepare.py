@@ -1,0 +1,84 @@
+"""``prepare_beams(cfg)``: read the log once, cut it into the benchmark splits, cache the result.
+
+The cache ``outputs/<exp>/beams/beams.npz`` is keyed by the data settings and the size and mtime of the
+input files, so a changed setting or file rebuilds it; it is also what a GPU machine without the raw
+logs is sent (it carries no reader dependency).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from irmcl_warp.io import load_log, read_splits, resolve
+from irmcl_warp.nof.beams import (SPLITS, BeamSet, beams_from_log, interleaved_splits, load_beams, save_beams,
+                                  settings_key, split_beams)
+from irmcl_warp.outputs import stage_dir
+
+
+def input_files(cfg) -> list[Path]:
+    d = cfg.data
+    return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path) if p]
+
+
+def far_m(cfg, range_max_m: float | None = None) -> float:
+    """Far bound of rendering: render.far_m, else data.usable_range_m, else floor(range_max) (IR-MCL code)."""
+    if cfg.render.far_m is not None:
+        return float(cfg.render.far_m)
+    if cfg.data.usable_range_m is not None:
+        return float(cfg.data.usable_range_m)
+    if range_max_m is None:
+        raise ValueError(f"data={cfg.data.name}: set data.usable_range_m (the far bound of rendering)")
+    return float(math.floor(range_max_m))
+
+
+def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
+    """{split name: BeamSet} for the split scheme ``cfg.data.split`` (train, val, test names in that order)."""
+    if cfg.data.split not in SPLITS:
+        raise ValueError(f"data.split={cfg.data.split!r}: expected one of {sorted(SPLITS)}")
+    # the cache is keyed by the settings and by the inputs' size and mtime; a machine without the raw
+    # files (a GPU box that was sent only the cache) accepts a cache made with the same settings
+    key = settings_key(OmegaConf.to_container(cfg.data), OmegaConf.to_container(cfg.sim), cfg.render.near_m,
+                       cfg.render.far_m)
+    try:
+        files = [] if cfg.data.format == "sim" else input_files(cfg)
+    except FileNotFoundError as e:
+        files = None
+        missing = e
+    if files is not None:
+        key += "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files])
+    path = stage_dir(cfg, "beams") / "beams.npz"
+    sets = load_beams(path, key, prefix_only=files is None) if cache else None
+    if sets is None and files is None:
+        raise missing
+    elif files is None:
+        print(f"{missing}; using the beams cached in {path}")
+    if sets is None:
+        log = load_log(cfg)
+        beams = beams_from_log(log, cfg.render.near_m, far_m(cfg, log.info.range_max_m), name=cfg.data.name)
+        if cfg.data.splits_path:
+            source = str(resolve(cfg.data.splits_path))
+            splits = read_splits(resolve(cfg.data.splits_path))
+        else:
+            source, splits = f"{cfg.data.name} (interleaved rule)", interleaved_splits(beams.stamps)
+        sets = split_beams(beams, splits, [n for names in SPLITS.values() for n in names if n in splits] or
+                           list(SPLITS[cfg.data.split]), source)
+        if cache:
+            save_beams(path, sets, key)
+    names = SPLITS[cfg.data.split]
+    missing = [n for n in names if n not in sets]
+    if missing:
+        raise ValueError(f"data={cfg.data.name}: split file has no {missing}")
+    return {role: sets[n] for role, n in zip(("train", "val", "test"), names)}
+
+
+def recorded_inputs(cfg) -> list[Path]:
+    """Input files to hash into a manifest: none for the simulator or where only the cache was sent."""
+    if cfg.data.format == "sim":
+        return []
+    try:
+        return input_files(cfg)
+    except FileNotFoundError:
+        return []

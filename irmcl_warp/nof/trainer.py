@@ -1,0 +1,146 @@
+"""The NOF training loop (IR-MCL Sec. III-B): render each training beam from its pose through the NOF,
+compare with the measured range, and add the occupancy regulariser.
+
+    loss = SmoothL1(r_rendered, r_measured) + lambda * mean(log(0.1 + p) + log(1.1 - p) + 2.20727)
+
+The regulariser (from the authors' code, zero at p = 0 and p = 1, largest at p = 0.5) pushes occupancy
+towards certainty. Invalid (no return / out of range) beams are never in the training rays.
+Resumable: ``last.pt`` is written at the end of every epoch and every ``checkpoint_every_s``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from irmcl_warp.nof.checkpoint import atomic_torch_save
+from irmcl_warp.nof.render import make_renderer, render_rays, render_scans, sample_depths
+
+
+def opacity_regulariser(p: torch.Tensor) -> torch.Tensor:
+    return torch.mean(torch.log(0.1 + p) + torch.log(1.1 - p) + 2.20727)
+
+
+def range_loss(pred, target, kind: str):
+    if kind == "smooth_l1":
+        return F.smooth_l1_loss(pred, target)
+    if kind == "l1":
+        return F.l1_loss(pred, target)
+    raise ValueError(f"train.loss={kind!r}: expected smooth_l1 or l1")
+
+
+class Trainer:
+    """Owns the model, optimiser, schedule and rays of one run; ``run()`` trains and returns the history."""
+
+    def __init__(self, model, sets, tc, rc, near_m, far_m, device, out: Path, key: str, validate, meta: dict):
+        self.meta = meta  # stored in nof.pt beside the weights (model config, rendering bounds, data)
+        self.model, self.tc, self.rc, self.device, self.out, self.key = model.to(device), tc, rc, device, out, key
+        self.near_m, self.far_m, self.validate = near_m, far_m, validate
+        self.renderer = make_renderer(rc.name, normalize=rc.normalize, t_min=rc.t_min)
+        o, d, r, _ = sets["train"].rays()
+        self.origins, self.dirs, self.ranges = (torch.from_numpy(a).to(device) for a in (o, d, r))
+        self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay)
+        self.sched = torch.optim.lr_scheduler.MultiStepLR(self.opt, list(tc.lr_milestones), tc.lr_gamma)
+        self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
+        per_epoch = -(-len(self.ranges) // tc.batch_rays)
+        self.steps_per_epoch = min(per_epoch, tc.steps_per_epoch) if tc.steps_per_epoch else per_epoch
+
+    # --- checkpointing -------------------------------------------------------------------------
+    def state(self) -> dict:
+        rng = {"cpu": torch.get_rng_state()}
+        if torch.cuda.is_available():
+            rng["cuda"] = torch.cuda.get_rng_state_all()
+        return {"key": self.key, "model": self.model.state_dict(), "opt": self.opt.state_dict(),
+                "sched": self.sched.state_dict(), "epoch": self.epoch, "step_in_epoch": self.step_in_epoch,
+                "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng}
+
+    def try_resume(self) -> bool:
+        path = self.out / "last.pt"
+        if not path.is_file():
+            return False
+        s = torch.load(path, map_location=self.device, weights_only=False)
+        if s.get("key") != self.key:
+            print(f"{path}: made with other settings; starting afresh")
+            return False
+        self.model.load_state_dict(s["model"])
+        self.opt.load_state_dict(s["opt"])
+        self.sched.load_state_dict(s["sched"])
+        self.epoch, self.step_in_epoch, self.history = s["epoch"], s["step_in_epoch"], s["history"]
+        self.best, self.train_time_s = s["best"], s["train_time_s"]
+        torch.set_rng_state(s["rng"]["cpu"])
+        if "cuda" in s["rng"] and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all(s["rng"]["cuda"])
+        print(f"resuming {path}: epoch {self.epoch}, step {self.step_in_epoch}")
+        return True
+
+    # --- one optimisation step -----------------------------------------------------------------
+    def step(self, idx: torch.Tensor) -> float:
+        tc = self.tc
+        z = sample_depths(len(idx), tc.num_samples, self.near_m, self.far_m, tc.perturb, device=self.device)
+        amp = (torch.autocast("cuda", dtype=torch.bfloat16) if tc.amp == "bf16" and self.device.type == "cuda"
+               else contextlib.nullcontext())
+        with amp:
+            pred, _, p = render_rays(self.model, self.renderer, self.origins[idx], self.dirs[idx], z)
+        loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt.step()
+        return loss.detach()
+
+    def run(self) -> list[dict]:
+        tc, started = self.tc, time.time()
+        while self.epoch < tc.epochs:
+            if tc.max_time_s is not None and self.train_time_s >= tc.max_time_s:
+                print(f"train.max_time_s={tc.max_time_s} reached after {self.epoch} epochs")
+                break
+            self.run_epoch()
+        return self.history
+
+    def run_epoch(self) -> bool:
+        tc, B = self.tc, self.tc.batch_rays
+        gen = torch.Generator().manual_seed(tc.seed * 1000 + self.epoch)
+        perm = torch.randperm(len(self.ranges), generator=gen).to(self.device)
+        self.model.train()
+        bar = tqdm(range(self.step_in_epoch, self.steps_per_epoch), desc=f"epoch {self.epoch + 1}/{tc.epochs}",
+                   unit="step", dynamic_ncols=True, mininterval=1.0)
+        t_epoch, t_ckpt, losses = time.time(), time.time(), []
+        for b in bar:
+            losses.append(self.step(perm[(b * B) % len(perm):][:B]))
+            self.step_in_epoch = b + 1
+            if b % 20 == 0 or b + 1 == self.steps_per_epoch:
+                elapsed = time.time() - t_epoch
+                bar.set_postfix(loss=f"{float(losses[-1]):.3f}",
+                                rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}")
+            if time.time() - t_ckpt > tc.checkpoint_every_s:
+                self.train_time_s += time.time() - t_ckpt
+                t_ckpt = time.time()
+                atomic_torch_save(self.state(), self.out / "last.pt")
+            if tc.max_time_s is not None and self.train_time_s + time.time() - t_ckpt >= tc.max_time_s:
+                break
+        bar.close()
+        steps = self.step_in_epoch - bar.initial
+        self.train_time_s += time.time() - t_ckpt
+        epoch_s = time.time() - t_epoch
+        self.sched.step()
+        record = {"epoch": self.epoch + 1, "steps": steps, "loss": float(torch.stack(losses).mean()) if losses else None,
+                  "epoch_s": epoch_s, "rays_per_s": steps * B / max(epoch_s, 1e-9), "train_time_s": self.train_time_s,
+                  "lr": self.opt.param_groups[0]["lr"]}
+        record["val"] = self.validate(self.model)
+        self.epoch, self.step_in_epoch = self.epoch + 1, 0
+        self.history.append(record)
+        improved = self.best is None or record["val"]["mae_m"] < self.best["val"]["mae_m"]
+        if improved:
+            self.best = record
+            atomic_torch_save({**self.meta, "model": self.model.state_dict(), "epoch": record["epoch"],
+                               "val": record["val"]}, self.out / "nof.pt")
+        print(f"epoch {record['epoch']}: loss {record['loss']:.4f}, val MAE {record['val']['mae_m']:.3f} m, "
+              f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s"
+              + (" (best)" if improved else ""))
+        atomic_torch_save(self.state(), self.out / "last.pt")
+        return improved

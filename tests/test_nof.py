@@ -1,0 +1,123 @@
+"""The NOF model, its training data (splits, bad inputs), the scan metrics, and a short training run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from eval.metrics import scan_synthesis_metrics
+from irmcl_warp.config import ModelConfig, register
+from irmcl_warp.nof.beams import BeamSet, interleaved_splits, split_beams
+from irmcl_warp.nof.model import NOF, PositionalEncoding
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def _cfg(overrides):
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose("config", overrides=overrides)
+
+
+def test_encoding_matches_its_formula(rng):
+    xy = torch.from_numpy(rng.uniform(-20, 20, (5, 2))).float()
+    g = PositionalEncoding(10)(xy)
+    assert g.shape == (5, 42)
+    assert torch.equal(g[:, :2], xy)
+    for k in range(10):  # layout per frequency: sin x, sin y, cos x, cos y
+        f = 2.0 ** k
+        assert torch.allclose(g[:, 2 + 4 * k:4 + 4 * k], torch.sin(f * xy), atol=1e-5)
+        assert torch.allclose(g[:, 4 + 4 * k:6 + 4 * k], torch.cos(f * xy), atol=1e-5)
+
+
+def test_paper_network_shape_and_output_range(rng):
+    model = NOF(ModelConfig())
+    linears = [m for m in model.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(linears) == 9  # 8 hidden + output
+    assert linears[0].in_features == 42 and linears[4].in_features == 256 + 42  # input again after layer 4
+    assert sum(isinstance(m, torch.nn.BatchNorm1d) for m in model.modules()) == 8
+    p = model(torch.from_numpy(rng.uniform(-30, 30, (64, 2))).float())
+    assert p.shape == (64,) and torch.all((p >= 0) & (p <= 1))
+    with pytest.raises(ValueError, match="skip_after"):
+        NOF(ModelConfig(depth=4, skip_after=4))
+
+
+def _beams(S=20, B=8, name="unit"):
+    ranges = np.full((S, B), 3.0, np.float32)
+    return BeamSet(np.arange(S, dtype=float) + 100.0, np.zeros((S, 3)), ranges, np.linspace(-1, 1, B),
+                   np.ones((S, B), bool), name)
+
+
+def test_bad_inputs_give_clear_errors():
+    b = _beams()
+    with pytest.raises(ValueError, match="19 poses .* for 20 scans"):
+        BeamSet(b.stamps, b.T_map_laser[:-1], b.ranges_m, b.angles_rad, b.valid, "unit")
+    r = b.ranges_m.copy()
+    r[4, 2] = np.nan
+    with pytest.raises(ValueError, match=r"scan 4 \(stamp 104.000000\), beam 2: range nan is marked valid"):
+        BeamSet(b.stamps, b.T_map_laser, r, b.angles_rad, b.valid, "unit")
+    with pytest.raises(ValueError, match="none of its 20 scans has a valid beam"):
+        BeamSet(b.stamps, b.T_map_laser, b.ranges_m, b.angles_rad, np.zeros_like(b.valid), "unit")
+    poses = b.T_map_laser.copy()
+    poses[3, 0] = np.inf
+    with pytest.raises(ValueError, match="scan 3 .* non-finite pose"):
+        BeamSet(b.stamps, poses, b.ranges_m, b.angles_rad, b.valid, "unit")
+    with pytest.raises(ValueError, match="split 'train' is empty"):
+        split_beams(b, {"train": np.array([]), "val": b.stamps[:2]}, ["train"], "splits/x.json")
+    with pytest.raises(ValueError, match="1 of the 2 ids of split 'val' match no scan"):
+        split_beams(b, {"val": np.array([100.0, 555.0])}, ["val"], "splits/x.json")
+
+
+def test_interleaved_rule_reproduces_a_shared_split_file(data_dir):
+    from irmcl_warp.io import read_matched_csv, read_splits
+
+    stamps, _ = read_matched_csv(data_dir / "corrected/matched/intel.gmapping_corrected_keyframes.csv")
+    ours, theirs = interleaved_splits(stamps), read_splits(data_dir / "splits/intel.json")
+    for name in ("train", "val", "test", "train_block", "val_block", "test_block"):
+        assert np.allclose(np.sort(ours[name]), np.sort(theirs[name]), atol=1e-6), name
+
+
+def test_scan_metrics_on_known_errors():
+    angles = np.linspace(-1.5, 1.5, 100)
+    meas = np.full((2, 100), 4.0)
+    valid = np.ones((2, 100), bool)
+    exact = scan_synthesis_metrics(meas, meas, valid, angles)
+    assert exact["mae_m"] == 0 and exact["accuracy_pct"] == 100 and exact["chamfer_m"] < 1e-9
+    assert exact["fscore_pct"] == 100
+    pred = meas.copy()
+    pred[:, :25] += 1.0  # a quarter of the beams 1 m long
+    m = scan_synthesis_metrics(pred, meas, valid, angles)
+    assert m["mae_m"] == pytest.approx(0.25) and m["accuracy_pct"] == pytest.approx(75.0)
+    assert m["median_error_m"] == 0.0 and 0 < m["fscore_pct"] < 100
+    valid[1] = False  # a scan without valid beams is not scored
+    assert scan_synthesis_metrics(pred, meas, valid, angles)["scans"] == 1
+
+
+def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch):
+    """A minute of CPU training must cut the validation range error to well below an untrained field's."""
+    from irmcl_warp.nof.prepare import prepare_beams
+    from irmcl_warp.nof.render import make_renderer, render_scans
+    from irmcl_warp.train import run_train
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=150",
+                "train.val_scans=8", "train.num_samples=96", "render.num_samples=128"])
+    torch.manual_seed(0)
+    val = prepare_beams(cfg)["val"].subset(np.arange(8))
+    untrained = NOF(ModelConfig(**cfg.model)).eval()
+    pred = render_scans(untrained, val, make_renderer("warp"), 128, 0.02, 20.0)
+    mae_untrained = scan_synthesis_metrics(pred, val.ranges_m, val.valid, val.angles_rad)["mae_m"]
+    out = run_train(cfg)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert (out / "nof.pt").is_file() and (out / "last.pt").is_file()
+    assert metrics["epochs_done"] == 2 and metrics["history"][-1]["loss"] < metrics["history"][0]["loss"]
+    mae = metrics["val"]["mae_m"]
+    assert mae < 0.9 and mae < 0.3 * mae_untrained, (mae, mae_untrained)
+    # a second call finds the finished run and resumes without training again
+    again = json.loads((run_train(cfg) / "metrics.json").read_text())
+    assert again["epochs_done"] == 2 and again["train_time_s"] == pytest.approx(metrics["train_time_s"])
