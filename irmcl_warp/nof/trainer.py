@@ -48,8 +48,8 @@ class Trainer:
         self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay)
         self.sched = torch.optim.lr_scheduler.MultiStepLR(self.opt, list(tc.lr_milestones), tc.lr_gamma)
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
-        per_epoch = -(-len(self.ranges) // tc.batch_rays)
-        self.steps_per_epoch = min(per_epoch, tc.steps_per_epoch) if tc.steps_per_epoch else per_epoch
+        # an epoch is one pass over the rays, or ``steps_per_epoch`` batches (fewer or more than a pass)
+        self.steps_per_epoch = tc.steps_per_epoch or -(-len(self.ranges) // tc.batch_rays)
 
     # --- checkpointing -------------------------------------------------------------------------
     def state(self) -> dict:
@@ -104,14 +104,15 @@ class Trainer:
 
     def run_epoch(self) -> bool:
         tc, B = self.tc, self.tc.batch_rays
-        gen = torch.Generator().manual_seed(tc.seed * 1000 + self.epoch)
-        perm = torch.randperm(len(self.ranges), generator=gen).to(self.device)
+        gen = torch.Generator().manual_seed(tc.seed * 1000 + self.epoch)  # the same order when resumed
+        passes = -(-self.steps_per_epoch * B // len(self.ranges))
+        perm = torch.cat([torch.randperm(len(self.ranges), generator=gen) for _ in range(passes)]).to(self.device)
         self.model.train()
         bar = tqdm(range(self.step_in_epoch, self.steps_per_epoch), desc=f"epoch {self.epoch + 1}/{tc.epochs}",
                    unit="step", dynamic_ncols=True, mininterval=1.0)
         t_epoch, t_ckpt, losses = time.time(), time.time(), []
         for b in bar:
-            losses.append(self.step(perm[(b * B) % len(perm):][:B]))
+            losses.append(self.step(perm[b * B:(b + 1) * B]))
             self.step_in_epoch = b + 1
             if b % 20 == 0 or b + 1 == self.steps_per_epoch:
                 elapsed = time.time() - t_epoch
