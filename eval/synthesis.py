@@ -1,11 +1,11 @@
 """``python -m eval.synthesis +exp=<name>``: scan synthesis on the test split (IR-MCL Table I protocol).
 
 Every method renders the same test beams from the ground-truth laser poses:
-* the trained NOF (outputs/<exp>/train/nof.pt), ``render.num_samples`` fixed depths over [near, far];
+* the NOF trained with preset ``train.name`` (outputs/<exp>/train-<preset>/nof.pt), ``render.num_samples`` fixed depths over [near, far];
 * occupancy grid maps built from the training split's scans and poses at 5 and 10 cm (log-odds mapping),
   rendered by ray casting (RAYCAST["dda"]); a cell never observed stops the beam, as in AMCL's
   map_calc_range, and a beam leaving the map returns ``far``.
-Writes outputs/<exp>/synthesis/metrics.json (one entry per method) and scan.png (one test scan).
+Writes outputs/<exp>/synthesis-<preset>/metrics.json (one entry per method) and scan.png (one test scan).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
 from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.train import train_dir
 from kernels import RAYCAST, pick_device
 
 GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 and 10 cm
@@ -80,11 +81,11 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
 def run_synthesis(cfg) -> Path:
     started = time.time()
     device = pick_device(cfg.device)
-    out = stage_dir(cfg, "synthesis")
+    out = stage_dir(cfg, f"synthesis-{cfg.train.name}")
     sets = prepare_beams(cfg)
     train, test, far = sets["train"], sets["test"], far_m(cfg)
     preds, methods = {}, {}
-    nof_path = stage_dir(cfg, "train") / "nof.pt"
+    nof_path = train_dir(cfg) / "nof.pt"
     if nof_path.is_file():
         t0 = time.time()
         pred, meta = nof_ranges(nof_path, test, cfg)

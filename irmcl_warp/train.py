@@ -1,6 +1,6 @@
 """``python -m irmcl_warp.train +exp=<name> [train=paper|fast|cpu|quick] [render=warp|torch_ref]``
 
-Trains the NOF on the ``train`` split (the benchmark ids) and writes ``outputs/<exp>/train/``:
+Trains the NOF on the ``train`` split (the benchmark ids) and writes ``outputs/<exp>/train-<preset>/``:
 nof.pt (best epoch on the validation split, with its model config), last.pt (to resume), metrics.json
 (history per epoch), config.yaml, manifest.json. Run it again after an interruption and it resumes.
 """
@@ -32,6 +32,11 @@ def torch_device(cfg) -> torch.device:
     return torch.device(pick_device(cfg.device))
 
 
+def train_dir(cfg) -> Path:
+    """``outputs/<exp>/train-<preset>/``: one folder per recipe, so presets never overwrite each other."""
+    return stage_dir(cfg, f"train-{cfg.train.name}")
+
+
 def make_validator(beams, cfg, near_m, far_m, device):
     """Render ``train.val_scans`` evenly spread validation scans and score them."""
     k = min(len(beams), cfg.train.val_scans)
@@ -50,14 +55,18 @@ def run_train(cfg) -> Path:
     if cfg.train.tf32:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
-    out = stage_dir(cfg, "train")
+    out = train_dir(cfg)
     sets = prepare_beams(cfg)
     near, far = cfg.render.near_m, far_m(cfg)
     model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
     meta = {"model_config": asdict(model_cfg), "near_m": near, "far_m": far, "render": OmegaConf.to_container(cfg.render),
             "data": cfg.data.name, "split": cfg.data.split, "train_split": sets["train"].name,
             "train_preset": cfg.train.name}
-    key = settings_key(meta, OmegaConf.to_container(cfg.train), OmegaConf.to_container(cfg.data))
+    # what decides the result; not time limits, checkpoint period or validation size, so a run resumed
+    # with a longer train.max_time_s continues instead of starting again
+    recipe = {k: v for k, v in OmegaConf.to_container(cfg.train).items()
+              if k not in ("max_time_s", "checkpoint_every_s", "val_scans")}
+    key = settings_key(meta, recipe, OmegaConf.to_container(cfg.data))
     trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, key,
                       make_validator(sets["val"], cfg, near, far, device), meta)
     trainer.try_resume()
