@@ -37,6 +37,18 @@ def train_dir(cfg) -> Path:
     return stage_dir(cfg, f"train-{cfg.train.name}")
 
 
+def run_settings(cfg, train_split: str, far: float) -> tuple[dict, str]:
+    """(metadata stored in nof.pt, key of the settings that decide the result). Time limits, checkpoint
+    period and validation size are not in the key: a run resumed with a longer max_time_s continues."""
+    model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
+    meta = {"model_config": asdict(model_cfg), "near_m": cfg.render.near_m, "far_m": far,
+            "render": OmegaConf.to_container(cfg.render), "data": cfg.data.name, "split": cfg.data.split,
+            "train_split": train_split, "train_preset": cfg.train.name}
+    recipe = {k: v for k, v in OmegaConf.to_container(cfg.train).items()
+              if k not in ("max_time_s", "checkpoint_every_s", "val_scans")}
+    return meta, settings_key(meta, recipe, OmegaConf.to_container(cfg.data))
+
+
 def make_validator(beams, cfg, near_m, far_m, device):
     """Render ``train.val_scans`` evenly spread validation scans and score them."""
     k = min(len(beams), cfg.train.val_scans)
@@ -58,15 +70,8 @@ def run_train(cfg) -> Path:
     out = train_dir(cfg)
     sets = prepare_beams(cfg)
     near, far = cfg.render.near_m, far_m(cfg)
-    model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
-    meta = {"model_config": asdict(model_cfg), "near_m": near, "far_m": far, "render": OmegaConf.to_container(cfg.render),
-            "data": cfg.data.name, "split": cfg.data.split, "train_split": sets["train"].name,
-            "train_preset": cfg.train.name}
-    # what decides the result; not time limits, checkpoint period or validation size, so a run resumed
-    # with a longer train.max_time_s continues instead of starting again
-    recipe = {k: v for k, v in OmegaConf.to_container(cfg.train).items()
-              if k not in ("max_time_s", "checkpoint_every_s", "val_scans")}
-    key = settings_key(meta, recipe, OmegaConf.to_container(cfg.data))
+    meta, key = run_settings(cfg, sets["train"].name, far)
+    model_cfg = ModelConfig(**meta["model_config"])
     trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, key,
                       make_validator(sets["val"], cfg, near, far, device), meta)
     trainer.try_resume()

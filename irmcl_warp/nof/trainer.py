@@ -73,9 +73,9 @@ class Trainer:
         self.sched.load_state_dict(s["sched"])
         self.epoch, self.step_in_epoch, self.history = s["epoch"], s["step_in_epoch"], s["history"]
         self.best, self.train_time_s = s["best"], s["train_time_s"]
-        torch.set_rng_state(s["rng"]["cpu"])
+        torch.set_rng_state(s["rng"]["cpu"].cpu())  # map_location moved it to the device
         if "cuda" in s["rng"] and torch.cuda.is_available():
-            torch.cuda.set_rng_state_all(s["rng"]["cuda"])
+            torch.cuda.set_rng_state_all([t.cpu() for t in s["rng"]["cuda"]])
         print(f"resuming {path}: epoch {self.epoch}, step {self.step_in_epoch}")
         return True
 
