@@ -40,3 +40,27 @@ def test_unknown_key_fails():
 def test_derived_logs_where_odometry_matters():
     assert "derived/intel.fileorder" in _compose(["+exp=intel"]).data.path
     assert "derived/fr079.revfix" in _compose(["+exp=fr079"]).data.path
+
+
+TRAIN_PRESETS = sorted(p.stem for p in (CONF / "train").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("preset", TRAIN_PRESETS)
+def test_training_presets_compose_and_name_themselves(preset):
+    cfg = _compose(["+exp=fr079", f"train={preset}"])
+    assert cfg.train.name == preset  # the output folder train-<name> must not collide
+    assert cfg.model.skip_after < cfg.model.depth and cfg.train.batch_rays > 0
+
+
+def test_paper_recipe_is_the_authors_script():
+    cfg = _compose(["+exp=fr079", "train=paper"])
+    t, r, m = cfg.train, cfg.render, cfg.model
+    assert (t.epochs, t.batch_rays, t.num_samples, t.lr, list(t.lr_milestones), t.lr_gamma, t.weight_decay) == \
+        (32, 1024, 256, 1e-4, [4, 8], 0.5, 1e-3)
+    assert (t.loss, t.lambda_opacity, r.near_m, cfg.data.usable_range_m) == ("smooth_l1", 1e-5, 0.02, 40.0)
+    assert (m.num_freqs, m.width, m.depth, m.skip_after) == (10, 256, 8, 4)
+
+
+def test_block_experiments_hold_out_the_time_block():
+    cfg = _compose(["+exp=fr079_block"])
+    assert cfg.data.split == "block" and cfg.exp == "fr079_block" and cfg.data.name == "fr079"

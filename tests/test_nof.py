@@ -121,3 +121,23 @@ def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch)
     # a second call finds the finished run and resumes without training again
     again = json.loads((run_train(cfg) / "metrics.json").read_text())
     assert again["epochs_done"] == 2 and again["train_time_s"] == pytest.approx(metrics["train_time_s"])
+    # scan synthesis scores the NOF and both grids on the same test beams
+    from eval.synthesis import run_synthesis
+
+    syn = json.loads((run_synthesis(cfg) / "metrics.json").read_text())
+    assert set(syn["methods"]) == {"NOF (quick)", "OGM 5 cm", "OGM 10 cm"}
+    assert syn["methods"]["OGM 5 cm"]["mae_m"] < 0.25  # exact simulated poses: the grid is sharp
+    assert syn["methods"]["NOF (quick)"]["beams"] == syn["methods"]["OGM 5 cm"]["beams"]
+
+
+@pytest.mark.data
+def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
+    from irmcl_warp.nof.prepare import prepare_beams
+
+    monkeypatch.chdir(tmp_path)
+    sets = prepare_beams(_cfg(["+exp=fr079"]))
+    assert [len(sets[k]) for k in ("train", "val", "test")] == [3832, 479, 480]
+    assert sets["train"].num_rays == 1_350_698  # the 1.35M training rays of the authors' fr079 run
+    block = prepare_beams(_cfg(["+exp=fr079_block"]))
+    assert block["test"].name == "test_block" and len(block["test"]) == 959
+    assert block["test"].stamps.min() > block["train"].stamps.max()  # a held-out time block
