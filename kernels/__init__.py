@@ -58,6 +58,7 @@ RAYCAST = Registry("raycast")
 MAPPING = Registry("mapping")
 SIM = Registry("sim")
 RENDER = Registry("render")
+WEIGHTING = Registry("weighting")
 
 # importing the families registers their entries
-from kernels import mapping, raycast, render, sim  # noqa: E402,F401
+from kernels import mapping, raycast, render, sim, weighting  # noqa: E402,F401

@@ -10,11 +10,12 @@ def test_kernels_package_is_ours_not_the_pypi_one():
 
 
 def test_every_registry_entry_has_a_reference_twin():
-    from kernels import MAPPING, RAYCAST, RENDER, SIM
+    from kernels import MAPPING, RAYCAST, RENDER, SIM, WEIGHTING
 
     assert RAYCAST.names() == ["dda", "distance_field"]
     assert MAPPING.names() == ["logodds"]
     assert SIM.names() == ["rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
-    for twin in ("raycast", "mapping", "sim", "render"):
+    assert WEIGHTING.names() == ["nog_raymarch"]
+    for twin in ("raycast", "mapping", "sim", "render", "weighting"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()
