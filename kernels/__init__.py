@@ -59,6 +59,8 @@ MAPPING = Registry("mapping")
 SIM = Registry("sim")
 RENDER = Registry("render")
 WEIGHTING = Registry("weighting")
+MOTION = Registry("motion")
+RESAMPLE = Registry("resample")
 
 # importing the families registers their entries
-from kernels import mapping, raycast, render, sim, weighting  # noqa: E402,F401
+from kernels import mapping, motion, raycast, render, resample, sim, weighting  # noqa: E402,F401

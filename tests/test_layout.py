@@ -10,12 +10,13 @@ def test_kernels_package_is_ours_not_the_pypi_one():
 
 
 def test_every_registry_entry_has_a_reference_twin():
-    from kernels import MAPPING, RAYCAST, RENDER, SIM, WEIGHTING
+    from kernels import MAPPING, MOTION, RAYCAST, RENDER, RESAMPLE, SIM, WEIGHTING
 
     assert RAYCAST.names() == ["dda", "distance_field"]
     assert MAPPING.names() == ["logodds"]
     assert SIM.names() == ["rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
     assert WEIGHTING.names() == ["nog_raymarch"]
-    for twin in ("raycast", "mapping", "sim", "render", "weighting"):
+    assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
+    for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

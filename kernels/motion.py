@@ -1,0 +1,66 @@
+"""Particle motion: ``MOTION["odometry"]``, the sample_motion_model_odometry of Thrun, Burgard & Fox,
+Probabilistic Robotics, Table 5.6. The odometry step between two scans is (rot1, trans, rot2); each
+particle draws its own noisy version with standard deviations
+
+    s_rot1 = sqrt(a1 rot1^2 + a2 trans^2),  s_trans = sqrt(a3 trans^2 + a4 (rot1^2 + rot2^2)),
+    s_rot2 = sqrt(a1 rot2^2 + a2 trans^2)
+
+and moves by it. Random numbers: Warp's per-thread generator seeded by (seed, particle).
+Numpy twin: irmcl_warp/reference/motion.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from kernels import MOTION, pick_device
+
+
+def odometry_step(odom_from, odom_to) -> tuple[float, float, float]:
+    """(rot1, trans, rot2) between two odometry poses; rot1 = 0 when the robot only turned."""
+    dx, dy = odom_to[0] - odom_from[0], odom_to[1] - odom_from[1]
+    trans = float(np.hypot(dx, dy))
+    rot1 = float(np.arctan2(dy, dx) - odom_from[2]) if trans > 1e-6 else 0.0
+    rot2 = float(odom_to[2] - odom_from[2] - rot1)
+    wrap = lambda a: float((a + np.pi) % (2 * np.pi) - np.pi)
+    return wrap(rot1), trans, wrap(rot2)
+
+
+def make_kernel(a1: float, a2: float, a3: float, a4: float):
+    @wp.kernel(module="unique")
+    def sample(particles: wp.array(dtype=wp.vec3), step: wp.vec3, seed: int):
+        i = wp.tid()
+        state = wp.rand_init(seed, i)
+        r1 = step[0]
+        t = step[1]
+        r2 = step[2]
+        s1 = wp.sqrt(wp.static(a1) * r1 * r1 + wp.static(a2) * t * t)
+        st = wp.sqrt(wp.static(a3) * t * t + wp.static(a4) * (r1 * r1 + r2 * r2))
+        s2 = wp.sqrt(wp.static(a1) * r2 * r2 + wp.static(a2) * t * t)
+        r1h = r1 - s1 * wp.randn(state)
+        th = t - st * wp.randn(state)
+        r2h = r2 - s2 * wp.randn(state)
+        p = particles[i]
+        heading = p[2] + r1h
+        yaw = p[2] + r1h + r2h
+        yaw = wp.atan2(wp.sin(yaw), wp.cos(yaw))
+        particles[i] = wp.vec3(p[0] + th * wp.cos(heading), p[1] + th * wp.sin(heading), yaw)
+
+    return sample
+
+
+class OdometryMotion:
+    def __init__(self, alphas=(0.05, 0.005, 0.05, 0.005), device: str = "auto"):
+        if len(alphas) != 4 or min(alphas) < 0:
+            raise ValueError(f"motion: expected 4 non-negative alphas (Thrun a1..a4), got {list(alphas)}")
+        self.device = pick_device(device)
+        self.kernel = make_kernel(*map(float, alphas))
+
+    def __call__(self, particles: wp.array, step, seed: int) -> None:
+        wp.launch(self.kernel, particles.shape[0], [particles, wp.vec3(*map(float, step)), int(seed)], device=self.device)
+
+
+@MOTION.register("odometry")
+def make_odometry(**settings) -> OdometryMotion:
+    return OdometryMotion(**settings)

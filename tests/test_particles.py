@@ -1,0 +1,88 @@
+"""Motion, weights and resampling kernels: statistics against the numpy twins, and resampling invariants."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+from irmcl_warp.reference.motion import sample_odometry
+from irmcl_warp.reference.resample import (effective_sample_size, low_variance_indices, multinomial_indices,
+                                           weighted_mean)
+from kernels import MOTION, RESAMPLE
+from kernels.motion import odometry_step
+from kernels.resample import ParticleWeights
+
+ALPHAS = (0.1, 0.02, 0.08, 0.01)
+
+
+def test_odometry_step_decomposes_a_motion():
+    r1, t, r2 = odometry_step((1.0, 2.0, 0.5), (1.0 + np.cos(1.0), 2.0 + np.sin(1.0), 1.6))
+    assert (r1, t, r2) == pytest.approx((0.5, 1.0, 0.6))
+    assert odometry_step((0, 0, 0), (0, 0, 0.3)) == pytest.approx((0.0, 0.0, 0.3))  # turning in place
+
+
+def test_motion_kernel_statistics_match_the_twin(rng):
+    n, step = 40000, (0.3, 0.8, -0.2)
+    start = np.tile(np.array([[1.0, -2.0, 0.4]], np.float32), (n, 1))
+    p = wp.array(start, dtype=wp.vec3, device="cpu")
+    MOTION.build("odometry", alphas=ALPHAS, device="cpu")(p, step, seed=int(rng.integers(1 << 30)))
+    ours = p.numpy().astype(np.float64)
+    twin = sample_odometry(start.astype(np.float64), step, ALPHAS, rng)
+    assert np.allclose(ours.mean(0), twin.mean(0), atol=0.01), f"seed {rng.seed}"
+    assert np.allclose(np.cov(ours.T), np.cov(twin.T), atol=2e-3, rtol=0.1), f"seed {rng.seed}"
+    # noiseless odometry moves every particle exactly
+    q = wp.array(start[:3], dtype=wp.vec3, device="cpu")
+    MOTION.build("odometry", alphas=(0, 0, 0, 0), device="cpu")(q, step, seed=1)
+    x = 1.0 + 0.8 * np.cos(0.7)
+    assert np.allclose(q.numpy()[0], [x, -2.0 + 0.8 * np.sin(0.7), 0.5], atol=1e-5)
+    with pytest.raises(ValueError, match="4 non-negative alphas"):
+        MOTION.build("odometry", alphas=(0.1, 0.1), device="cpu")
+
+
+def _weights(rng, n):
+    log_w = rng.normal(0, 2, n).astype(np.float32)
+    particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(np.float32)
+    pw = wp.array(particles, dtype=wp.vec3, device="cpu")
+    weights = ParticleWeights(n, device="cpu")
+    weights.update(wp.array(log_w, dtype=wp.float32, device="cpu"), pw)
+    return log_w, particles, pw, weights
+
+
+def test_neff_and_mean_match_the_twin(rng):
+    log_w, particles, _, weights = _weights(rng, 500)
+    pose, neff = weights.summary()
+    assert neff == pytest.approx(effective_sample_size(log_w), rel=1e-4)
+    assert np.allclose(pose, weighted_mean(particles.astype(np.float64), log_w), atol=1e-4)
+    assert 1.0 <= neff <= 500
+
+
+def test_low_variance_keeps_each_particle_floor_or_ceil_of_its_share(rng):
+    n = 1000
+    log_w, particles, pw, weights = _weights(rng, n)
+    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
+    offset = float(rng.uniform())
+    RESAMPLE.build("low_variance", device="cpu")(weights.cdf, pw, dst, offset)
+    out = dst.numpy()
+    # map drawn particles back to their index (positions are unique)
+    index = {tuple(p): i for i, p in enumerate(particles)}
+    drawn = np.array([index[tuple(p)] for p in out])
+    counts = np.bincount(drawn, minlength=n)
+    share = n * np.exp(log_w - log_w.max()) / np.exp(log_w - log_w.max()).sum()
+    assert np.all((counts >= np.floor(share) - 1) & (counts <= np.ceil(share) + 1)), f"seed {rng.seed}"
+    twin = low_variance_indices(log_w, offset)
+    assert (drawn == twin).mean() > 0.99, f"seed {rng.seed}"  # float32 vs float64 cumulative sums at edges
+
+
+def test_multinomial_draws_follow_the_weights(rng):
+    n = 4000
+    log_w = np.log(np.where(np.arange(n) < n // 4, 3.0, 1.0)).astype(np.float32)  # first quarter: 3x weight
+    particles = np.stack([np.arange(n), np.zeros(n), np.zeros(n)], -1).astype(np.float32)
+    pw = wp.array(particles, dtype=wp.vec3, device="cpu")
+    weights = ParticleWeights(n, device="cpu")
+    weights.update(wp.array(log_w, dtype=wp.float32, device="cpu"), pw)
+    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
+    RESAMPLE.build("multinomial", device="cpu")(weights.cdf, pw, dst, float(rng.uniform()))
+    share_first = (dst.numpy()[:, 0] < n // 4).mean()
+    twin_share = (multinomial_indices(log_w, rng) < n // 4).mean()
+    assert abs(share_first - 0.5) < 0.03 and abs(twin_share - 0.5) < 0.03, f"seed {rng.seed}"
