@@ -16,6 +16,13 @@ from kernels import RESAMPLE, pick_device
 
 
 @wp.kernel
+def accumulate_kernel(log_w: wp.array(dtype=wp.float32), log_likelihood: wp.array(dtype=wp.float32)):
+    """Importance weights multiply across steps until the set is resampled: log w += log p(z | x)."""
+    i = wp.tid()
+    log_w[i] = log_w[i] + log_likelihood[i]
+
+
+@wp.kernel
 def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
     wp.atomic_max(out, 0, log_w[wp.tid()])
 

@@ -1,0 +1,104 @@
+"""The particle filter: motion -> weighting -> (selective) resampling -> estimate, every part a Warp kernel
+chosen from a registry once, in ``__init__``; particle arrays are allocated once and only launched on.
+
+Per step the host sends the odometry step and the measured ranges of the chosen beams, and reads back
+five sums (weighted mean and N_eff). Resampling runs when N_eff < ``resample_threshold`` * N
+(selective resampling; 1.0 = every step).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from kernels import MOTION, RESAMPLE, WEIGHTING, pick_device
+from kernels.resample import ParticleWeights, accumulate_kernel
+
+
+@dataclass
+class MCLConfig:
+    num_particles: int = 100_000  # IR-MCL global localization
+    num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
+    num_samples: int = 256
+    near_m: float = 0.02
+    far_m: float = 40.0
+    t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
+    sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
+    alphas: tuple = (0.05, 0.005, 0.05, 0.005)  # Thrun a1..a4
+    resample: str = "low_variance"
+    resample_threshold: float = 0.5  # N_eff < 0.5 N
+    seed: int = 0
+
+
+class ParticleFilter:
+    def __init__(self, nog, cfg: MCLConfig, T_base_laser, scan_angles_rad, device: str = "auto"):
+        self.cfg, self.device = cfg, pick_device(device)
+        n_sensor = len(scan_angles_rad)
+        if n_sensor < 1:
+            raise ValueError("MCL: the sensor has no beams")
+        self.beam_index = np.unique(np.linspace(0, n_sensor - 1, min(cfg.num_beams, n_sensor)).round().astype(int))
+        self.num_sensor_beams, self.nog, self.T_base_laser = n_sensor, nog, tuple(map(float, T_base_laser))
+        N, B, d = cfg.num_particles, len(self.beam_index), self.device
+        self.motion = MOTION.build("odometry", alphas=cfg.alphas, device=d)
+        self.weighting = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=N, num_beams=B, num_samples=cfg.num_samples,
+                                         near_m=cfg.near_m, far_m=cfg.far_m, t_min=cfg.t_min, sigma_m=cfg.sigma_m, device=d)
+        self.resampler = RESAMPLE.build(cfg.resample, device=d)
+        self.weights = ParticleWeights(N, device=d)
+        self.particles = wp.zeros(N, dtype=wp.vec3, device=d)
+        self.scratch = wp.zeros(N, dtype=wp.vec3, device=d)
+        self.log_w = wp.zeros(N, dtype=wp.float32, device=d)  # accumulated since the last resampling
+        self.log_lik = wp.zeros(N, dtype=wp.float32, device=d)  # this scan's
+        self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
+        self.measured = wp.zeros(B, dtype=wp.float32, device=d)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.steps = 0
+
+    # --- initialisation ---------------------------------------------------------------------------
+    def init_uniform(self, free_threshold: float = 0.1) -> None:
+        """Global localization: particles spread uniformly over the free nodes of the map, any heading."""
+        occ = self.nog.occupancy
+        iy, ix = np.nonzero(occ < free_threshold)
+        if len(ix) == 0:
+            raise ValueError("MCL: the map has no free space to spread particles over")
+        k = self.rng.integers(0, len(ix), self.cfg.num_particles)
+        res = self.nog.resolution_m
+        xy = np.stack([ix[k], iy[k]], -1) * res + np.asarray(self.nog.origin_xy) + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
+        self.set_particles(np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))]))
+
+    def init_gaussian(self, pose, std=(0.5, 0.5, 0.3)) -> None:
+        """Pose tracking from a noisy initial pose."""
+        self.set_particles(np.asarray(pose) + self.rng.normal(0, 1, (self.cfg.num_particles, 3)) * np.asarray(std))
+
+    def set_particles(self, poses: np.ndarray) -> None:
+        poses = np.asarray(poses, np.float32)
+        H, W = self.nog.shape
+        cells = self.nog.node_of(poses[:, :2])
+        if np.any((cells < 0) | (cells >= np.array([W, H]))):
+            raise ValueError("MCL: particles outside the map")
+        self.particles.assign(wp.array(poses, dtype=wp.vec3, device=self.device))
+        self.log_w.zero_()
+
+    # --- one filter step --------------------------------------------------------------------------
+    def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
+        """odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no return).
+        Returns (estimate [x, y, yaw], N_eff before resampling)."""
+        ranges_m = np.asarray(ranges_m, np.float32)
+        if ranges_m.shape != (self.num_sensor_beams,):
+            raise ValueError(f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
+                             f"for a sensor of {self.num_sensor_beams}")
+        self.steps += 1
+        self.motion(self.particles, odom_step, seed=self.cfg.seed * 1_000_003 + self.steps)
+        chosen = ranges_m[self.beam_index]
+        chosen = np.where((chosen > self.cfg.near_m) & (chosen < self.cfg.far_m), chosen, np.nan).astype(np.float32)
+        self.measured.assign(chosen)
+        self.weighting(self.particles, self.T_base_laser, self.angles, self.measured, self.log_lik)
+        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
+        self.weights.update(self.log_w, self.particles)
+        pose, neff = self.weights.summary()
+        if neff < self.cfg.resample_threshold * self.cfg.num_particles:
+            self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()))
+            self.particles, self.scratch = self.scratch, self.particles
+            self.log_w.zero_()
+        return pose, neff

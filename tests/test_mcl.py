@@ -1,0 +1,67 @@
+"""The particle filter on the simulator: pose tracking stays locked, and bad input gives clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from scipy.ndimage import binary_dilation
+
+from irmcl_warp.config import register
+from irmcl_warp.mcl import MCLConfig, ParticleFilter
+from irmcl_warp.nog import NOG
+from irmcl_warp.sim import simulate
+from kernels import SIM
+from kernels.motion import odometry_step
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def _world_and_map(duration_s=30.0, res=0.1):
+    """The simulated log and a stand-in NOG: the true walls rasterised (one cell thicker, as a NOF learns them)."""
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=[f"sim.duration_s={duration_s}"])
+    log, world = simulate(cfg.sim, "cpu")
+    lo = world.segments.reshape(-1, 2).min(0) - 1.0
+    hi = world.segments.reshape(-1, 2).max(0) + 1.0
+    shape = tuple(np.ceil((hi - lo) / res).astype(int)[::-1])
+    walls = SIM.build("rasterize", device="cpu")(world.segments, tuple(lo), res, shape) > 0
+    return log, NOG(binary_dilation(walls).astype(np.float32), (float(lo[0] + res / 2), float(lo[1] + res / 2)), res)
+
+
+def test_pose_tracking_stays_within_a_bound():
+    log, nog = _world_and_map()
+    pf = ParticleFilter(nog, MCLConfig(num_particles=1000, num_samples=128, far_m=10.0, seed=3), log.T_base_laser,
+                        log.info.angles_rad, device="cpu")
+    pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
+    errors = []
+    for k in range(1, len(log)):
+        pose, neff = pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k])
+        errors.append(np.hypot(*(pose[:2] - log.ground_truth[k, :2])))
+        assert 1.0 <= neff <= 1000.0 + 1e-3
+    errors = np.array(errors)
+    assert np.median(errors[20:]) < 0.15 and errors[20:].max() < 0.5, (np.median(errors), errors.max())
+
+
+def test_bad_input_gives_clear_errors():
+    log, nog = _world_and_map(duration_s=2.0)
+    pf = ParticleFilter(nog, MCLConfig(num_particles=16, num_samples=32, far_m=10.0), log.T_base_laser,
+                        log.info.angles_rad, device="cpu")
+    with pytest.raises(ValueError, match="scan of 180 beams, the filter was built for a sensor of 360"):
+        pf.step((0.0, 0.0, 0.0), np.ones(180))
+    with pytest.raises(ValueError, match="particles outside the map"):
+        pf.set_particles(np.array([[1e4, 0.0, 0.0]] * 16))
+    empty = NOG(np.ones((20, 20), np.float32), nog.origin_xy, nog.resolution_m)
+    pf_full = ParticleFilter(empty, MCLConfig(num_particles=16, num_samples=32, far_m=10.0), log.T_base_laser,
+                             log.info.angles_rad, device="cpu")
+    with pytest.raises(ValueError, match="no free space"):
+        pf_full.init_uniform()
+
+
+def test_odometry_step_treats_reversing_as_negative_translation():
+    r1, t, r2 = odometry_step((0.0, 0.0, 0.0), (-0.5, 0.0, 0.0))
+    assert (r1, t, r2) == pytest.approx((0.0, -0.5, 0.0))
+    assert odometry_step((0.0, 0.0, 0.0), (0.005, 0.0, 0.2)) == pytest.approx((0.0, 0.005, 0.2))  # a turn in place
