@@ -19,11 +19,11 @@ from kernels.motion import odometry_step
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def _world_and_map(duration_s=30.0, res=0.1):
+def _world_and_map(duration_s=30.0, res=0.1, extra=()):
     """The simulated log and a stand-in NOG: the true walls rasterised (one cell thicker, as a NOF learns them)."""
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=[f"sim.duration_s={duration_s}"])
+        cfg = compose("config", overrides=[f"sim.duration_s={duration_s}", *extra])
     log, world = simulate(cfg.sim, "cpu")
     lo = world.segments.reshape(-1, 2).min(0) - 1.0
     hi = world.segments.reshape(-1, 2).max(0) + 1.0
@@ -44,6 +44,22 @@ def test_pose_tracking_stays_within_a_bound():
         assert 1.0 <= neff <= 1000.0 + 1e-3
     errors = np.array(errors)
     assert np.median(errors[20:]) < 0.15 and errors[20:].max() < 0.5, (np.median(errors), errors.max())
+
+
+@pytest.mark.slow
+def test_global_localization_converges_in_a_small_world():
+    """5k particles spread over a 14 x 10 m office find the robot within 12 s and stay within 0.3 m."""
+    log, nog = _world_and_map(duration_s=30.0, extra=("sim.width_m=14", "sim.height_m=10"))
+    pf = ParticleFilter(nog, MCLConfig(num_particles=5000, num_samples=128, far_m=10.0, seed=1), log.T_base_laser,
+                        log.info.angles_rad, device="cpu")
+    pf.init_uniform()
+    errors = []
+    for k in range(1, len(log)):
+        pose, _ = pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k])
+        errors.append(np.hypot(*(pose[:2] - log.ground_truth[k, :2])))
+    errors = np.array(errors)
+    assert errors[:5].min() > 1.0  # it did start lost
+    assert errors[60:].max() < 0.3, errors[60:].max()
 
 
 def test_bad_input_gives_clear_errors():
