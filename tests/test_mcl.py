@@ -29,13 +29,23 @@ def _world_and_map(duration_s=30.0, res=0.1, extra=()):
     hi = world.segments.reshape(-1, 2).max(0) + 1.0
     shape = tuple(np.ceil((hi - lo) / res).astype(int)[::-1])
     walls = SIM.build("rasterize", device="cpu")(world.segments, tuple(lo), res, shape) > 0
-    return log, NOG(binary_dilation(walls).astype(np.float32), (float(lo[0] + res / 2), float(lo[1] + res / 2)), res)
+    nog = NOG(binary_dilation(walls).astype(np.float32), (float(lo[0] + res / 2), float(lo[1] + res / 2)), res)
+    nog.walls = walls.astype(np.float32)  # the thin rasterised walls, for the grid baselines
+    return log, nog
 
 
-def test_pose_tracking_stays_within_a_bound():
+@pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
+def test_pose_tracking_stays_within_a_bound(weighting):
+    from kernels import WEIGHTING
+
     log, nog = _world_and_map()
+    lf = None
+    if weighting == "likelihood_field":  # the grid baseline on the same walls (cells: corner origin)
+        corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+        lf = WEIGHTING.build("likelihood_field", occupancy=nog.walls, origin_xy=corner,
+                             resolution_m=nog.resolution_m, max_range_m=20.0, device="cpu")
     pf = ParticleFilter(nog, MCLConfig(num_particles=1000, num_samples=128, far_m=10.0, seed=3), log.T_base_laser,
-                        log.info.angles_rad, device="cpu")
+                        log.info.angles_rad, device="cpu", weighting=lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
     errors = []
     for k in range(1, len(log)):

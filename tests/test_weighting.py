@@ -94,3 +94,34 @@ def test_bake_from_a_checkpoint_is_cached_by_hash(tmp_path):
     assert np.array_equal(a.occupancy, b.occupancy)
     bake_nog(ckpt, (0, 0, 1, 1), 0.05, cache_dir=tmp_path / "nog")
     assert len(list((tmp_path / "nog").glob("nog-*.npz"))) == 2
+
+
+def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
+    from irmcl_warp.reference.weighting import likelihood_field_log_weights
+    from kernels.raycast import distance_to_occupied
+
+    occ = np.zeros((60, 80), np.float32)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1.0  # a 8 x 6 m room at 0.1 m
+    occ[20:40, 50] = 1.0
+    origin, res = (0.0, 0.0), 0.1
+    true = np.array([3.0, 3.0, 0.3])
+    angles = np.linspace(-np.pi, np.pi, 24, endpoint=False).astype(np.float32)
+    from kernels import RAYCAST
+
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=20.0, device="cpu")
+    # +half a cell: end points inside the wall cell, not on its border (where float32 and float64 floor differ)
+    measured = (caster.cast_numpy(true[None], angles)[0] + 0.05).astype(np.float32)
+    measured[5] = np.nan
+    particles = np.vstack([true, true + [0.5, 0.0, 0.0], true + [0.0, 0.0, 0.3],
+                           np.column_stack([rng.uniform(1, 7, 20), rng.uniform(1, 5, 20), rng.uniform(-3, 3, 20)])]).astype(np.float32)
+    lf = WEIGHTING.build("likelihood_field", occupancy=occ, origin_xy=origin, resolution_m=res, device="cpu")
+    out = wp.zeros(len(particles), dtype=wp.float32, device="cpu")
+    lf(wp.array(particles, dtype=wp.vec3, device="cpu"), (0, 0, 0), wp.array(angles, dtype=wp.float32, device="cpu"),
+       wp.array(measured, dtype=wp.float32, device="cpu"), out)
+    ours = out.numpy()
+    twin = likelihood_field_log_weights(distance_to_occupied(occ, res, 0.65), origin, res, particles.astype(np.float64),
+                                        (0, 0, 0), angles, measured, 0.95, 0.05, 0.2, 30.0, 2.0)
+    assert np.allclose(ours, twin, rtol=1e-4, atol=1e-3), f"seed {rng.seed}"
+    assert ours[0] > ours[1] and ours[0] > ours[2] and ours[0] >= ours[3:].max()
+    with pytest.raises(ValueError, match="map is empty"):
+        WEIGHTING.build("likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device="cpu")

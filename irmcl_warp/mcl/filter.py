@@ -33,7 +33,9 @@ class MCLConfig:
 
 
 class ParticleFilter:
-    def __init__(self, nog, cfg: MCLConfig, T_base_laser, scan_angles_rad, device: str = "auto"):
+    def __init__(self, nog, cfg: MCLConfig, T_base_laser, scan_angles_rad, device: str = "auto", weighting=None):
+        """``nog``: the map particles are spread over (free nodes); ``weighting``: a WEIGHTING entry already
+        built (e.g. ``likelihood_field`` on an occupancy grid), else IR-MCL's ``nog_raymarch`` on ``nog``."""
         self.cfg, self.device = cfg, pick_device(device)
         n_sensor = len(scan_angles_rad)
         if n_sensor < 1:
@@ -42,8 +44,9 @@ class ParticleFilter:
         self.num_sensor_beams, self.nog, self.T_base_laser = n_sensor, nog, tuple(map(float, T_base_laser))
         N, B, d = cfg.num_particles, len(self.beam_index), self.device
         self.motion = MOTION.build("odometry", alphas=cfg.alphas, device=d)
-        self.weighting = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=N, num_beams=B, num_samples=cfg.num_samples,
-                                         near_m=cfg.near_m, far_m=cfg.far_m, t_min=cfg.t_min, sigma_m=cfg.sigma_m, device=d)
+        self.weighting = weighting or WEIGHTING.build(
+            "nog_raymarch", nog=nog, num_particles=N, num_beams=B, num_samples=cfg.num_samples, near_m=cfg.near_m,
+            far_m=cfg.far_m, t_min=cfg.t_min, sigma_m=cfg.sigma_m, device=d)
         self.resampler = RESAMPLE.build(cfg.resample, device=d)
         self.weights = ParticleWeights(N, device=d)
         self.particles = wp.zeros(N, dtype=wp.vec3, device=d)

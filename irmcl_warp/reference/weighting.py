@@ -34,3 +34,18 @@ def nog_log_weights(rendered, measured, sigma):
     valid = np.isfinite(measured)
     D = np.abs(rendered[:, valid] - measured[valid]).sum(1) / max(valid.sum(), 1)
     return -0.5 * D ** 2 / sigma ** 2
+
+
+def likelihood_field_log_weights(dist, origin, res, particles, T_base_laser, angles, measured, z_hit, z_rand,
+                                 sigma_hit, max_range, max_dist):
+    """Thrun et al. Table 6.3 in logs: sum over valid beams of log(z_hit exp(-d^2 / 2 s^2) + z_rand / max_range)."""
+    pose = laser_poses(particles, T_base_laser)
+    valid = np.isfinite(measured)
+    a = pose[:, 2:3] + np.asarray(angles)[None, valid]
+    m = np.asarray(measured)[None, valid]
+    ix = np.floor((pose[:, :1] + m * np.cos(a) - origin[0]) / res).astype(int)
+    iy = np.floor((pose[:, 1:2] + m * np.sin(a) - origin[1]) / res).astype(int)
+    H, W = dist.shape
+    inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
+    d = np.where(inside, np.minimum(dist[np.clip(iy, 0, H - 1), np.clip(ix, 0, W - 1)], max_dist), max_dist)
+    return np.log(z_hit * np.exp(-d ** 2 / (2 * sigma_hit ** 2)) + z_rand / max_range).sum(1)
