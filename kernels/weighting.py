@@ -163,3 +163,60 @@ class LikelihoodField:
 @WEIGHTING.register("likelihood_field")
 def make_likelihood_field(**settings) -> LikelihoodField:
     return LikelihoodField(**settings)
+
+
+def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
+    from kernels.raycast import dda_range
+
+    @wp.kernel(module="unique")
+    def beam(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
+             T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+             log_lik: wp.array(dtype=wp.float32)):
+        p, b = wp.tid()
+        z = measured[b]
+        if not (z == z):
+            return
+        pose = laser_pose(particles[p], T_base_laser)
+        a = pose[2] + angles[b]
+        expected = dda_range(occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)),
+                             wp.static(max_range), wp.static(occ_threshold))
+        e = z - expected
+        q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
+        if z < expected:
+            q += wp.static(z_short) * wp.static(lambda_short) * wp.exp(-wp.static(lambda_short) * z)
+        if z >= wp.static(max_range):
+            q += wp.static(z_max)
+        else:
+            q += wp.static(z_rand / max_range)
+        wp.atomic_add(log_lik, p, wp.log(q))
+
+    return beam
+
+
+class BeamModel:
+    """The beam model (Thrun et al. Table 6.1, as AMCL's ``beam`` model): ray cast the expected range on
+    the grid (DDA), then q = z_hit exp(-(z - z*)^2 / 2 sigma^2) + z_short lambda exp(-lambda z) [z < z*]
+    + z_max [z >= max] + z_rand / max [z < max]; log w = sum over valid beams of log q."""
+
+    def __init__(self, occupancy, origin_xy, resolution_m: float, z_hit: float = 0.95, z_short: float = 0.1,
+                 z_max: float = 0.05, z_rand: float = 0.05, sigma_hit_m: float = 0.2, lambda_short: float = 0.1,
+                 max_range_m: float = 30.0, occ_threshold: float = 0.5, device: str = "auto"):
+        occupancy = np.asarray(occupancy, np.float32)
+        if occupancy.ndim != 2 or occupancy.size == 0 or not (occupancy >= occ_threshold).any():
+            raise ValueError(f"beam_model: the map is empty (shape {occupancy.shape}, no occupied cell)")
+        self.device = pick_device(device)
+        self.occ = wp.array(occupancy, dtype=wp.float32, device=self.device)
+        self.origin, self.res = wp.vec2(*map(float, origin_xy)), float(resolution_m)
+        self.kernel = make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, max_range_m,
+                                             occ_threshold)
+
+    def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
+        log_lik.zero_()
+        wp.launch(self.kernel, (particles.shape[0], angles.shape[0]),
+                  [self.occ, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
+                   log_lik], device=self.device)
+
+
+@WEIGHTING.register("beam_model")
+def make_beam_model(**settings) -> BeamModel:
+    return BeamModel(**settings)

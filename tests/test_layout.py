@@ -16,7 +16,7 @@ def test_every_registry_entry_has_a_reference_twin():
     assert MAPPING.names() == ["logodds"]
     assert SIM.names() == ["rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
-    assert WEIGHTING.names() == ["likelihood_field", "nog_raymarch"]
+    assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nog_raymarch"]
     assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
     for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

@@ -125,3 +125,28 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     assert ours[0] > ours[1] and ours[0] > ours[2] and ours[0] >= ours[3:].max()
     with pytest.raises(ValueError, match="map is empty"):
         WEIGHTING.build("likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device="cpu")
+
+
+def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
+    from irmcl_warp.reference.weighting import beam_model_log_weights
+    from kernels import RAYCAST
+
+    occ = np.zeros((40, 50), np.float32)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1.0  # a 5 x 4 m room at 0.1 m
+    occ[10:25, 30] = 1.0
+    origin, res = (0.0, 0.0), 0.1
+    true = np.array([2.0, 2.0, 0.3])
+    angles = np.linspace(-np.pi, np.pi, 12, endpoint=False).astype(np.float32)
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device="cpu")
+    measured = (caster.cast_numpy(true[None], angles)[0] + rng.normal(0, 0.02, len(angles))).astype(np.float32)
+    measured[4] = np.nan
+    particles = np.vstack([true, true + [0.4, 0.0, 0.0], true + [0.0, 0.0, 0.25],
+                           np.column_stack([rng.uniform(1, 4, 6), rng.uniform(1, 3, 6), rng.uniform(-3, 3, 6)])]).astype(np.float32)
+    bm = WEIGHTING.build("beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device="cpu")
+    out = wp.zeros(len(particles), dtype=wp.float32, device="cpu")
+    bm(wp.array(particles, dtype=wp.vec3, device="cpu"), (0, 0, 0), wp.array(angles, dtype=wp.float32, device="cpu"),
+       wp.array(measured, dtype=wp.float32, device="cpu"), out)
+    twin = beam_model_log_weights(occ, origin, res, particles.astype(np.float32), (0, 0, 0), angles, measured,
+                                  0.95, 0.1, 0.05, 0.05, 0.2, 0.1, 8.0, 0.5)
+    assert np.allclose(out.numpy(), twin, rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
+    assert out.numpy()[0] > out.numpy()[1:].max()

@@ -49,3 +49,24 @@ def likelihood_field_log_weights(dist, origin, res, particles, T_base_laser, ang
     inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
     d = np.where(inside, np.minimum(dist[np.clip(iy, 0, H - 1), np.clip(ix, 0, W - 1)], max_dist), max_dist)
     return np.log(z_hit * np.exp(-d ** 2 / (2 * sigma_hit ** 2)) + z_rand / max_range).sum(1)
+
+
+def beam_model_log_weights(occ, origin, res, particles, T_base_laser, angles, measured, z_hit, z_short, z_max,
+                           z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
+    """Thrun et al. Table 6.1 in logs, expected ranges from the DDA twin (one Python loop per ray)."""
+    from irmcl_warp.reference.raycast import dda_range
+
+    pose = laser_poses(particles, T_base_laser)
+    out = np.zeros(len(pose))
+    for p, (x, y, yaw) in enumerate(pose):
+        for a, z in zip(angles, measured):
+            if not np.isfinite(z):
+                continue
+            d = np.array([np.cos(yaw + a), np.sin(yaw + a)], np.float32)
+            exp_r = dda_range(occ, np.asarray(origin, np.float32), res, np.array([x, y], np.float32), d, max_range,
+                              occ_threshold)
+            q = z_hit * np.exp(-(z - exp_r) ** 2 / (2 * sigma_hit ** 2))
+            q += z_short * lambda_short * np.exp(-lambda_short * z) if z < exp_r else 0.0
+            q += z_max if z >= max_range else z_rand / max_range
+            out[p] += np.log(q)
+    return out
