@@ -72,3 +72,49 @@ def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float
     return {"mae_m": float(a[:, 0].mean()), "accuracy_pct": float(a[:, 1].mean()), "chamfer_m": float(a[:, 2].mean()),
             "fscore_pct": float(a[:, 3].mean()), "median_error_m": float(np.median(np.concatenate(errors))),
             "scans": len(per_scan), "beams": int(sum(len(e) for e in errors))}
+
+
+def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float = 20.0, success_within_s: float = 60.0,
+                         success_rmse_m: float = 0.30, converged_m: float = 0.5, diverged_m: float = 1.0,
+                         pos_thresholds_m=(0.05, 0.10, 0.20), yaw_thresholds_deg=(0.5, 1.0, 2.0)) -> dict:
+    """IR-MCL's protocol (Kuang et al. 2023, Sec. IV-C) plus success, time to converge and divergence.
+
+    * converged: the first time from which the position error stays below ``converged_m`` for 5 s
+      (``time_to_converge_s``, from the first stamp); success = converged within ``success_within_s`` and
+      location RMSE afterwards < ``success_rmse_m``;
+    * location/yaw RMSE and % of poses within the thresholds over poses after max(converged,
+      ``converge_after_s``) — IR-MCL evaluates after 20 s;
+    * divergences: how often a converged filter's error rose above ``diverged_m``.
+    Poses without ground truth (NaN) are skipped. Arrays: stamps [N], poses [N, 3].
+    """
+    stamps, est, gt = np.asarray(stamps, float), np.asarray(estimate, float), np.asarray(ground_truth, float)
+    ok = np.all(np.isfinite(gt), axis=1) & np.all(np.isfinite(est), axis=1)
+    if ok.sum() < 2:
+        raise ValueError("fewer than two estimated poses have ground truth")
+    t, e_xy = stamps[ok] - stamps[ok][0], np.hypot(*(est[ok, :2] - gt[ok, :2]).T)
+    e_yaw = np.degrees(np.abs(wrap_angle(est[ok, 2] - gt[ok, 2])))
+    below = e_xy < converged_m
+    t_conv = None
+    for i in np.flatnonzero(below):  # first index from which the error stays low for 5 s
+        window = (t >= t[i]) & (t <= t[i] + 5.0)
+        if below[window].all() and t[-1] >= t[i] + 5.0 or (below[i:].all()):
+            t_conv = float(t[i])
+            break
+    out = {"poses": int(ok.sum()), "time_to_converge_s": t_conv, "converged": t_conv is not None}
+    if t_conv is None:
+        return {**out, "success": False, "location_rmse_cm": None, "yaw_rmse_deg": None, "divergences": 0}
+    after = t >= max(t_conv, converge_after_s)
+    if not after.any():
+        after = t >= t_conv
+    out["location_rmse_cm"] = float(100 * np.sqrt(np.mean(e_xy[after] ** 2)))
+    out["yaw_rmse_deg"] = float(np.sqrt(np.mean(e_yaw[after] ** 2)))
+    for th in pos_thresholds_m:
+        out[f"within_{int(round(th * 100))}cm_pct"] = float(100 * (e_xy[after] < th).mean())
+    for th in yaw_thresholds_deg:
+        out[f"within_{th:g}deg_pct"] = float(100 * (e_yaw[after] < th).mean())
+    rmse_since = float(np.sqrt(np.mean(e_xy[t >= t_conv] ** 2)))
+    out["success"] = bool(t_conv <= success_within_s and rmse_since < success_rmse_m)
+    tracking = t >= t_conv
+    high = (e_xy > diverged_m) & tracking
+    out["divergences"] = int(np.sum(high[1:] & ~high[:-1]) + (high[0] if len(high) else 0))
+    return out

@@ -1,0 +1,40 @@
+"""Localization metrics on trajectories with known errors."""
+
+import numpy as np
+import pytest
+
+from eval.metrics import localization_metrics
+
+
+def _traj(n=400, rate=5.0):
+    t = np.arange(n) / rate
+    gt = np.column_stack([np.cos(t / 10), np.sin(t / 10), t / 10])
+    return t, gt
+
+
+def test_converging_filter_is_scored_after_convergence():
+    t, gt = _traj()
+    est = gt.copy()
+    est[t < 12, 0] += 5.0  # lost for 12 s
+    est[t >= 12, 0] += 0.08  # then 8 cm off
+    est[t >= 12, 2] += np.radians(0.7)
+    m = localization_metrics(t, est, gt)
+    assert m["converged"] and m["time_to_converge_s"] == pytest.approx(12.0)
+    assert m["location_rmse_cm"] == pytest.approx(8.0, abs=1e-6) and m["yaw_rmse_deg"] == pytest.approx(0.7, abs=1e-6)
+    assert m["within_5cm_pct"] == 0 and m["within_10cm_pct"] == 100 and m["within_1deg_pct"] == 100
+    assert m["within_0.5deg_pct"] == 0 and m["success"] and m["divergences"] == 0
+
+
+def test_never_converging_and_diverging_filters():
+    t, gt = _traj()
+    lost = gt + [3.0, 0.0, 0.0]
+    assert localization_metrics(t, lost, gt)["success"] is False
+    est = gt.copy()
+    est[(t > 30) & (t < 35), 1] += 2.0  # a 5 s excursion after converging at once
+    m = localization_metrics(t, est, gt)
+    assert m["converged"] and m["divergences"] == 1 and m["time_to_converge_s"] == 0.0
+    late = gt.copy()
+    late[t < 70, 0] += 4.0  # converges only after 70 s: no success
+    assert localization_metrics(t, late, gt)["success"] is False
+    with pytest.raises(ValueError, match="fewer than two"):
+        localization_metrics(t[:1], gt[:1], gt[:1])
