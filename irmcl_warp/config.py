@@ -123,6 +123,28 @@ class TrainConfig:
 
 
 @dataclass
+class MCLConfig:
+    """Monte Carlo localization; IR-MCL's values (Kuang et al. 2023, Sec. IV and their configs) cited."""
+    weighting: str = "nog_raymarch"  # nog_raymarch | likelihood_field | beam_model
+    num_particles: int = 100_000  # IR-MCL global localization
+    num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
+    num_samples: int = 256  # IR-MCL: samples per beam on the NOG
+    near_m: float = 0.02
+    far_m: float = 40.0  # the filter's far bound; the localize stage sets it from data.usable_range_m
+    t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
+    sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
+    alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
+    resample: str = "low_variance"  # low_variance | multinomial
+    resample_threshold: float = 0.5  # resample when N_eff < threshold * N (1.0 = every step)
+    map_resolution_m: float = 0.05  # NOG / grid resolution
+    mode: str = "global"  # global | tracking
+    tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # initial spread (m, m, rad)
+    num_starts: int = 10  # start times spread evenly over the sequence
+    run_s: float = 60.0  # how long each start is followed
+    seed: int = 0
+
+
+@dataclass
 class Config:
     data: DataConfig = field(default_factory=DataConfig)
     sim: SimConfig = field(default_factory=SimConfig)
@@ -131,6 +153,7 @@ class Config:
     model: ModelConfig = field(default_factory=ModelConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    mcl: MCLConfig = field(default_factory=MCLConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

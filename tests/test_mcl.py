@@ -91,3 +91,23 @@ def test_odometry_step_treats_reversing_as_negative_translation():
     r1, t, r2 = odometry_step((0.0, 0.0, 0.0), (-0.5, 0.0, 0.0))
     assert (r1, t, r2) == pytest.approx((0.0, -0.5, 0.0))
     assert odometry_step((0.0, 0.0, 0.0), (0.005, 0.0, 0.2)) == pytest.approx((0.0, 0.005, 0.2))  # a turn in place
+
+
+def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_path, monkeypatch):
+    import json
+
+    from irmcl_warp.localize import run_localize
+
+    monkeypatch.chdir(tmp_path)
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["+exp=sim_office", "device=cpu", "sim.duration_s=60",
+                                           "mcl.weighting=likelihood_field", "mcl.mode=tracking", "mcl.num_starts=2",
+                                           "mcl.run_s=15", "mcl.num_particles=500", "mcl.map_resolution_m=0.1"])
+    out = run_localize(cfg)
+    result = json.loads((out / "metrics.json").read_text())
+    assert result["summary"]["starts"] == 2 and result["summary"]["success_rate"] == 1.0
+    assert all(r["location_rmse_cm"] < 25 for r in result["runs"])
+    rows = np.loadtxt(out / "start1.tum")
+    assert rows.shape[1] == 8 and rows[0, 0] >= 1000.0 + 30.0  # TUM rows, second start half-way
+    assert (out / "start0.png").is_file()

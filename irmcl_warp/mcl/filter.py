@@ -8,28 +8,12 @@ five sums (weighted mean and N_eff). Resampling runs when N_eff < ``resample_thr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import warp as wp
 
+from irmcl_warp.config import MCLConfig
 from kernels import MOTION, RESAMPLE, WEIGHTING, pick_device
 from kernels.resample import ParticleWeights, accumulate_kernel
-
-
-@dataclass
-class MCLConfig:
-    num_particles: int = 100_000  # IR-MCL global localization
-    num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
-    num_samples: int = 256
-    near_m: float = 0.02
-    far_m: float = 40.0
-    t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
-    sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
-    alphas: tuple = (0.05, 0.005, 0.05, 0.005)  # Thrun a1..a4
-    resample: str = "low_variance"
-    resample_threshold: float = 0.5  # N_eff < 0.5 N
-    seed: int = 0
 
 
 class ParticleFilter:
