@@ -21,7 +21,7 @@ from irmcl_warp.config import register
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import save_figure, stage_dir, write_json, write_manifest
 from irmcl_warp.train import train_dir
 from kernels import RAYCAST, pick_device
 
@@ -69,13 +69,7 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
     ax.set_aspect("equal")
     ax.set_title(f"test scan {k} (stamp {test.stamps[k]:.3f}), laser frame [m]")
     ax.legend(markerscale=4, fontsize=8)
-    from irmcl_warp.mapping.mapio import atomic_write_bytes
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path)
 
 
 def run_synthesis(cfg) -> Path:

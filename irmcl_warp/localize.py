@@ -10,7 +10,6 @@ grid's known free cells for every method. Writes outputs/<exp>/localize-<weighti
 
 from __future__ import annotations
 
-import io
 import time
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from irmcl_warp.mapping.mapio import atomic_write_bytes
 from irmcl_warp.mcl import ParticleFilter
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
 from irmcl_warp.nog import NOG, bake_nog
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import save_figure, stage_dir, write_json, write_manifest
 from kernels import WEIGHTING, pick_device
 from kernels.motion import odometry_step
 
@@ -77,10 +76,7 @@ def plot_run(path: Path, view: NOG, gt, est) -> None:
     ax.plot(gt[:, 0], gt[:, 1], "g-", lw=1.5, label="ground truth")
     ax.plot(est[:, 0], est[:, 1], "r.", ms=2, label="estimate")
     ax.legend()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path)
 
 
 def run_localize(cfg) -> Path:

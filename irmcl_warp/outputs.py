@@ -20,6 +20,19 @@ def write_json(path, obj) -> Path:
     return Path(path)
 
 
+def save_figure(fig, path) -> Path:
+    """A matplotlib figure as PNG, written atomically, then closed."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)
+
+
 def file_digest(path, chunk=1 << 20) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:

@@ -133,31 +133,44 @@ def make_likelihood_field_kernel(z_hit: float, z_rand: float, sigma_hit: float, 
     return field
 
 
-class LikelihoodField:
+class _GridModel:
+    """Shared by the grid baselines: the grid on the device, its frame, and one (particle x beam) launch
+    that adds each valid beam's log q into ``log_lik``."""
+
+    name = "grid model"
+
+    def _setup(self, occupancy, origin_xy, resolution_m, occ_threshold, device):
+        occupancy = np.asarray(occupancy, np.float32)
+        if occupancy.ndim != 2 or occupancy.size == 0 or not (occupancy >= occ_threshold).any():
+            raise ValueError(f"{self.name}: the map is empty (shape {occupancy.shape}, no occupied cell)")
+        self.device = pick_device(device)
+        self.origin, self.res = wp.vec2(*map(float, origin_xy)), float(resolution_m)
+        return occupancy
+
+    def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
+        log_lik.zero_()
+        wp.launch(self.kernel, (particles.shape[0], angles.shape[0]),
+                  [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
+                   log_lik], device=self.device)
+
+
+class LikelihoodField(_GridModel):
     """The likelihood-field model (Thrun et al. Table 6.3; AMCL's default): each beam's end point scores by
     its distance d to the nearest occupied cell, q = z_hit N(d; 0, sigma_hit) + z_rand / max_range (the
     Gaussian unnormalised, as AMCL), d capped at ``max_dist_m``; log w = sum over valid beams of log q.
     End points off the map count as ``max_dist_m`` away. One thread per (particle, beam), atomic sums."""
+
+    name = "likelihood_field"
 
     def __init__(self, occupancy, origin_xy, resolution_m: float, z_hit: float = 0.95, z_rand: float = 0.05,
                  sigma_hit_m: float = 0.2, max_range_m: float = 30.0, max_dist_m: float = 2.0,
                  occ_threshold: float = 0.65, device: str = "auto"):
         from kernels.raycast import distance_to_occupied
 
-        occupancy = np.asarray(occupancy, np.float32)
-        if occupancy.ndim != 2 or occupancy.size == 0 or not (occupancy >= occ_threshold).any():
-            raise ValueError(f"likelihood_field: the map is empty (shape {occupancy.shape}, no occupied cell)")
-        self.device = pick_device(device)
-        self.dist = wp.array(distance_to_occupied(occupancy, resolution_m, occ_threshold), dtype=wp.float32,
+        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
+        self.grid = wp.array(distance_to_occupied(occupancy, resolution_m, occ_threshold), dtype=wp.float32,
                              device=self.device)
-        self.origin, self.res = wp.vec2(*map(float, origin_xy)), float(resolution_m)
         self.kernel = make_likelihood_field_kernel(z_hit, z_rand, sigma_hit_m, max_range_m, max_dist_m)
-
-    def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
-        log_lik.zero_()
-        wp.launch(self.kernel, (particles.shape[0], angles.shape[0]),
-                  [self.dist, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
-                   log_lik], device=self.device)
 
 
 @WEIGHTING.register("likelihood_field")
@@ -193,28 +206,20 @@ def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_shor
     return beam
 
 
-class BeamModel:
+class BeamModel(_GridModel):
     """The beam model (Thrun et al. Table 6.1, as AMCL's ``beam`` model): ray cast the expected range on
     the grid (DDA), then q = z_hit exp(-(z - z*)^2 / 2 sigma^2) + z_short lambda exp(-lambda z) [z < z*]
     + z_max [z >= max] + z_rand / max [z < max]; log w = sum over valid beams of log q."""
 
+    name = "beam_model"
+
     def __init__(self, occupancy, origin_xy, resolution_m: float, z_hit: float = 0.95, z_short: float = 0.1,
                  z_max: float = 0.05, z_rand: float = 0.05, sigma_hit_m: float = 0.2, lambda_short: float = 0.1,
                  max_range_m: float = 30.0, occ_threshold: float = 0.5, device: str = "auto"):
-        occupancy = np.asarray(occupancy, np.float32)
-        if occupancy.ndim != 2 or occupancy.size == 0 or not (occupancy >= occ_threshold).any():
-            raise ValueError(f"beam_model: the map is empty (shape {occupancy.shape}, no occupied cell)")
-        self.device = pick_device(device)
-        self.occ = wp.array(occupancy, dtype=wp.float32, device=self.device)
-        self.origin, self.res = wp.vec2(*map(float, origin_xy)), float(resolution_m)
+        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
+        self.grid = wp.array(occupancy, dtype=wp.float32, device=self.device)
         self.kernel = make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, max_range_m,
                                              occ_threshold)
-
-    def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
-        log_lik.zero_()
-        wp.launch(self.kernel, (particles.shape[0], angles.shape[0]),
-                  [self.occ, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
-                   log_lik], device=self.device)
 
 
 @WEIGHTING.register("beam_model")
