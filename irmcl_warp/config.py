@@ -139,6 +139,8 @@ class MCLConfig:
     map_resolution_m: float = 0.05  # NOG / grid resolution
     mode: str = "global"  # global | tracking
     tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # initial spread (m, m, rad)
+    recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
+    recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
     num_starts: int = 10  # start times spread evenly over the sequence
     run_s: float = 60.0  # how long each start is followed
     seed: int = 0

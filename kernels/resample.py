@@ -119,3 +119,31 @@ def make_low_variance(device: str = "auto") -> Resampler:
 @RESAMPLE.register("multinomial")
 def make_multinomial(device: str = "auto") -> Resampler:
     return Resampler("multinomial", device)
+
+
+@wp.kernel
+def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32),
+                        out: wp.array(dtype=wp.float32)):
+    wp.atomic_add(out, 0, wp.exp(log_lik[wp.tid()] - top[0]))
+
+
+@wp.kernel
+def inject_kernel(particles: wp.array(dtype=wp.vec3), free_xy: wp.array(dtype=wp.vec2), jitter: float,
+                  probability: float, seed: int):
+    """Replace each particle, with the given probability, by a random pose on a free node (recovery)."""
+    i = wp.tid()
+    state = wp.rand_init(seed, i)
+    if wp.randf(state) < probability:
+        j = int(wp.randf(state) * float(free_xy.shape[0])) % free_xy.shape[0]
+        xy = free_xy[j]
+        particles[i] = wp.vec3(xy[0] + jitter * (wp.randf(state) - 0.5), xy[1] + jitter * (wp.randf(state) - 0.5),
+                               (wp.randf(state) * 2.0 - 1.0) * 3.14159265)
+
+
+def log_mean_likelihood(log_lik: wp.array, device) -> float:
+    """log(mean(exp(log_lik))) without underflow (max shift on the device, two floats read back)."""
+    top = wp.full(1, -3.0e38, dtype=wp.float32, device=device)
+    acc = wp.zeros(1, dtype=wp.float32, device=device)
+    wp.launch(max_kernel, log_lik.shape[0], [log_lik, top], device=device)
+    wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, top, acc], device=device)
+    return float(top.numpy()[0]) + float(np.log(acc.numpy()[0] / log_lik.shape[0]))

@@ -111,3 +111,20 @@ def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_pat
     rows = np.loadtxt(out / "start1.tum")
     assert rows.shape[1] == 8 and rows[0, 0] >= 1000.0 + 30.0  # TUM rows, second start half-way
     assert (out / "start0.png").is_file()
+
+
+def test_recovery_injects_only_when_the_likelihood_drops():
+    """Augmented MCL's injection probability: 0 while the likelihood holds or rises, > 0 after a sudden drop."""
+    import warp as wp
+
+    log, nog = _world_and_map(duration_s=2.0)
+    cfg = MCLConfig(num_particles=64, num_samples=32, far_m=10.0, recovery_alpha_slow=0.01, recovery_alpha_fast=0.5)
+    pf = ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, device="cpu")
+    probabilities = []
+    for level in [-1.0] * 10 + [-0.5] * 5 + [-6.0] * 3:
+        pf.log_lik.assign(wp.array(np.full(64, level, np.float32), dtype=wp.float32, device="cpu"))
+        probabilities.append(pf.recovery_probability())
+    assert max(probabilities[:15]) == 0.0 and probabilities[-1] > 0.5
+    off = ParticleFilter(nog, MCLConfig(num_particles=64, num_samples=32, far_m=10.0), log.T_base_laser,
+                         log.info.angles_rad, device="cpu")
+    assert off.recovery_probability() == 0.0

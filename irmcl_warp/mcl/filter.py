@@ -13,7 +13,7 @@ import warp as wp
 
 from irmcl_warp.config import MCLConfig
 from kernels import MOTION, RESAMPLE, WEIGHTING, pick_device
-from kernels.resample import ParticleWeights, accumulate_kernel
+from kernels.resample import ParticleWeights, accumulate_kernel, inject_kernel, log_mean_likelihood
 
 
 class ParticleFilter:
@@ -41,6 +41,9 @@ class ParticleFilter:
         self.measured = wp.zeros(B, dtype=wp.float32, device=d)
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
+        self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
+        free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
+        self.free_xy = wp.array(free.astype(np.float32), dtype=wp.vec2, device=d) if len(free) else None
 
     # --- initialisation ---------------------------------------------------------------------------
     def init_uniform(self, free_threshold: float = 0.1) -> None:
@@ -84,8 +87,26 @@ class ParticleFilter:
         wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
         self.weights.update(self.log_w, self.particles)
         pose, neff = self.weights.summary()
-        if neff < self.cfg.resample_threshold * self.cfg.num_particles:
+        p_inject = self.recovery_probability()
+        if neff < self.cfg.resample_threshold * self.cfg.num_particles or p_inject > 0:
             self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()))
             self.particles, self.scratch = self.scratch, self.particles
             self.log_w.zero_()
+            if p_inject > 0 and self.free_xy is not None:
+                wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.nog.resolution_m,
+                          float(p_inject), self.cfg.seed * 7919 + self.steps], device=self.device)
         return pose, neff
+
+    def recovery_probability(self) -> float:
+        """AMCL's augmented MCL (Thrun et al. Table 8.3): inject random particles with probability
+        max(0, 1 - w_fast / w_slow). Here the running averages are taken of log(mean likelihood), so that
+        likelihoods far below float32's range still compare: w_fast / w_slow = exp(l_fast - l_slow)."""
+        a_slow, a_fast = self.cfg.recovery_alpha_slow, self.cfg.recovery_alpha_fast
+        if a_slow <= 0 or a_fast <= 0:
+            return 0.0
+        l_avg = log_mean_likelihood(self.log_lik, self.device)
+        if self.l_slow is None:
+            self.l_slow = self.l_fast = l_avg
+        self.l_slow += a_slow * (l_avg - self.l_slow)
+        self.l_fast += a_fast * (l_avg - self.l_fast)
+        return float(max(0.0, 1.0 - np.exp(self.l_fast - self.l_slow)))
