@@ -91,6 +91,12 @@ def test_negative_range_is_an_error(tmp_path):
         read_carmen(_write(tmp_path, small_log(2).replace("FLASER 6 1.00", "FLASER 6 -1.00", 1)))
 
 
+def test_absurd_range_is_an_error_not_an_overflow(tmp_path):
+    with pytest.raises(LogFormatError, match=r"scan 1: range 1e\+39 m is beyond any lidar"):
+        read_carmen(_write(tmp_path, small_log(2).replace("FLASER 6 1.00", "FLASER 6 1e39", 2).replace(
+            "FLASER 6 1e39", "FLASER 6 1.00", 1)))
+
+
 def test_empty_log_is_an_error_not_an_empty_result(tmp_path):
     with pytest.raises(LogFormatError, match="no FLASER or ROBOTLASER1"):
         read_carmen(_write(tmp_path, "# nothing\nPARAM a b\n"))

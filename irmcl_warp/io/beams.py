@@ -45,12 +45,19 @@ def detect_no_return(ranges: np.ndarray, min_share: float = 1e-4) -> float:
     return top if share >= min_share else float("inf")
 
 
+MAX_PLAUSIBLE_RANGE_M = 1.0e4  # larger values are corrupt data (and overflow float32 beyond 3.4e38)
+
+
 def mask_ranges(path, ranges, no_return_m, report: DefectReport, tol_m: float = 5e-3):
     """NaN-mask no-return beams (>= no_return_m - tol) and zero ranges; negative ranges are an error."""
     ranges = np.asarray(ranges, dtype=np.float64)
     if ranges.size and ranges.min() < 0:
         row = int(np.argwhere(ranges < 0)[0, 0])
         raise LogFormatError(path, f"scan {row}", f"negative range {ranges.min():g} m (ranges must be >= 0)")
+    if ranges.size and ranges.max() > MAX_PLAUSIBLE_RANGE_M:
+        row = int(np.argwhere(ranges > MAX_PLAUSIBLE_RANGE_M)[0, 0])
+        raise LogFormatError(path, f"scan {row}", f"range {ranges.max():g} m is beyond any lidar "
+                             f"(> {MAX_PLAUSIBLE_RANGE_M:g} m)")
     no_return = detect_no_return(ranges) if no_return_m is None else float(no_return_m)
     masked = ranges.astype(np.float32)
     masked[ranges >= no_return - tol_m] = np.nan
