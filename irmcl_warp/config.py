@@ -134,6 +134,8 @@ class MCLConfig:
     t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
+    estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | mean (all particles)
+    estimate_share: float = 0.8
     resample: str = "low_variance"  # low_variance | multinomial
     resample_threshold: float = 0.5  # resample when N_eff < threshold * N (1.0 = every step)
     map_resolution_m: float = 0.05  # NOG / grid resolution

@@ -61,6 +61,7 @@ RENDER = Registry("render")
 WEIGHTING = Registry("weighting")
 MOTION = Registry("motion")
 RESAMPLE = Registry("resample")
+ESTIMATE = Registry("estimate")
 
 # importing the families registers their entries
-from kernels import mapping, motion, raycast, render, resample, sim, weighting  # noqa: E402,F401
+from kernels import estimate, mapping, motion, raycast, render, resample, sim, weighting  # noqa: E402,F401

@@ -86,3 +86,22 @@ def test_multinomial_draws_follow_the_weights(rng):
     share_first = (dst.numpy()[:, 0] < n // 4).mean()
     twin_share = (multinomial_indices(log_w, rng) < n // 4).mean()
     assert abs(share_first - 0.5) < 0.03 and abs(twin_share - 0.5) < 0.03, f"seed {rng.seed}"
+
+
+def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
+    from irmcl_warp.reference.estimate import top_share_mean
+    from kernels import ESTIMATE
+
+    n = 1000
+    particles = np.column_stack([rng.normal(2.0, 0.1, n), rng.normal(-1.0, 0.1, n), rng.normal(3.1, 0.05, n)])
+    log_w = rng.normal(0, 1, n)
+    particles[800:, :2] += 20.0  # a far-off tail ...
+    log_w[800:] -= 30.0  # ... of the lightest particles
+    est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device="cpu")
+    ours = est(wp.array(particles.astype(np.float32), dtype=wp.vec3, device="cpu"),
+               wp.array(log_w.astype(np.float32), dtype=wp.float32, device="cpu"))
+    twin = top_share_mean(particles.astype(np.float32), log_w.astype(np.float32), 0.8)
+    assert np.allclose(ours, twin, atol=1e-4), f"seed {rng.seed}"
+    assert abs(ours[0] - 2.0) < 0.05 and abs(abs(ours[2]) - 3.1) < 0.1  # yaw near +-pi: circular mean
+    with pytest.raises(ValueError, match="share must lie"):
+        ESTIMATE.build("top_share", num_particles=10, share=0.0, device="cpu")

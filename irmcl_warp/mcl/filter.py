@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.config import MCLConfig
-from kernels import MOTION, RESAMPLE, WEIGHTING, pick_device
+from kernels import ESTIMATE, MOTION, RESAMPLE, WEIGHTING, pick_device
 from kernels.resample import ParticleWeights, accumulate_kernel, inject_kernel, log_mean_likelihood
 
 
@@ -32,6 +32,8 @@ class ParticleFilter:
             "nog_raymarch", nog=nog, num_particles=N, num_beams=B, num_samples=cfg.num_samples, near_m=cfg.near_m,
             far_m=cfg.far_m, t_min=cfg.t_min, sigma_m=cfg.sigma_m, device=d)
         self.resampler = RESAMPLE.build(cfg.resample, device=d)
+        self.estimator = (ESTIMATE.build("top_share", num_particles=N, share=cfg.estimate_share, device=d)
+                          if cfg.estimate == "top_share" else None)  # None: the weighted mean of all
         self.weights = ParticleWeights(N, device=d)
         self.particles = wp.zeros(N, dtype=wp.vec3, device=d)
         self.scratch = wp.zeros(N, dtype=wp.vec3, device=d)
@@ -73,7 +75,7 @@ class ParticleFilter:
     # --- one filter step --------------------------------------------------------------------------
     def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
         """odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no return).
-        Returns (estimate [x, y, yaw], N_eff before resampling)."""
+        Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling)."""
         ranges_m = np.asarray(ranges_m, np.float32)
         if ranges_m.shape != (self.num_sensor_beams,):
             raise ValueError(f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
@@ -87,6 +89,8 @@ class ParticleFilter:
         wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
         self.weights.update(self.log_w, self.particles)
         pose, neff = self.weights.summary()
+        if self.estimator is not None:
+            pose = self.estimator(self.particles, self.log_w)
         p_inject = self.recovery_probability()
         if neff < self.cfg.resample_threshold * self.cfg.num_particles or p_inject > 0:
             self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()))
