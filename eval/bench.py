@@ -10,7 +10,6 @@ Absolute times count only from a GPU; on a CPU read the ratios.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from pathlib import Path
@@ -100,7 +99,7 @@ def run_train_bench(a) -> list[dict]:
                 rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, amp=True))
     name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
     print(f"\nNOF training speed on {name} ({device}), torch {torch.__version__}, tf32 {a.tf32 and device.type == 'cuda'}")
-    print(f"| what | model | renderer | amp | batch | samples | ms/step | rays/s |\n|---|---|---|---|---|---|---|---|")
+    print("| what | model | renderer | amp | batch | samples | ms/step | rays/s |\n|---|---|---|---|---|---|---|---|")
     for x in rows:
         print(f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
               f"{x['step_ms']:.2f} | {x['rays_per_s']:,.0f} |")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.geometry import interpolate_poses, wrap_angle
+from irmcl_warp.geometry import interpolate_poses
 from irmcl_warp.io.beams import BeamPolicy, harmonise_beams
 from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
 from irmcl_warp.io.errors import LogFormatError, warn_defects
@@ -220,7 +220,6 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
             linear=Vec3(x=float(v), y=0.0, z=0.0), angular=Vec3(x=0.0, y=0.0, z=0.0)), covariance=Cov)
         return T[ODOM](header=header(stamp, odom_frame, seq), child_frame_id=base_frame, pose=pose_c, twist=tw)
 
-    info = log.info
     ranges = np.where(np.isfinite(log.ranges_m), log.ranges_m, np.inf).astype(np.float32)
     dt = np.diff(log.stamps, prepend=log.stamps[0] - 1.0)
     step = np.diff(log.odom[:, :2], axis=0, prepend=log.odom[:1, :2])

@@ -8,6 +8,7 @@ and return (ranges [R], opacity [R]):
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from irmcl_warp.reference.render import composite_torch
@@ -65,9 +66,8 @@ def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: t
 
 @torch.no_grad()
 def render_scans(model, beams, renderer, num_samples: int, near_m: float, far_m: float,
-                 chunk_rays: int = 2048, device="cpu") -> "np.ndarray":
+                 chunk_rays: int = 2048, device="cpu") -> np.ndarray:
     """Ranges [S, B] rendered for every beam of a BeamSet (evaluation: fixed depths, model in eval mode)."""
-    import numpy as np
 
     was_training = model.training
     model.eval()

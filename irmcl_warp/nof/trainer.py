@@ -14,13 +14,12 @@ import contextlib
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
 from irmcl_warp.nof.checkpoint import atomic_torch_save
-from irmcl_warp.nof.render import make_renderer, render_rays, render_scans, sample_depths
+from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
 
 
 def opacity_regulariser(p: torch.Tensor) -> torch.Tensor:
@@ -94,7 +93,7 @@ class Trainer:
         return loss.detach()
 
     def run(self) -> list[dict]:
-        tc, started = self.tc, time.time()
+        tc = self.tc
         while self.epoch < tc.epochs:
             if tc.max_time_s is not None and self.train_time_s >= tc.max_time_s:
                 print(f"train.max_time_s={tc.max_time_s} reached after {self.epoch} epochs")
