@@ -22,11 +22,11 @@ def rank_keys_kernel(log_w: wp.array(dtype=wp.float32), keys: wp.array(dtype=wp.
 
 
 @wp.kernel
-def top_sums_kernel(order: wp.array(dtype=wp.int32), log_w: wp.array(dtype=wp.float32), top: float,
-                    particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32)):
+def top_sums_kernel(order: wp.array(dtype=wp.int32), sorted_keys: wp.array(dtype=wp.float32),
+                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32)):
     r = wp.tid()
     j = order[r]
-    w = wp.exp(log_w[j] - top)
+    w = wp.exp(log_w[j] + sorted_keys[0])  # sorted_keys[0] = -(largest log-weight): a stable exp
     p = particles[j]
     wp.atomic_add(sums, 0, w)
     wp.atomic_add(sums, 1, w * p[0])
@@ -49,9 +49,8 @@ class TopShareMean:
         """[x, y, yaw] from the top ``share`` of the particles by weight."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
-        top = -float(self.keys.numpy()[0])  # the largest log-weight (first key), for a stable exp
         self.sums.zero_()
-        wp.launch(top_sums_kernel, self.k, [self.values, log_w, top, particles, self.sums], device=self.device)
+        wp.launch(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles, self.sums], device=self.device)
         s = self.sums.numpy().astype(np.float64)
         return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
 

@@ -30,7 +30,7 @@ def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32
 @wp.kernel
 def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
                sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3)):
-    """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin]."""
+    """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w]."""
     i = wp.tid()
     v = wp.exp(log_w[i] - top[0])
     w[i] = v
@@ -40,6 +40,7 @@ def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32
     wp.atomic_add(sums, 2, v * p[1])
     wp.atomic_add(sums, 3, v * wp.cos(p[2]))
     wp.atomic_add(sums, 4, v * wp.sin(p[2]))
+    wp.atomic_add(sums, 5, v)
 
 
 @wp.func
@@ -82,7 +83,7 @@ class ParticleWeights:
         self.w = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cdf = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
-        self.sums = wp.zeros(5, dtype=wp.float32, device=d)
+        self.sums = wp.zeros(6, dtype=wp.float32, device=d)
 
     def update(self, log_w: wp.array, particles: wp.array) -> None:
         self.top.fill_(-3.0e38)
@@ -92,9 +93,9 @@ class ParticleWeights:
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
     def summary(self) -> tuple[np.ndarray, float]:
-        """(weighted mean pose [x, y, yaw], N_eff): the one small read back per step."""
+        """(weighted mean pose [x, y, yaw], N_eff): the one small read back per step (six sums)."""
         s = self.sums.numpy().astype(np.float64)
-        total = float(self.cdf.numpy()[-1])
+        total = s[5]
         pose = np.array([s[1] / total, s[2] / total, np.arctan2(s[4], s[3])])
         return pose, total * total / s[0]
 
@@ -140,10 +141,18 @@ def inject_kernel(particles: wp.array(dtype=wp.vec3), free_xy: wp.array(dtype=wp
                                (wp.randf(state) * 2.0 - 1.0) * 3.14159265)
 
 
-def log_mean_likelihood(log_lik: wp.array, device) -> float:
-    """log(mean(exp(log_lik))) without underflow (max shift on the device, two floats read back)."""
-    top = wp.full(1, -3.0e38, dtype=wp.float32, device=device)
-    acc = wp.zeros(1, dtype=wp.float32, device=device)
-    wp.launch(max_kernel, log_lik.shape[0], [log_lik, top], device=device)
-    wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, top, acc], device=device)
-    return float(top.numpy()[0]) + float(np.log(acc.numpy()[0] / log_lik.shape[0]))
+class LogMeanLikelihood:
+    """log(mean(exp(log_lik))) without underflow: max shift on the device, buffers allocated once,
+    two floats read back."""
+
+    def __init__(self, device: str = "auto"):
+        self.device = pick_device(device)
+        self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
+        self.acc = wp.zeros(1, dtype=wp.float32, device=self.device)
+
+    def __call__(self, log_lik: wp.array) -> float:
+        self.top.fill_(-3.0e38)
+        self.acc.zero_()
+        wp.launch(max_kernel, log_lik.shape[0], [log_lik, self.top], device=self.device)
+        wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, self.top, self.acc], device=self.device)
+        return float(self.top.numpy()[0]) + float(np.log(self.acc.numpy()[0] / log_lik.shape[0]))

@@ -13,7 +13,7 @@ import warp as wp
 
 from irmcl_warp.config import MCLConfig
 from kernels import ESTIMATE, MOTION, RESAMPLE, WEIGHTING, pick_device
-from kernels.resample import ParticleWeights, accumulate_kernel, inject_kernel, log_mean_likelihood
+from kernels.resample import LogMeanLikelihood, ParticleWeights, accumulate_kernel, inject_kernel
 
 
 class ParticleFilter:
@@ -44,6 +44,7 @@ class ParticleFilter:
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
+        self.log_mean_likelihood = LogMeanLikelihood(d)
         free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
         self.free_xy = wp.array(free.astype(np.float32), dtype=wp.vec2, device=d) if len(free) else None
 
@@ -108,7 +109,7 @@ class ParticleFilter:
         a_slow, a_fast = self.cfg.recovery_alpha_slow, self.cfg.recovery_alpha_fast
         if a_slow <= 0 or a_fast <= 0:
             return 0.0
-        l_avg = log_mean_likelihood(self.log_lik, self.device)
+        l_avg = self.log_mean_likelihood(self.log_lik)
         if self.l_slow is None:
             self.l_slow = self.l_fast = l_avg
         self.l_slow += a_slow * (l_avg - self.l_slow)
