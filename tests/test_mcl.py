@@ -47,12 +47,14 @@ def test_pose_tracking_stays_within_a_bound(weighting):
     pf = ParticleFilter(nog, MCLConfig(num_particles=1000, num_samples=128, far_m=10.0, seed=3), log.T_base_laser,
                         log.info.angles_rad, device="cpu", weighting=lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
-    errors = []
+    errors, neffs = [], []
     for k in range(1, len(log)):
         pose, neff = pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k])
         errors.append(np.hypot(*(pose[:2] - log.ground_truth[k, :2])))
-        assert 1.0 <= neff <= 1000.0 + 1e-3
+        neffs.append(neff)
     errors = np.array(errors)
+    # selective resampling: some steps fall below N/2 (and resample), others keep their weights
+    assert min(neffs) < 500 < max(neffs), (min(neffs), max(neffs))
     assert np.median(errors[20:]) < 0.15 and errors[20:].max() < 0.5, (np.median(errors), errors.max())
 
 

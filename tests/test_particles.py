@@ -54,7 +54,6 @@ def test_neff_and_mean_match_the_twin(rng):
     pose, neff = weights.summary()
     assert neff == pytest.approx(effective_sample_size(log_w), rel=1e-4)
     assert np.allclose(pose, weighted_mean(particles.astype(np.float64), log_w), atol=1e-4)
-    assert 1.0 <= neff <= 500
 
 
 def test_low_variance_keeps_each_particle_floor_or_ceil_of_its_share(rng):

@@ -42,19 +42,18 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
     # files (a GPU box that was sent only the cache) accepts a cache made with the same settings
     key = settings_key(OmegaConf.to_container(cfg.data), OmegaConf.to_container(cfg.sim), cfg.render.near_m,
                        cfg.render.far_m)
+    files, no_raw = [], None
     try:
         files = [] if cfg.data.format == "sim" else input_files(cfg)
-    except FileNotFoundError as e:
-        files = None
-        missing = e
-    if files is not None:
         key += "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files])
+    except FileNotFoundError as e:
+        no_raw = e
     path = stage_dir(cfg, "beams") / "beams.npz"
-    sets = load_beams(path, key, prefix_only=files is None) if cache else None
-    if sets is None and files is None:
-        raise missing
-    elif files is None:
-        print(f"{missing}; using the beams cached in {path}")
+    sets = load_beams(path, key, prefix_only=no_raw is not None) if cache else None
+    if no_raw is not None:
+        if sets is None:
+            raise no_raw
+        print(f"{no_raw}; using the beams cached in {path}")
     if sets is None:
         log = load_log(cfg)
         beams = beams_from_log(log, cfg.render.near_m, far_m(cfg, log.info.range_max_m), name=cfg.data.name)
