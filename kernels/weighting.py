@@ -35,6 +35,19 @@ def laser_pose(base: wp.vec3, T_base_laser: wp.vec3) -> wp.vec3:
                    base[1] + s * T_base_laser[0] + c * T_base_laser[1], base[2] + T_base_laser[2])
 
 
+@wp.func
+def beam_origin(particle: wp.vec3, T_base_laser: wp.vec3) -> wp.vec2:
+    pose = laser_pose(particle, T_base_laser)
+    return wp.vec2(pose[0], pose[1])
+
+
+@wp.func
+def beam_direction(particle: wp.vec3, T_base_laser: wp.vec3, angle: float) -> wp.vec2:
+    """Unit direction in the map frame of the beam at ``angle`` in the laser frame."""
+    a = particle[2] + T_base_laser[2] + angle
+    return wp.vec2(wp.cos(a), wp.sin(a))
+
+
 def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma: float, eps: float = 1e-10):
     step = (far - near) / float(num_samples - 1)
 
@@ -42,10 +55,8 @@ def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma:
     def render(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
                T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
         p, b = wp.tid()
-        pose = laser_pose(particles[p], T_base_laser)
-        a = pose[2] + angles[b]
-        dx = wp.cos(a)
-        dy = wp.sin(a)
+        o = beam_origin(particles[p], T_base_laser)
+        d = beam_direction(particles[p], T_base_laser, angles[b])
         T = float(1.0)
         A = float(0.0)
         W = float(0.0)
@@ -53,7 +64,7 @@ def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma:
             if T < wp.static(t_min):
                 break
             z = wp.static(near) + wp.static(step) * float(k)
-            occ = nearest_node(grid, origin, res, pose[0] + z * dx, pose[1] + z * dy)
+            occ = nearest_node(grid, origin, res, o[0] + z * d[0], o[1] + z * d[1])
             w = occ * T
             A += w * z
             W += w
@@ -120,10 +131,9 @@ def make_likelihood_field_kernel(z_hit: float, z_rand: float, sigma_hit: float, 
         m = measured[b]
         if not (m == m):
             return
-        pose = laser_pose(particles[p], T_base_laser)
-        a = pose[2] + angles[b]
-        ix = int(wp.floor((pose[0] + m * wp.cos(a) - origin[0]) / res))
-        iy = int(wp.floor((pose[1] + m * wp.sin(a) - origin[1]) / res))
+        end = beam_origin(particles[p], T_base_laser) + m * beam_direction(particles[p], T_base_laser, angles[b])
+        ix = int(wp.floor((end[0] - origin[0]) / res))
+        iy = int(wp.floor((end[1] - origin[1]) / res))
         d = wp.static(max_dist)
         if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
             d = wp.min(dist[iy, ix], wp.static(max_dist))
@@ -189,9 +199,8 @@ def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_shor
         z = measured[b]
         if not (z == z):
             return
-        pose = laser_pose(particles[p], T_base_laser)
-        a = pose[2] + angles[b]
-        expected = dda_range(occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)),
+        expected = dda_range(occ, origin, res, beam_origin(particles[p], T_base_laser),
+                             beam_direction(particles[p], T_base_laser, angles[b]),
                              wp.static(max_range), wp.static(occ_threshold))
         e = z - expected
         q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
