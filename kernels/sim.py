@@ -92,13 +92,18 @@ class SegmentLidar:
         return out.numpy()
 
 
+RASTER_SLACK = 1e-3
+
+
 def rasterize(segments: np.ndarray, origin_xy, resolution_m: float, shape_hw, device: str = "auto") -> np.ndarray:
-    """Occupancy grid [H, W] (1 = wall) of the cells whose centre lies within half a cell of a segment."""
+    """Occupancy grid [H, W] (1 = wall) of the cells whose centre lies within half a cell of a segment, plus
+    a hair (RASTER_SLACK): a wall exactly on a cell border marks both neighbours instead of, by float
+    rounding, neither (the outer walls of the simulated office lie on the 5 and 10 cm lattices)."""
     dev = pick_device(device)
     segs = wp.array(np.asarray(segments, dtype=np.float32), dtype=wp.vec4, device=dev)
     out = wp.zeros(tuple(shape_hw), dtype=wp.float32, device=dev)
     wp.launch(rasterize_kernel, out.shape, [segs, wp.vec2(*map(float, origin_xy)), float(resolution_m),
-                                            0.5 * float(resolution_m), out], device=dev)
+                                            0.5 * float(resolution_m) * (1.0 + RASTER_SLACK), out], device=dev)
     return out.numpy()
 
 

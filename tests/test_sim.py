@@ -39,12 +39,18 @@ def test_lidar_noise_and_dropout_statistics():
     assert not np.array_equal(r, lidar.scan(np.zeros((1, 3)), seed=4)[0], equal_nan=True)
 
 
-def test_rasterize_matches_twin(rng):
+@pytest.mark.parametrize("on_lattice", [False, True])
+def test_rasterize_matches_twin(rng, on_lattice):
     world = office(int(rng.integers(1000)), 12.0, 8.0)
-    origin = (-0.5 + 0.013, -0.5 + 0.027)  # off the 0.05 m lattice: no cell centre exactly half a cell from a wall
+    origin = (-0.5, -0.5) if on_lattice else (-0.5 + 0.013, -0.5 + 0.027)
     got = SIM.build("rasterize", device="cpu")(world.segments, origin, 0.1, (90, 130))
     want = rasterize(world.segments, origin, 0.1, (90, 130))
     assert np.mean(got == want) > 0.999
+    # every wall is drawn, the outer ones included (on the lattice they lie on cell borders)
+    for x0, y0, x1, y1 in world.segments:
+        mid = ((x0 + x1) / 2 - origin[0]) / 0.1, ((y0 + y1) / 2 - origin[1]) / 0.1
+        ix, iy = int(np.clip(mid[0], 0, 129)), int(np.clip(mid[1], 0, 89))
+        assert got[max(iy - 1, 0):iy + 2, max(ix - 1, 0):ix + 2].any(), (x0, y0, x1, y1)
 
 
 def test_simulation_is_deterministic_and_odometry_noise_follows_alphas():

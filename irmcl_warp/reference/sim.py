@@ -33,5 +33,5 @@ def rasterize(segments, origin_xy, resolution_m, shape_hw):
         a, e = np.array([x0, y0]), np.array([x1 - x0, y1 - y0])
         u = np.clip(((p - a) @ e) / max(e @ e, 1e-12), 0, 1)
         dist = np.linalg.norm(p - (a + u[..., None] * e), axis=-1)
-        occ[dist <= 0.5 * resolution_m] = 1.0
+        occ[dist <= 0.5 * resolution_m * (1.0 + 1e-3)] = 1.0  # kernels/sim.py RASTER_SLACK
     return occ
