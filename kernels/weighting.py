@@ -1,13 +1,20 @@
-"""Particle weighting for MCL: ``WEIGHTING["nog_raymarch"]`` (IR-MCL's observation model on the NOG).
+"""Particle weighting for MCL: ``WEIGHTING["nog_raymarch"]`` (IR-MCL's observation model on the NOG) and
+the grid baselines ``likelihood_field`` and ``beam_model``.
 
-For every particle and beam (one thread each), march ``num_samples`` fixed depths over [near, far] from
-the particle's laser pose, read the nearest NOG node (occupancy 0 outside the grid), and composite as in
-training (kernels/render.py, normalised weights); optionally stop once the transmittance is below
-``t_min`` (early termination). A second kernel reduces per particle (IR-MCL eq. 6):
+``nog_raymarch``: for every particle and beam (one thread each), march ``num_samples`` fixed depths over
+[near, far] from the particle's laser pose, read the nearest NOG node (occupancy 0 outside the grid), and
+composite as in training (kernels/render.py, normalised weights). The thread adds |r_rendered - r_measured|
+of a valid beam into its particle's sum, and a second kernel turns the sums into (IR-MCL eq. 6)
 
     D = mean over valid beams of |r_rendered - r_measured|,   log w = -0.5 * D^2 / sigma^2
 
-Numpy twin: irmcl_warp/reference/weighting.py.
+Two exact shortcuts, both off with their setting at 0 (the authors' formulation):
+* ``t_min``: stop once the transmittance is below t_min (early termination);
+* ``empty_below``: nodes with p_occ < empty_below read as 0 ("empty"), and the march jumps over empty
+  space: a sample in an empty node whose centre lies D from the nearest non-empty node centre skips every
+  sample closer than D - res * sqrt(2) (no point that near can round to a non-empty node).
+Samples outside the grid are skipped by clipping the march to the grid's extent (slab test).
+Numpy twin: irmcl_warp/reference/weighting.py (all samples, the same "empty" rule).
 """
 
 from __future__ import annotations
@@ -48,64 +55,132 @@ def beam_direction(particle: wp.vec3, T_base_laser: wp.vec3, angle: float) -> wp
     return wp.vec2(wp.cos(a), wp.sin(a))
 
 
-def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma: float, eps: float = 1e-10):
+@wp.func
+def slab(o: float, d: float, lo: float, hi: float) -> wp.vec2:
+    """Ray parameters (enter, exit) of o + t d within [lo, hi] on one axis."""
+    if wp.abs(d) < 1.0e-12:
+        if o < lo or o > hi:
+            return wp.vec2(1.0e30, -1.0e30)
+        return wp.vec2(-1.0e30, 1.0e30)
+    a = (lo - o) / d
+    b = (hi - o) / d
+    return wp.vec2(wp.min(a, b), wp.max(a, b))
+
+
+def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma: float, empty_below: float,
+                 eps: float = 1e-10):
     step = (far - near) / float(num_samples - 1)
+    skip = empty_below > 0.0
 
     @wp.kernel(module="unique")
-    def render(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
-               T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
+    def render(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2,
+               res: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
+               angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+               out: wp.array2d(dtype=wp.float32), err_sum: wp.array(dtype=wp.float32)):
         p, b = wp.tid()
         o = beam_origin(particles[p], T_base_laser)
         d = beam_direction(particles[p], T_base_laser, angles[b])
+        # the samples whose point can round to a node: the grid's extent plus one node of margin
+        sx = slab(o[0], d[0], origin[0] - 1.5 * res, origin[0] + (float(grid.shape[1]) + 0.5) * res)
+        sy = slab(o[1], d[1], origin[1] - 1.5 * res, origin[1] + (float(grid.shape[0]) + 0.5) * res)
+        t0 = wp.max(sx[0], sy[0])
+        t1 = wp.min(sx[1], sy[1])
+        k = int(0)
+        k_end = int(-1)
+        if t1 >= t0:
+            k = int(wp.max(wp.floor((t0 - wp.static(near)) / wp.static(step)), 0.0))
+            k_end = int(wp.min(wp.ceil((t1 - wp.static(near)) / wp.static(step)), float(wp.static(num_samples - 1))))
         T = float(1.0)
         A = float(0.0)
         W = float(0.0)
-        for k in range(wp.static(num_samples)):
+        while k <= k_end:
             if T < wp.static(t_min):
                 break
             z = wp.static(near) + wp.static(step) * float(k)
-            occ = nearest_node(grid, origin, res, o[0] + z * d[0], o[1] + z * d[1])
+            ix = int(wp.round((o[0] + z * d[0] - origin[0]) / res))
+            iy = int(wp.round((o[1] + z * d[1] - origin[1]) / res))
+            occ = float(0.0)
+            jump = int(1)
+            if ix >= 0 and iy >= 0 and ix < grid.shape[1] and iy < grid.shape[0]:
+                occ = grid[iy, ix]
+                if wp.static(skip):
+                    if occ < 0.0:  # an empty node holds -(the distance it lets the ray jump)
+                        jump = wp.max(1, int(-occ * wp.static(1.0 / step)))
+                        occ = 0.0
             w = occ * T
             A += w * z
             W += w
             T *= 1.0 - occ
-        out[p, b] = A / (W + wp.static(eps))
+            k += jump
+        r = A / (W + wp.static(eps))
+        out[p, b] = r
+        m = measured[b]
+        if m == m:  # NaN: invalid beam
+            wp.atomic_add(err_sum, p, wp.abs(r - m))
 
     @wp.kernel(module="unique")
-    def likelihood(rendered: wp.array2d(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+    def likelihood(err_sum: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
                    log_weights: wp.array(dtype=wp.float32)):
         p = wp.tid()
-        total = float(0.0)
         n = float(0.0)
         for b in range(measured.shape[0]):
             m = measured[b]
-            if m == m:  # NaN: invalid beam
-                total += wp.abs(rendered[p, b] - m)
+            if m == m:
                 n += 1.0
-        D = total / wp.max(n, 1.0)
+        D = err_sum[p] / wp.max(n, 1.0)
+        err_sum[p] = 0.0  # ready for the next scan
         log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
 
     return render, likelihood
 
 
+def pack_empty_space(occupancy: np.ndarray, res: float, empty_below: float) -> np.ndarray:
+    """The grid the kernel reads (one load per sample): p_occ at non-empty nodes, and at an empty node
+    (p_occ < empty_below) minus how far a ray may advance from any point rounding to it without reaching a
+    point that rounds to a non-empty node: its centre distance to the nearest one - res * sqrt(2) (-0 - 1e-6
+    when that is not positive, so that every empty node is negative)."""
+    from kernels.raycast import distance_to_occupied
+
+    occupancy = np.asarray(occupancy, np.float32)
+    if empty_below <= 0:
+        return occupancy
+    dist = distance_to_occupied(occupancy, res, empty_below)
+    jump = np.maximum(dist - res * np.sqrt(2.0) - 1e-4, 0.0) + 1e-6
+    return np.where(occupancy < empty_below, -jump, occupancy).astype(np.float32)
+
+
 class NogRaymarch:
-    """Holds the NOG on the device and a [P, B] scratch array; ``__call__`` only launches."""
+    """Holds the NOG (with its empty-space jumps packed in) on the device and [P, B] / [P] scratch arrays;
+    ``__call__`` only launches."""
 
     def __init__(self, nog, num_particles: int, num_beams: int, num_samples: int = 256, near_m: float = 0.02,
-                 far_m: float = 40.0, t_min: float = 0.0, sigma_m: float = 0.5, device: str = "auto"):
+                 far_m: float = 40.0, t_min: float = 0.0, sigma_m: float = 0.5, empty_below: float = 0.0,
+                 device: str = "auto"):
         if nog.occupancy.size == 0 or nog.occupancy.ndim != 2:
             raise ValueError(f"nog_raymarch: the NOG is empty (shape {nog.occupancy.shape})")
+        if num_samples < 2 or not far_m > near_m:
+            raise ValueError(f"nog_raymarch: need num_samples >= 2 and far > near, got {num_samples}, [{near_m}, {far_m}]")
         self.device = pick_device(device)
-        self.grid = wp.array(np.asarray(nog.occupancy, np.float32), dtype=wp.float32, device=self.device)
+        self.grid = wp.array(pack_empty_space(nog.occupancy, float(nog.resolution_m), empty_below),
+                             dtype=wp.float32, device=self.device)
         self.origin, self.res = wp.vec2(*map(float, nog.origin_xy)), float(nog.resolution_m)
         self.num_beams = num_beams
         self.rendered = wp.zeros((num_particles, num_beams), dtype=wp.float32, device=self.device)
-        self.render_kernel, self.likelihood_kernel = make_kernels(num_samples, near_m, far_m, t_min, sigma_m)
+        self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
+        self.render_kernel, self.likelihood_kernel = make_kernels(num_samples, near_m, far_m, t_min, sigma_m,
+                                                                  empty_below)
+
+    def _launch(self, particles, T_base_laser, angles, measured):
+        if particles.shape[0] > self.err_sum.shape[0]:
+            raise ValueError(f"nog_raymarch: {particles.shape[0]} particles, built for {self.err_sum.shape[0]}")
+        wp.launch(self.render_kernel, (particles.shape[0], angles.shape[0]),
+                  [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)),
+                   angles, measured, self.rendered, self.err_sum], device=self.device)
 
     def render(self, particles: wp.array, T_base_laser, angles: wp.array) -> wp.array:
-        wp.launch(self.render_kernel, (particles.shape[0], angles.shape[0]),
-                  [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles,
-                   self.rendered], device=self.device)
+        """Rendered ranges [P, B] (the first P rows of the scratch array)."""
+        self._launch(particles, T_base_laser, angles, wp.full(angles.shape[0], np.nan, dtype=wp.float32,
+                                                                  device=self.device))
         return self.rendered
 
     def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
@@ -113,13 +188,84 @@ class NogRaymarch:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
             raise ValueError(f"nog_raymarch: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                              f"built for {self.num_beams} beams")
-        self.render(particles, T_base_laser, angles)
-        wp.launch(self.likelihood_kernel, particles.shape[0], [self.rendered, measured, log_weights], device=self.device)
+        self._launch(particles, T_base_laser, angles, measured)
+        wp.launch(self.likelihood_kernel, particles.shape[0], [self.err_sum, measured, log_weights],
+                  device=self.device)
 
 
 @WEIGHTING.register("nog_raymarch")
 def make_nog_raymarch(**settings) -> NogRaymarch:
     return NogRaymarch(**settings)
+
+
+class NofDirect:
+    """``nof_direct``: IR-MCL's observation model on the NOF itself, no grid (for small particle sets, and as
+    the ablation of the NOG's nearest-node approximation). Per call: the sample points of every particle
+    and beam (torch), the MLP in chunks, compositing by the Warp ``composite`` kernel (kernels/render.py,
+    normalised as in training), then |r - m| per valid beam and the Gaussian on its mean, as
+    ``nog_raymarch``. The particle arrays stay on their device (zero-copy ``wp.to_torch``)."""
+
+    def __init__(self, checkpoint=None, model=None, num_particles: int = 1000, num_beams: int = 32,
+                 num_samples: int = 256, near_m: float = 0.02, far_m: float = 40.0, sigma_m: float = 0.5,
+                 chunk_rays: int = 4096, device: str = "auto"):
+        import torch
+
+        from kernels import RENDER
+
+        self.device = pick_device(device)
+        self.torch_device = torch.device("cuda" if self.device.startswith("cuda") else "cpu")
+        if model is None:
+            if checkpoint is None:
+                raise ValueError("nof_direct: give a NOF checkpoint (nof.pt) or a model")
+            from irmcl_warp.nof.checkpoint import load_nof
+
+            model, _ = load_nof(checkpoint, self.torch_device)
+        self.model = model.to(self.torch_device).eval()
+        self.num_beams, self.chunk = num_beams, int(chunk_rays)
+        self.z = torch.linspace(near_m, far_m, num_samples, device=self.torch_device)
+        self.compositor = RENDER.build("composite", normalize=True)
+        self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
+        self.likelihood_kernel = make_kernels(2, near_m, far_m, 0.0, sigma_m, 0.0)[1]
+
+    def render(self, particles: wp.array, T_base_laser, angles: wp.array):
+        """Rendered ranges [P, B] as a torch tensor."""
+        import torch
+
+        with torch.no_grad():
+            p = wp.to_torch(particles).to(self.torch_device).double()
+            a = wp.to_torch(angles).to(self.torch_device).double()
+            tx, ty, tt = map(float, T_base_laser)
+            c, s = torch.cos(p[:, 2]), torch.sin(p[:, 2])
+            origin = torch.stack([p[:, 0] + c * tx - s * ty, p[:, 1] + s * tx + c * ty], -1)  # [P, 2]
+            yaw = p[:, 2:3] + tt + a[None, :]  # [P, B]
+            dirs = torch.stack([torch.cos(yaw), torch.sin(yaw)], -1).reshape(-1, 2).float()
+            origins = origin[:, None, :].expand(-1, a.shape[0], -1).reshape(-1, 2).float()
+            out = torch.empty(origins.shape[0], device=self.torch_device)
+            z = self.z
+            for k in range(0, origins.shape[0], self.chunk):
+                o, d = origins[k:k + self.chunk], dirs[k:k + self.chunk]
+                occ = self.model((o[:, None, :] + d[:, None, :] * z[None, :, None]).reshape(-1, 2))
+                occ = occ.float().reshape(o.shape[0], z.shape[0])
+                out[k:k + self.chunk] = self.compositor.forward(occ, z.expand(o.shape[0], -1))[0]
+            return out.reshape(p.shape[0], a.shape[0])
+
+    def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
+                 log_weights: wp.array) -> None:
+        import torch
+
+        if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
+            raise ValueError(f"nof_direct: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
+                             f"built for {self.num_beams} beams")
+        rendered = self.render(particles, T_base_laser, angles)
+        m = wp.to_torch(measured).to(self.torch_device)
+        err = torch.where(torch.isnan(m)[None, :], torch.zeros((), device=m.device), (rendered - m[None, :]).abs())
+        self.err_sum.assign(wp.from_torch(err.sum(1).contiguous().to(wp.device_to_torch(self.device))))
+        wp.launch(self.likelihood_kernel, particles.shape[0], [self.err_sum, measured, log_weights], device=self.device)
+
+
+@WEIGHTING.register("nof_direct")
+def make_nof_direct(**settings) -> NofDirect:
+    return NofDirect(**settings)
 
 
 def make_likelihood_field_kernel(z_hit: float, z_rand: float, sigma_hit: float, max_range: float, max_dist: float):

@@ -16,8 +16,8 @@ def test_every_registry_entry_has_a_reference_twin():
     assert MAPPING.names() == ["logodds"]
     assert SIM.names() == ["rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
-    assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nog_raymarch"]
+    assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch"]
     assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
-    assert ESTIMATE.names() == ["top_share"]
+    assert ESTIMATE.names() == ["best_cluster", "top_share"]
     for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample", "estimate"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

@@ -28,28 +28,49 @@ def test_pose_two_metres_before_a_wall_renders_two_metres():
     assert abs(r - 2.0) <= 0.5 * nog.resolution_m
 
 
-@pytest.mark.parametrize("t_min", [0.0, 1e-3])
-def test_kernel_matches_numpy_twin(rng, t_min):
-    occ = (rng.uniform(0, 1, (60, 80)) ** 6).astype(np.float32)  # mostly free, some walls
+def _random_nog_grid(rng, kind):
+    if kind == "noise":  # mostly free, some walls, every level of occupancy
+        return (rng.uniform(0, 1, (60, 80)) ** 6).astype(np.float32)
+    from scipy.ndimage import gaussian_filter  # "rooms": blurred random walls over a faint background, as a NOF
+
+    occ = np.zeros((60, 80), np.float32)
+    for _ in range(14):
+        x0, y0 = rng.integers(0, 80), rng.integers(0, 60)
+        if rng.uniform() < 0.5:
+            occ[y0, x0:x0 + rng.integers(5, 40)] = 1.0
+        else:
+            occ[y0:y0 + rng.integers(5, 30), x0] = 1.0
+    return np.clip(gaussian_filter(occ, 0.8) * 2.5 + rng.uniform(0, 2e-3, occ.shape), 0, 1).astype(np.float32)
+
+
+@pytest.mark.parametrize("kind, t_min, empty_below", [("noise", 0.0, 0.0), ("noise", 1e-3, 0.0), ("noise", 0.0, 0.01),
+                                                      ("rooms", 0.0, 0.0), ("rooms", 1e-3, 0.01), ("rooms", 0.0, 0.05)])
+def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below):
+    """Every sample in the twin; the kernel's grid clipping and jumps over empty space must give the same."""
+    occ = _random_nog_grid(rng, kind)
     nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
-    P, B = 40, 16
-    particles = np.stack([rng.uniform(-1, 6, P), rng.uniform(-1, 4, P), rng.uniform(-np.pi, np.pi, P)], -1).astype(np.float32)
+    P, B = 60, 16
+    particles = np.stack([rng.uniform(-3, 7, P), rng.uniform(-3, 5, P), rng.uniform(-np.pi, np.pi, P)], -1).astype(np.float32)
     angles = np.linspace(-2.0, 2.0, B).astype(np.float32)
     T_bl = (0.1, -0.05, 0.02)
     measured = rng.uniform(0.5, 6.0, B).astype(np.float32)
     measured[3] = np.nan
-    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=P, num_beams=B, num_samples=64, near_m=0.02,
-                        far_m=8.0, t_min=t_min, sigma_m=0.5, device="cpu")
+    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=P, num_beams=B, num_samples=128, near_m=0.02,
+                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, device="cpu")
     pw = wp.array(particles, dtype=wp.vec3, device="cpu")
     aw = wp.array(angles, dtype=wp.float32, device="cpu")
     logw = wp.zeros(P, dtype=wp.float32, device="cpu")
     w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device="cpu"), logw)
     ours = w.rendered.numpy()
-    twin = nog_render(occ, nog.origin_xy, nog.resolution_m, particles, T_bl, angles, 64, 0.02, 8.0, t_min)
+    twin = nog_render(occ, nog.origin_xy, nog.resolution_m, particles, T_bl, angles, 128, 0.02, 12.0, t_min,
+                      empty_below)
     close = np.abs(ours - twin) < 1e-3
     assert close.mean() > 0.99, f"seed {rng.seed}: {close.mean():.3f} of beams agree"  # float32 rounding at node borders
+    assert (twin > 0.1).mean() > 0.15  # the case has walls to hit
     twin_logw = nog_log_weights(ours.astype(np.float64), measured.astype(np.float64), 0.5)
     assert np.allclose(logw.numpy(), twin_logw, rtol=1e-4, atol=1e-4), f"seed {rng.seed}"
+    w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device="cpu"), logw)  # the per-particle sums were reset
+    assert np.allclose(logw.numpy(), twin_logw, rtol=1e-4, atol=1e-4)
 
 
 def test_beam_count_mismatch_is_a_clear_error():
@@ -150,3 +171,65 @@ def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
                                   0.95, 0.1, 0.05, 0.05, 0.2, 0.1, 8.0, 0.5)
     assert np.allclose(out.numpy(), twin, rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
     assert out.numpy()[0] > out.numpy()[1:].max()
+
+
+def test_torch_formulation_of_the_bench_matches_the_twin(rng):
+    """The speed reference of eval.bench mcl computes the same log-weights as the numpy twin."""
+    from irmcl_warp.reference.weighting import nog_log_weights_torch
+
+    occ = _random_nog_grid(rng, "rooms")
+    origin = (rng.uniform(-2, 2), rng.uniform(-2, 2))
+    P, B = 37, 8
+    particles = np.stack([rng.uniform(-1, 6, P), rng.uniform(-1, 4, P), rng.uniform(-np.pi, np.pi, P)], -1)
+    angles = np.linspace(-1.5, 1.5, B)
+    measured = rng.uniform(0.5, 6.0, B)
+    measured[2] = np.nan
+    T_bl = (0.1, -0.05, 0.02)
+    ours = nog_log_weights_torch(torch.tensor(occ, dtype=torch.float64), origin, 0.1, torch.tensor(particles), T_bl,
+                                 torch.tensor(angles), torch.tensor(measured), 64, 0.02, 8.0, 0.5, chunk=10).numpy()
+    twin = nog_log_weights(nog_render(occ, origin, 0.1, particles, T_bl, angles, 64, 0.02, 8.0), measured, 0.5)
+    assert np.allclose(ours, twin, atol=1e-9), f"seed {rng.seed}"
+    assert twin.std() > 0.01  # the particles are told apart
+
+
+def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
+    """The MLP queried at every sample: the twin composites in torch; a small NOF trained on nothing still
+    gives the same numbers, and a field that is one wall weighs the pose that sees it right the highest."""
+    from irmcl_warp.config import ModelConfig
+    from irmcl_warp.nof.model import NOF
+    from irmcl_warp.reference.render import composite_torch
+
+    torch.manual_seed(int(rng.integers(1 << 30)))
+    model = NOF(ModelConfig(width=32, depth=2, skip_after=1, num_freqs=4)).eval()
+    P, B, S = 7, 5, 48
+    particles = np.column_stack([rng.uniform(-2, 2, (P, 2)), rng.uniform(-np.pi, np.pi, P)]).astype(np.float32)
+    angles = np.linspace(-1.0, 1.0, B).astype(np.float32)
+    measured = rng.uniform(1, 5, B).astype(np.float32)
+    measured[1] = np.nan
+    T_bl = (0.1, 0.0, 0.05)
+    w = WEIGHTING.build("nof_direct", model=model, num_particles=P, num_beams=B, num_samples=S, near_m=0.02,
+                        far_m=6.0, sigma_m=0.5, chunk_rays=8, device="cpu")
+    logw = wp.zeros(P, dtype=wp.float32, device="cpu")
+    w(wp.array(particles, dtype=wp.vec3, device="cpu"), T_bl, wp.array(angles, dtype=wp.float32, device="cpu"),
+      wp.array(measured, dtype=wp.float32, device="cpu"), logw)
+    # twin: the same points, the MLP, composite_torch, the Gaussian on the mean L1 error
+    yaw = particles[:, 2:3].astype(np.float64) + T_bl[2] + angles[None, :]
+    c, s = np.cos(particles[:, 2]), np.sin(particles[:, 2])
+    o = np.stack([particles[:, 0] + c * T_bl[0], particles[:, 1] + s * T_bl[0]], -1)
+    z = np.linspace(0.02, 6.0, S)
+    pts = o[:, None, None, :] + np.stack([np.cos(yaw), np.sin(yaw)], -1)[:, :, None, :] * z[:, None]
+    with torch.no_grad():
+        occ = model(torch.tensor(pts.reshape(-1, 2), dtype=torch.float32)).reshape(P * B, S)
+        r = composite_torch(occ.double(), torch.tensor(z).expand(P * B, S))[0].numpy().reshape(P, B)
+    assert np.allclose(logw.numpy(), nog_log_weights(r, measured.astype(np.float64), 0.5), atol=1e-4), f"seed {rng.seed}"
+
+    class Wall(torch.nn.Module):  # p_occ = 1 beyond x = 2
+        def forward(self, xy):
+            return (xy[:, 0] > 2.0).float()
+
+    wall = WEIGHTING.build("nof_direct", model=Wall(), num_particles=2, num_beams=1, num_samples=256, near_m=0.0,
+                           far_m=10.0, device="cpu")
+    two = wp.array(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device="cpu")
+    lw = wp.zeros(2, dtype=wp.float32, device="cpu")
+    wall(two, (0, 0, 0), wp.zeros(1, dtype=wp.float32, device="cpu"), wp.array([2.0], dtype=wp.float32, device="cpu"), lw)
+    assert lw.numpy()[0] > -0.01 > lw.numpy()[1]  # 2 m before the wall: right; 1 m before: 1 m off
