@@ -132,10 +132,17 @@ class MCLConfig:
     near_m: float = 0.02
     far_m: float = 40.0  # the filter's far bound; the localize stage sets it from data.usable_range_m
     t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
+    empty_below: float = 0.0  # NOG nodes below this p_occ read as 0 and are jumped over (0 = authors')
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
-    estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | mean (all particles)
+    estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | best_cluster | mean
     estimate_share: float = 0.8
+    cluster_cell_m: float = 0.5  # best_cluster: histogram cell (m) ...
+    cluster_yaw_bins: int = 8  # ... and heading bins
+    reduce_to: int = 5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never)
+    reduce_after_s: float = 20.0  # IR-MCL's code reduces 20 s into the run (global localization only)
+    update_min_trans_m: float = 0.0  # weigh and resample only after the odometry moved more than this ...
+    update_min_rot_rad: float = 0.0  # ... or turned more than this (0/0: any motion, as IR-MCL's code)
     resample: str = "low_variance"  # low_variance | multinomial
     resample_threshold: float = 0.5  # resample when N_eff < threshold * N (1.0 = every step)
     map_resolution_m: float = 0.05  # NOG / grid resolution
@@ -144,6 +151,7 @@ class MCLConfig:
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
     num_starts: int = 10  # start times spread evenly over the sequence
+    kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
     run_s: float = 60.0  # how long each start is followed
     seed: int = 0
 

@@ -1,8 +1,16 @@
-"""Pose estimates from a weighted particle set: ``ESTIMATE["top_share"]``, IR-MCL's estimate (the weighted
-mean of the particles with the highest weights, 80 % of them; circular mean for yaw). The particles are
-ranked by Warp's radix sort of their log-weights; the sums are atomic adds over the first K ranks.
+"""Pose estimates from a weighted particle set (both return [x, y, yaw], circular mean for yaw):
+
+* ``ESTIMATE["top_share"]``: IR-MCL's estimate, the weighted mean of the particles with the highest
+  weights (80 % of them). The particles are ranked by Warp's radix sort of their log-weights; the sums
+  are atomic adds over the first K ranks.
+* ``ESTIMATE["best_cluster"]``: the weighted mean of the heaviest cluster, in the spirit of AMCL (which
+  reports the mean of its heaviest kd-tree cluster): weights are binned on a coarse (x, y, yaw) histogram
+  (``cell_m``, ``yaw_bins``), each bin's mass is summed with its 26 neighbours (yaw wraps), and the
+  particles within 1.5 cells and 1.5 yaw bins of the heaviest bin's centre are averaged. Robust when the
+  set is still split between look-alike places, where the mean of all particles lies between them.
+
 (The plain weighted mean of all particles comes with ``ParticleWeights`` in kernels/resample.py.)
-Numpy twin: irmcl_warp/reference/estimate.py.
+Numpy twins: irmcl_warp/reference/estimate.py.
 """
 
 from __future__ import annotations
@@ -58,3 +66,79 @@ class TopShareMean:
 @ESTIMATE.register("top_share")
 def make_top_share(**settings) -> TopShareMean:
     return TopShareMean(**settings)
+
+
+@wp.kernel
+def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
+                     top: wp.array(dtype=wp.float32), lo: wp.vec2, cell: float, nx: int, ny: int, nyaw: int,
+                     hist: wp.array(dtype=wp.float32)):
+    i = wp.tid()
+    p = particles[i]
+    ix = wp.clamp(int(wp.floor((p[0] - lo[0]) / cell)), 0, nx - 1)
+    iy = wp.clamp(int(wp.floor((p[1] - lo[1]) / cell)), 0, ny - 1)
+    a = wp.atan2(wp.sin(p[2]), wp.cos(p[2])) + 3.14159265358979
+    ia = wp.clamp(int(a / (6.28318530717959 / float(nyaw))), 0, nyaw - 1)
+    wp.atomic_add(hist, (ia * ny + iy) * nx + ix, wp.exp(log_w[i] - top[0]))
+
+
+@wp.kernel
+def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
+                        top: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, yaw_radius: float,
+                        sums: wp.array(dtype=wp.float32)):
+    i = wp.tid()
+    p = particles[i]
+    dx = p[0] - centre[0]
+    dy = p[1] - centre[1]
+    da = wp.atan2(wp.sin(p[2] - centre[2]), wp.cos(p[2] - centre[2]))
+    if dx * dx + dy * dy <= radius * radius and wp.abs(da) <= yaw_radius:
+        w = wp.exp(log_w[i] - top[0])
+        wp.atomic_add(sums, 0, w)
+        wp.atomic_add(sums, 1, w * p[0])
+        wp.atomic_add(sums, 2, w * p[1])
+        wp.atomic_add(sums, 3, w * wp.cos(p[2]))
+        wp.atomic_add(sums, 4, w * wp.sin(p[2]))
+
+
+def heaviest_bin(hist: np.ndarray) -> tuple[int, int, int]:
+    """(yaw bin, iy, ix) of the largest 3x3x3 neighbourhood sum of a [yaw, y, x] histogram (yaw wraps)."""
+    from scipy.ndimage import uniform_filter
+
+    smooth = uniform_filter(hist.astype(np.float64), size=3, mode=("wrap", "constant", "constant"))
+    return tuple(int(v) for v in np.unravel_index(np.argmax(smooth), hist.shape))
+
+
+class BestCluster:
+    def __init__(self, num_particles: int, bounds, cell_m: float = 0.5, yaw_bins: int = 8, device: str = "auto"):
+        xmin, ymin, xmax, ymax = map(float, bounds)
+        if not (xmax > xmin and ymax > ymin and cell_m > 0 and yaw_bins >= 1):
+            raise ValueError(f"best_cluster: bounds {bounds}, cell {cell_m} m, {yaw_bins} yaw bins do not make a histogram")
+        self.device = pick_device(device)
+        self.lo, self.cell, self.nyaw = wp.vec2(xmin, ymin), float(cell_m), int(yaw_bins)
+        self.nx, self.ny = int(np.ceil((xmax - xmin) / cell_m)) + 1, int(np.ceil((ymax - ymin) / cell_m)) + 1
+        self.hist = wp.zeros(self.nyaw * self.ny * self.nx, dtype=wp.float32, device=self.device)
+        self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
+        self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
+
+    def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
+        from kernels.resample import max_kernel
+
+        n, d = particles.shape[0], self.device
+        self.top.fill_(-3.0e38)
+        self.hist.zero_()
+        self.sums.zero_()
+        wp.launch(max_kernel, n, [log_w, self.top], device=d)
+        wp.launch(histogram_kernel, n, [particles, log_w, self.top, self.lo, self.cell, self.nx, self.ny, self.nyaw,
+                                        self.hist], device=d)
+        ia, iy, ix = heaviest_bin(self.hist.numpy().reshape(self.nyaw, self.ny, self.nx))
+        bin_yaw = 2 * np.pi / self.nyaw
+        centre = wp.vec3(self.lo[0] + (ix + 0.5) * self.cell, self.lo[1] + (iy + 0.5) * self.cell,
+                         -np.pi + (ia + 0.5) * bin_yaw)
+        wp.launch(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell, 1.5 * bin_yaw,
+                                           self.sums], device=d)
+        s = self.sums.numpy().astype(np.float64)
+        return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
+
+
+@ESTIMATE.register("best_cluster")
+def make_best_cluster(**settings) -> BestCluster:
+    return BestCluster(**settings)

@@ -29,18 +29,23 @@ def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32
 
 @wp.kernel
 def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
-               sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3)):
-    """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w]."""
+               sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2):
+    """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w, sum w x^2,
+    sum w y^2], x and y taken relative to ``centre`` (so that the spread does not cancel in float32)."""
     i = wp.tid()
     v = wp.exp(log_w[i] - top[0])
     w[i] = v
     p = particles[i]
+    x = p[0] - centre[0]
+    y = p[1] - centre[1]
     wp.atomic_add(sums, 0, v * v)
-    wp.atomic_add(sums, 1, v * p[0])
-    wp.atomic_add(sums, 2, v * p[1])
+    wp.atomic_add(sums, 1, v * x)
+    wp.atomic_add(sums, 2, v * y)
     wp.atomic_add(sums, 3, v * wp.cos(p[2]))
     wp.atomic_add(sums, 4, v * wp.sin(p[2]))
     wp.atomic_add(sums, 5, v)
+    wp.atomic_add(sums, 6, v * x * x)
+    wp.atomic_add(sums, 7, v * y * y)
 
 
 @wp.func
@@ -75,29 +80,37 @@ def multinomial_kernel(cdf: wp.array(dtype=wp.float32), seed: int, src: wp.array
 
 
 class ParticleWeights:
-    """Scratch arrays for N particles; ``update(log_w, particles)`` fills w, cdf and sums on the device."""
+    """Scratch arrays for N particles; ``update(log_w, particles)`` fills w, cdf and sums on the device.
+    ``centre``: a point near the particles (the map's centre), subtracted before the squares are summed."""
 
-    def __init__(self, num_particles: int, device: str = "auto"):
+    def __init__(self, num_particles: int, device: str = "auto", centre=(0.0, 0.0)):
         self.device = pick_device(device)
         d = self.device
+        self.centre = wp.vec2(float(centre[0]), float(centre[1]))
         self.w = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cdf = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
-        self.sums = wp.zeros(6, dtype=wp.float32, device=d)
+        self.sums = wp.zeros(8, dtype=wp.float32, device=d)
 
     def update(self, log_w: wp.array, particles: wp.array) -> None:
+        if log_w.shape[0] != self.w.shape[0]:
+            raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
         self.top.fill_(-3.0e38)
         self.sums.zero_()
         wp.launch(max_kernel, log_w.shape[0], [log_w, self.top], device=self.device)
-        wp.launch(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.sums, particles], device=self.device)
+        wp.launch(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.sums, particles, self.centre],
+                  device=self.device)
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
-    def summary(self) -> tuple[np.ndarray, float]:
-        """(weighted mean pose [x, y, yaw], N_eff): the one small read back per step (six sums)."""
+    def summary(self) -> tuple[np.ndarray, float, float]:
+        """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums).
+        spread = sqrt(var x + var y) of the weighted particle positions (m)."""
         s = self.sums.numpy().astype(np.float64)
         total = s[5]
-        pose = np.array([s[1] / total, s[2] / total, np.arctan2(s[4], s[3])])
-        return pose, total * total / s[0]
+        mx, my = s[1] / total, s[2] / total
+        pose = np.array([mx + self.centre[0], my + self.centre[1], np.arctan2(s[4], s[3])])
+        spread = np.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0))
+        return pose, total * total / s[0], float(spread)
 
 
 class Resampler:
@@ -123,36 +136,58 @@ def make_multinomial(device: str = "auto") -> Resampler:
 
 
 @wp.kernel
-def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32),
-                        out: wp.array(dtype=wp.float32)):
-    wp.atomic_add(out, 0, wp.exp(log_lik[wp.tid()] - top[0]))
+def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32)):
+    i = wp.tid()
+    if skip[i] == 0:
+        wp.atomic_max(out, 0, values[i])
+
+
+@wp.kernel
+def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32),
+                        top: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
+    """out = [sum of exp(log_lik - top), count] over the particles not marked in ``skip``."""
+    i = wp.tid()
+    if skip[i] == 0:
+        wp.atomic_add(out, 0, wp.exp(log_lik[i] - top[0]))
+        wp.atomic_add(out, 1, 1.0)
 
 
 @wp.kernel
 def inject_kernel(particles: wp.array(dtype=wp.vec3), free_xy: wp.array(dtype=wp.vec2), jitter: float,
-                  probability: float, seed: int):
-    """Replace each particle, with the given probability, by a random pose on a free node (recovery)."""
+                  probability: float, seed: int, injected: wp.array(dtype=wp.int32)):
+    """Replace each particle, with the given probability, by a random pose on a free node (recovery);
+    ``injected`` marks the replaced ones."""
     i = wp.tid()
     state = wp.rand_init(seed, i)
+    injected[i] = 0
     if wp.randf(state) < probability:
         j = int(wp.randf(state) * float(free_xy.shape[0])) % free_xy.shape[0]
         xy = free_xy[j]
         particles[i] = wp.vec3(xy[0] + jitter * (wp.randf(state) - 0.5), xy[1] + jitter * (wp.randf(state) - 0.5),
                                (wp.randf(state) * 2.0 - 1.0) * 3.14159265)
+        injected[i] = 1
 
 
 class LogMeanLikelihood:
-    """log(mean(exp(log_lik))) without underflow: max shift on the device, buffers allocated once,
-    two floats read back."""
+    """log(mean(exp(log_lik))) over the particles not marked in ``skip`` (all when None), without
+    underflow: max shift on the device, buffers allocated once, three floats read back."""
 
     def __init__(self, device: str = "auto"):
         self.device = pick_device(device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
-        self.acc = wp.zeros(1, dtype=wp.float32, device=self.device)
+        self.acc = wp.zeros(2, dtype=wp.float32, device=self.device)
+        self.none = None
 
-    def __call__(self, log_lik: wp.array) -> float:
+    def __call__(self, log_lik: wp.array, skip: wp.array | None = None) -> float:
+        if skip is None:
+            if self.none is None or self.none.shape[0] != log_lik.shape[0]:
+                self.none = wp.zeros(log_lik.shape[0], dtype=wp.int32, device=self.device)
+            skip = self.none
         self.top.fill_(-3.0e38)
         self.acc.zero_()
-        wp.launch(max_kernel, log_lik.shape[0], [log_lik, self.top], device=self.device)
-        wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, self.top, self.acc], device=self.device)
-        return float(self.top.numpy()[0]) + float(np.log(self.acc.numpy()[0] / log_lik.shape[0]))
+        wp.launch(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], device=self.device)
+        wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top, self.acc], device=self.device)
+        acc = self.acc.numpy()
+        if acc[1] == 0:
+            return -np.inf
+        return float(self.top.numpy()[0]) + float(np.log(acc[0] / acc[1]))

@@ -130,3 +130,33 @@ def test_recovery_injects_only_when_the_likelihood_drops():
     off = ParticleFilter(nog, MCLConfig(num_particles=64, num_samples=32, far_m=10.0), log.T_base_laser,
                          log.info.angles_rad, device="cpu")
     assert off.recovery_probability() == 0.0
+
+
+@pytest.mark.parametrize("recovery", [True, False])
+def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
+    """Teleport the robot 15 s into a tracking run (the scans jump to a place over 3 m away, the odometry sees
+    nothing): augmented MCL's injection finds it again; without recovery the filter stays lost. The slow
+    average here learns the likelihood level within ~100 updates (alpha_slow 0.01; AMCL's 0.001 suits
+    runs of thousands of updates)."""
+    from irmcl_warp.localize import run_one
+
+    log, nog = _world_and_map(duration_s=60.0, extra=("sim.width_m=14", "sim.height_m=10"))
+    rates = dict(recovery_alpha_slow=0.01, recovery_alpha_fast=0.2) if recovery else {}
+    cfg = MCLConfig(num_particles=2000, num_samples=128, far_m=10.0, mode="tracking", seed=5, **rates)
+    t = log.stamps - log.stamps[0]
+    first = np.flatnonzero(t < 15.0)
+    far = np.flatnonzero((t >= 19.0) & (np.hypot(*(log.ground_truth[:, :2] - log.ground_truth[first[-1], :2]).T) > 3.0))
+    idx = np.concatenate([first, np.arange(far[0], len(log))])
+    pf = ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, device="cpu")
+    pf.init_gaussian(log.ground_truth[0], (0.2, 0.2, 0.1))
+    est = run_one(pf, log, idx, cfg)
+    err = np.hypot(*(est[:, :2] - log.ground_truth[idx, :2]).T)
+    cut = len(first)
+    assert err[cut - 5:cut].max() < 0.3  # tracked before the kidnapping
+    assert np.hypot(*(log.ground_truth[idx[cut], :2] - log.ground_truth[idx[cut - 1], :2])) > 3.0  # teleported ...
+    assert err[cut] > 2.0  # ... and the filter did not see it
+    end = err[-25:]  # the last 5 s
+    if recovery:
+        assert end.max() < 0.3, end.max()
+    else:
+        assert end.min() > 1.0, end.min()

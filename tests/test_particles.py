@@ -8,7 +8,7 @@ import warp as wp
 
 from irmcl_warp.reference.motion import sample_odometry
 from irmcl_warp.reference.resample import (effective_sample_size, low_variance_indices, multinomial_indices,
-                                           weighted_mean)
+                                           weighted_mean, weighted_spread)
 from kernels import MOTION, RESAMPLE
 from kernels.motion import odometry_step
 from kernels.resample import ParticleWeights
@@ -51,9 +51,15 @@ def _weights(rng, n):
 
 def test_neff_and_mean_match_the_twin(rng):
     log_w, particles, _, weights = _weights(rng, 500)
-    pose, neff = weights.summary()
+    pose, neff, spread = weights.summary()
     assert neff == pytest.approx(effective_sample_size(log_w), rel=1e-4)
     assert np.allclose(pose, weighted_mean(particles.astype(np.float64), log_w), atol=1e-4)
+    assert spread == pytest.approx(weighted_spread(particles, log_w), rel=1e-3)
+    # far from the origin the centred sums keep the spread of a tight cluster
+    tight = np.column_stack([rng.normal(0, 0.05, (500, 2)) + [300.0, -250.0], np.zeros(500)]).astype(np.float32)
+    far = ParticleWeights(500, device="cpu", centre=(299.0, -251.0))
+    far.update(wp.array(log_w, dtype=wp.float32, device="cpu"), wp.array(tight, dtype=wp.vec3, device="cpu"))
+    assert far.summary()[2] == pytest.approx(weighted_spread(tight, log_w), rel=1e-2)
 
 
 def test_low_variance_keeps_each_particle_floor_or_ceil_of_its_share(rng):
@@ -104,3 +110,25 @@ def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
     assert abs(ours[0] - 2.0) < 0.05 and abs(abs(ours[2]) - 3.1) < 0.1  # yaw near +-pi: circular mean
     with pytest.raises(ValueError, match="share must lie"):
         ESTIMATE.build("top_share", num_particles=10, share=0.0, device="cpu")
+
+
+def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
+    """60 % of the mass near A, 40 % near B: the cluster estimate lands on A, the plain mean between them."""
+    from irmcl_warp.reference.estimate import best_cluster_mean
+    from kernels import ESTIMATE
+
+    n = 3000
+    a, b = np.array([2.0, 3.0, 0.5]), np.array([-4.0, 1.0, -2.5])
+    which = rng.uniform(size=n) < 0.5
+    particles = np.where(which[:, None], a, b) + rng.normal(0, 1, (n, 3)) * [0.15, 0.15, 0.05]
+    log_w = np.where(which, np.log(0.6), np.log(0.4)) + rng.normal(0, 0.1, n)
+    bounds = (-6.0, -2.0, 5.0, 6.0)
+    est = ESTIMATE.build("best_cluster", num_particles=n, bounds=bounds, cell_m=0.5, yaw_bins=8, device="cpu")
+    p32, w32 = particles.astype(np.float32), log_w.astype(np.float32)
+    ours = est(wp.array(p32, dtype=wp.vec3, device="cpu"), wp.array(w32, dtype=wp.float32, device="cpu"))
+    twin = best_cluster_mean(p32, w32, bounds, 0.5, 8)
+    assert np.allclose(ours, twin, atol=1e-4), f"seed {rng.seed}: {ours} vs {twin}"
+    assert np.hypot(*(ours[:2] - a[:2])) < 0.1 and abs(ours[2] - a[2]) < 0.05, f"seed {rng.seed}: {ours}"
+    assert np.hypot(*(weighted_mean(particles, log_w)[:2] - a[:2])) > 1.0  # the plain mean is lost between them
+    with pytest.raises(ValueError, match="do not make a histogram"):
+        ESTIMATE.build("best_cluster", num_particles=n, bounds=(0, 0, -1, 1), device="cpu")

@@ -20,6 +20,13 @@ def weighted_mean(particles, log_w):
                      np.arctan2(w @ np.sin(particles[:, 2]), w @ np.cos(particles[:, 2]))])
 
 
+def weighted_spread(particles, log_w) -> float:
+    """sqrt(var x + var y) of the weighted positions."""
+    w = normalise(log_w)
+    p = np.asarray(particles, np.float64)
+    return float(np.sqrt(sum(w @ (p[:, i] - w @ p[:, i]) ** 2 for i in range(2))))
+
+
 def low_variance_indices(log_w, offset: float) -> np.ndarray:
     """Thrun et al. Table 4.4: pointers (offset + i) / N into the cumulative weights."""
     cdf = np.cumsum(normalise(log_w))
