@@ -1,4 +1,5 @@
 """``python -m eval.bench train [--device cuda] [--batch 1024] [--samples 256] [--steps 10]``
+(``python -m eval.bench mcl ...``: the MCL step, eval/bench_mcl.py.)
 
 Side-by-side speed of NOF training on one device, in one run: rays/s of a whole training step
 (encode + MLP forward, composite, loss, backward, Adam) with the Warp renderer and with
@@ -122,9 +123,14 @@ def main(argv=None):
     t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
     t.add_argument("--tf32", action="store_true")
     t.add_argument("--out", default="outputs/bench")
+    from eval.bench_mcl import add_parser, run_mcl_bench
+
+    add_parser(sub)
     a = ap.parse_args(argv)
     if a.what == "train":
         run_train_bench(a)
+    elif a.what == "mcl":
+        run_mcl_bench(a)
 
 
 if __name__ == "__main__":

@@ -4,8 +4,16 @@ Runs MCL over the recorded stream (scans + odometry) from ``mcl.num_starts`` sta
 the sequence, each for ``mcl.run_s`` seconds, globally (uniform over the free space) or tracking from a
 noisy pose. The map comes from the training split only: the NOF of ``train=<preset>`` baked into a NOG
 (nog_raymarch), or a log-odds grid of the training scans (grid baselines); particles start on the
-grid's known free cells for every method. Writes outputs/<exp>/localize-<weighting>/: trajectories
-(TUM: stamp x y z qx qy qz qw), metrics.json (per start and summary), start0.png.
+grid's known free cells for every method. As IR-MCL's code, the filter weighs and resamples only after
+the odometry moved (``mcl.update_min_*``), and a global run keeps the ``mcl.reduce_to`` heaviest
+particles ``mcl.reduce_after_s`` into the run.
+
+``mcl.kidnap_at_s`` > 0 teleports the robot: that far into each run the stream jumps to the next start
+time (another place; the odometry does not see the jump), and metrics.json scores the recovery.
+
+Writes outputs/<exp>/localize-<tag>/ (tag: weighting, mode, particles, resolution, kidnap; see
+``run_tag``): trajectories (TUM: stamp x y z qx qy qz qw), metrics.json (per start and summary),
+start0.png. The stream is cached in outputs/<exp>/stream/ (a GPU box can run without the raw log).
 """
 
 from __future__ import annotations
@@ -24,8 +32,9 @@ from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import atomic_write_bytes
 from irmcl_warp.mcl import ParticleFilter
-from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
+from irmcl_warp.nof.prepare import cache_key, far_m, prepare_beams, recorded_inputs
 from irmcl_warp.nog import NOG, bake_nog
+from irmcl_warp.types import LaserInfo, LaserLog
 from irmcl_warp.outputs import save_figure, stage_dir, write_json, write_manifest
 from kernels import WEIGHTING, pick_device
 from kernels.motion import odometry_step
@@ -41,21 +50,72 @@ def build_maps(cfg, device):
     centre = (grid.origin_xy[0] + res / 2, grid.origin_xy[1] + res / 2)
     free_view = NOG(np.where(grid.known & (grid.probability < 0.35), 0.0, 1.0).astype(np.float32), centre, res)
     n_beams = min(m.num_beams, len(train.angles_rad))
-    if m.weighting == "nog_raymarch":
+    if m.weighting in ("nog_raymarch", "nof_direct"):
         from irmcl_warp.train import train_dir
 
         ckpt = train_dir(cfg) / "nof.pt"
         if not ckpt.is_file():
             raise FileNotFoundError(f"{ckpt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
+        shared = dict(num_particles=m.num_particles, num_beams=n_beams, num_samples=m.num_samples, near_m=m.near_m,
+                      far_m=far, sigma_m=m.sigma_m, device=device)
+        if m.weighting == "nof_direct":
+            return free_view, WEIGHTING.build("nof_direct", checkpoint=ckpt, **shared)
         nog = bake_nog(ckpt, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
                        cache_dir=stage_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
-        weighting = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=m.num_particles, num_beams=n_beams,
-                                    num_samples=m.num_samples, near_m=m.near_m, far_m=far, t_min=m.t_min,
-                                    sigma_m=m.sigma_m, device=device)
+        weighting = WEIGHTING.build("nog_raymarch", nog=nog, t_min=m.t_min, empty_below=m.empty_below, **shared)
     else:
         weighting = WEIGHTING.build(m.weighting, occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=res,
                                     max_range_m=far, device=device)
     return free_view, weighting
+
+
+STREAM_FIELDS = ("stamps", "ranges_m", "odom", "T_base_laser", "ground_truth")
+
+
+def load_stream(cfg) -> LaserLog:
+    """The log to localize in, from its cache when the settings and input files are unchanged (or when
+    the raw files are absent and the settings match)."""
+    import io
+
+    key, no_raw = cache_key(cfg)
+    path = stage_dir(cfg, "stream") / "stream.npz"
+    try:
+        with np.load(path) as z:
+            stored = str(z["key"])
+            if stored == key or (no_raw is not None and stored.split("-")[0] == key):
+                v = z["info"].tolist()
+                info = LaserInfo(int(v[0]), *map(float, v[1:]))
+                gt = z["ground_truth"] if z["ground_truth"].size else None
+                return LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
+                                source=f"{path} (cache of {cfg.data.path or cfg.data.name})")
+    except (OSError, KeyError, ValueError):
+        pass
+    if no_raw is not None:
+        raise no_raw
+    log = load_log(cfg)
+    i = log.info
+    buf = io.BytesIO()
+    np.savez_compressed(buf, key=np.array(key), stamps=log.stamps, ranges_m=log.ranges_m, odom=log.odom,
+                        T_base_laser=log.T_base_laser,
+                        ground_truth=log.ground_truth if log.ground_truth is not None else np.zeros(0),
+                        info=np.array([i.num_beams, i.angle_min_rad, i.angle_increment_rad, i.range_min_m,
+                                       i.range_max_m, i.no_return_m], np.float64))
+    atomic_write_bytes(path, buf.getvalue())
+    return log
+
+
+def run_tag(m) -> str:
+    """Output folder name of a localization run: what differs between the paper's table cells."""
+    n = f"{m.num_particles // 1000}k" if m.num_particles % 1000 == 0 else str(m.num_particles)
+    tag = f"localize-{m.weighting}-{m.mode}-{n}-{round(m.map_resolution_m * 100)}cm"
+    tag += f"-kidnap{m.kidnap_at_s:g}s" if m.kidnap_at_s > 0 else ""
+    return tag + ("-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else "")
+
+
+def moved(odom_step, min_trans: float, min_rot: float) -> bool:
+    """Has the robot moved enough since the last update (AMCL's update_min_d / update_min_a)?"""
+    rot1, trans, rot2 = odom_step
+    return abs(trans) > min_trans or abs(rot1 + rot2) > min_rot
 
 
 def write_tum(path: Path, stamps, poses) -> None:
@@ -79,44 +139,98 @@ def plot_run(path: Path, view: NOG, gt, est) -> None:
     save_figure(fig, path)
 
 
+def run_one(pf: ParticleFilter, log: LaserLog, idx: np.ndarray, m) -> np.ndarray:
+    """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised.
+    A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero."""
+    est = np.empty((len(idx), 3))
+    last_odom, t_start, pose = log.odom[idx[0]], log.stamps[idx[0]], None
+    reduce_pending = m.mode == "global" and 0 < m.reduce_to < pf.num_particles
+    for j, i in enumerate(idx):
+        if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
+            last_odom = log.odom[i]
+        u = odometry_step(last_odom, log.odom[i])
+        if pose is None or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+            pose = pf.step(u, log.ranges_m[i])[0]
+            last_odom = log.odom[i]
+            if reduce_pending and log.stamps[i] - t_start >= m.reduce_after_s:
+                pf.reduce(m.reduce_to)
+                reduce_pending = False
+        est[j] = pose
+    return est
+
+
 def run_localize(cfg) -> Path:
     started, device = time.time(), pick_device(cfg.device)
     m = OmegaConf.merge(cfg.mcl, {"far_m": far_m(cfg)})  # the filter's valid-beam bound = the sensor's far
-    out = stage_dir(cfg, f"localize-{m.weighting}")
-    log = load_log(cfg)
+    out = stage_dir(cfg, run_tag(m))
+    log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
     view, weighting = build_maps(cfg, device)
     t = log.stamps - log.stamps[0]
     starts = np.linspace(0.0, max(t[-1] - m.run_s, 0.0), m.num_starts)
-    runs = []
+    runs, kidnapped = [], m.kidnap_at_s > 0
     for k, t0 in enumerate(starts):
         pf = ParticleFilter(view, m, log.T_base_laser, log.info.angles_rad, device, weighting=weighting)
         pf.rng = np.random.default_rng(m.seed * 1000 + k)
         idx = np.flatnonzero((t >= t0) & (t <= t0 + m.run_s))
+        if kidnapped:  # the rest of the run from the next start time on: another place
+            t1 = starts[(k + 1) % len(starts)]
+            idx = np.concatenate([idx[t[idx] < t0 + m.kidnap_at_s],
+                                  np.flatnonzero((t >= t1) & (t <= t1 + m.run_s - m.kidnap_at_s))])
         if m.mode == "global":
             pf.init_uniform()
         else:
             first = idx[np.all(np.isfinite(log.ground_truth[idx]), axis=1)][0]
             pf.init_gaussian(log.ground_truth[first], m.tracking_std)
-        est = np.array([pf.step(odometry_step(log.odom[i - 1], log.odom[i]) if i > idx[0] else (0.0, 0.0, 0.0),
-                                log.ranges_m[i])[0] for i in idx])
-        write_tum(out / f"start{k}.tum", log.stamps[idx], est)
-        metrics = localization_metrics(log.stamps[idx], est, log.ground_truth[idx])
+        est = run_one(pf, log, idx, m)
+        stamps = log.stamps[idx]
+        cut = int(np.argmax(np.diff(idx) != 1) + 1) if kidnapped else len(idx)  # the first scan after a jump
+        if kidnapped:  # a continuous clock over the jump: the second part follows the first
+            dt = np.diff(stamps, prepend=stamps[0])
+            dt[cut] = np.median(dt[1:cut])
+            stamps = stamps[0] + np.cumsum(dt)
+        write_tum(out / f"start{k}.tum", stamps, est)
+        gt = log.ground_truth[idx]
+        metrics = localization_metrics(stamps, est, gt)
+        if kidnapped:
+            before = localization_metrics(stamps[:cut], est[:cut], gt[:cut])
+            recovery = localization_metrics(stamps[cut:], est[cut:], gt[cut:])
+            metrics = {**metrics, "localized_before_kidnap": before["converged"],
+                       "recovered": bool(before["converged"] and recovery["success"]),
+                       "recovery_time_s": recovery["time_to_converge_s"]}
         runs.append({"start_s": float(t0), **metrics})
         print(f"start {k} at {t0:.0f} s: " + (f"converged after {metrics['time_to_converge_s']:.1f} s, RMSE "
-              f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge"))
+              f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge")
+              + (f"; recovered from the kidnapping: {metrics['recovered']}" if kidnapped else ""))
         if k == 0:
-            plot_run(out / "start0.png", view, log.ground_truth[idx], est)
-    ok = [r for r in runs if r["success"]]
-    summary = {"weighting": m.weighting, "mode": m.mode, "num_particles": m.num_particles, "device": device,
-               "success_rate": len(ok) / len(runs), "starts": len(runs),
-               "location_rmse_cm_mean": float(np.mean([r["location_rmse_cm"] for r in ok])) if ok else None,
-               "time_to_converge_s_mean": float(np.mean([r["time_to_converge_s"] for r in ok])) if ok else None}
-    write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs})
+            plot_run(out / "start0.png", view, gt, est)
+    summary = summarise(runs, m, device)
+    write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs,
+                                      "settings": OmegaConf.to_container(m)})
     write_manifest(out, cfg, recorded_inputs(cfg), device, started)
-    print(f"{cfg.data.name}, {m.weighting}: success {len(ok)}/{len(runs)} -> {out}")
+    print(f"{cfg.data.name}, {m.weighting} ({m.mode}): success {summary['successes']}/{len(runs)} -> {out}")
     return out
+
+
+def summarise(runs: list[dict], m, device: str) -> dict:
+    ok = [r for r in runs if r["success"]]
+
+    def mean(key, rows):
+        vals = [r[key] for r in rows if r.get(key) is not None]
+        return float(np.mean(vals)) if vals else None
+
+    summary = {"weighting": m.weighting, "mode": m.mode, "num_particles": m.num_particles,
+               "map_resolution_m": m.map_resolution_m, "device": device, "starts": len(runs), "successes": len(ok),
+               "success_rate": len(ok) / len(runs), "divergences": int(sum(r["divergences"] for r in runs))}
+    for key in ("location_rmse_cm", "yaw_rmse_deg", "time_to_converge_s", "within_5cm_pct", "within_10cm_pct",
+                "within_20cm_pct", "within_0.5deg_pct", "within_1deg_pct", "within_2deg_pct"):
+        summary[f"{key}_mean"] = mean(key, ok)
+    if m.kidnap_at_s > 0:
+        summary["kidnap_at_s"] = m.kidnap_at_s
+        summary["recovered"] = int(sum(r["recovered"] for r in runs))
+        summary["recovery_time_s_mean"] = mean("recovery_time_s", [r for r in runs if r["recovered"]])
+    return summary
 
 
 register()

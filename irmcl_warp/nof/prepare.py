@@ -34,20 +34,23 @@ def far_m(cfg, range_max_m: float | None = None) -> float:
     return float(math.floor(range_max_m))
 
 
+def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
+    """(key, missing-input error): the data settings (+ ``settings``), then "-" and the inputs' size and
+    mtime. Without the raw files (a GPU box sent only the caches) the key stops after the settings part
+    and the error says which file is missing; a cache is then accepted by that prefix."""
+    key = settings_key(OmegaConf.to_container(cfg.data), OmegaConf.to_container(cfg.sim), *settings)
+    try:
+        files = [] if cfg.data.format == "sim" else input_files(cfg)
+        return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
+    except FileNotFoundError as e:
+        return key, e
+
+
 def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
     """{split name: BeamSet} for the split scheme ``cfg.data.split`` (train, val, test names in that order)."""
     if cfg.data.split not in SPLITS:
         raise ValueError(f"data.split={cfg.data.split!r}: expected one of {sorted(SPLITS)}")
-    # the cache is keyed by the settings and by the inputs' size and mtime; a machine without the raw
-    # files (a GPU box that was sent only the cache) accepts a cache made with the same settings
-    key = settings_key(OmegaConf.to_container(cfg.data), OmegaConf.to_container(cfg.sim), cfg.render.near_m,
-                       cfg.render.far_m)
-    files, no_raw = [], None
-    try:
-        files = [] if cfg.data.format == "sim" else input_files(cfg)
-        key += "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files])
-    except FileNotFoundError as e:
-        no_raw = e
+    key, no_raw = cache_key(cfg, cfg.render.near_m, cfg.render.far_m)
     path = stage_dir(cfg, "beams") / "beams.npz"
     sets = load_beams(path, key, prefix_only=no_raw is not None) if cache else None
     if no_raw is not None:

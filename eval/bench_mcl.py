@@ -1,0 +1,168 @@
+"""``python -m eval.bench mcl [--device cuda] [--particles 10000 100000 1000000] [--nog PATH.npz]``
+
+Side-by-side speed of one full MCL step (motion + weighting + resampling + estimate, ``mcl`` defaults:
+32 beams x 256 samples on the NOG, resampling every step as IR-MCL's code, the top-80 % estimate) for
+Warp kernel variants, against IR-MCL's weighting formulated as the authors do in torch (every sample,
+chunks of 500 particles; irmcl_warp/reference/weighting.py) on the same device, in one run:
+
+* ``warp``: the same formulation as the torch reference (every sample);
+* ``warp+et``: early termination once the transmittance is below 1e-3;
+* ``warp+et+skip``: and nodes below p_occ 0.01 read as empty and jumped over.
+
+The NOG is ``--nog`` (a baked outputs/<exp>/nog/nog-*.npz), else the simulator's walls rasterised at
+5 cm (no data needed). Particles start uniform over the free nodes (a global localization's first
+steps); the measured scan is rendered from a free pose plus noise. Prints a table and writes
+outputs/bench/mcl-<device>.json. Absolute times count only from a GPU; on a CPU read the ratios.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import warp as wp
+
+from irmcl_warp.mcl import MCLConfig, ParticleFilter
+from irmcl_warp.nog import NOG
+from irmcl_warp.outputs import write_json
+from irmcl_warp.reference.weighting import nog_log_weights_torch
+from kernels import pick_device
+
+VARIANTS = {"warp": dict(t_min=0.0, empty_below=0.0), "warp+et": dict(t_min=1e-3, empty_below=0.0),
+            "warp+et+skip": dict(t_min=1e-3, empty_below=0.01)}
+
+
+def simulator_nog(resolution_m: float = 0.05) -> NOG:
+    from hydra import compose, initialize_config_dir
+
+    from irmcl_warp.config import register
+    from irmcl_warp.sim import simulate
+    from kernels import SIM
+
+    register()
+    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
+        cfg = compose("config", overrides=["sim.duration_s=1"])
+    _, world = simulate(cfg.sim, "cpu")
+    lo = world.segments.reshape(-1, 2).min(0) - 1.0
+    hi = world.segments.reshape(-1, 2).max(0) + 1.0
+    shape = tuple(np.ceil((hi - lo) / resolution_m).astype(int)[::-1])
+    walls = SIM.build("rasterize", device="cpu")(world.segments, tuple(lo), resolution_m, shape) > 0
+    return NOG(walls.astype(np.float32), (float(lo[0] + resolution_m / 2), float(lo[1] + resolution_m / 2)),
+               resolution_m)
+
+
+def _sync(device: str) -> None:
+    wp.synchronize_device(device)
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) -> dict:
+    cfg = MCLConfig(num_particles=n, far_m=far, resample_threshold=1.0, seed=seed, **VARIANTS[variant])
+    pf = ParticleFilter(nog, cfg, (0.0, 0.0, 0.0), angles, device=device)
+    pf.init_uniform()
+    u = (0.01, 0.05, -0.01)
+    for _ in range(2):
+        pf.step(u, measured)
+    _sync(device)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        pf.step(u, measured)
+    _sync(device)
+    step_s = (time.perf_counter() - t0) / steps
+    t0 = time.perf_counter()  # the weighting alone, on the same particles
+    for _ in range(steps):
+        pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik)
+    _sync(device)
+    weigh_s = (time.perf_counter() - t0) / steps
+    return {"method": variant, "particles": n, "step_ms": 1e3 * step_s, "weighting_ms": 1e3 * weigh_s}
+
+
+def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
+    dev = torch.device("cuda" if device.startswith("cuda") else "cpu")
+    rng = np.random.default_rng(seed)
+    free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
+    k = rng.integers(0, len(free), n)
+    particles = torch.tensor(np.column_stack([free[k], rng.uniform(-np.pi, np.pi, n)]), dtype=torch.float32, device=dev)
+    grid = torch.tensor(nog.occupancy, device=dev)
+    beams = np.unique(np.linspace(0, len(angles) - 1, 32).round().astype(int))
+    a = torch.tensor(angles[beams], device=dev)
+    m = torch.tensor(measured[beams], device=dev)
+
+    def once():
+        return nog_log_weights_torch(grid, nog.origin_xy, nog.resolution_m, particles, (0.0, 0.0, 0.0), a, m, 256,
+                                     0.02, far, 0.5, chunk=500)
+
+    with torch.no_grad():
+        once()
+        _sync(device)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            once()
+        _sync(device)
+    s = (time.perf_counter() - t0) / steps
+    return {"method": "torch (authors' formulation)", "particles": n, "step_ms": None, "weighting_ms": 1e3 * s}
+
+
+def measured_scan(nog, far, device, seed=0):
+    """360 beams rendered from a free pose on the NOG, plus 2 cm noise."""
+    from kernels import WEIGHTING
+
+    rng = np.random.default_rng(seed)
+    free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
+    pose = np.append(free[rng.integers(len(free))], rng.uniform(-np.pi, np.pi)).astype(np.float32)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 360).astype(np.float32)
+    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=360, far_m=far, device=device)
+    r = w.render(wp.array(pose[None], dtype=wp.vec3, device=w.device), (0, 0, 0),
+                 wp.array(angles, dtype=wp.float32, device=w.device)).numpy()[0]
+    r = r + rng.normal(0, 0.02, r.shape)
+    return angles, np.where((r > 0.05) & (r < far - 0.5), r, np.nan).astype(np.float32)
+
+
+def run_mcl_bench(a) -> list[dict]:
+    device = pick_device(a.device or "auto")
+    nog = NOG.load(Path(a.nog)) if a.nog else simulator_nog()
+    far = a.far
+    angles, measured = measured_scan(nog, far, device)
+    rows = []
+    for n in a.particles:
+        for v in a.variants:
+            rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured))
+            print(rows[-1], flush=True)
+        if n <= a.torch_max:
+            rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
+            print(rows[-1], flush=True)
+            ref = rows[-1]["weighting_ms"]
+            for r in rows:
+                if r["particles"] == n and r["step_ms"] is not None:
+                    r["speedup_vs_torch"] = ref / r["step_ms"]
+    name = torch.cuda.get_device_name() if device.startswith("cuda") else platform.processor() or "cpu"
+    src = a.nog or "simulator walls (5 cm)"
+    print(f"\nMCL step on {name} ({device}), NOG {src} {nog.shape}, 32 beams x 256 samples, far {far} m")
+    print("| method | particles | full step (ms) | weighting (ms) | x faster than torch (full step vs its weighting) |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        step = f"{r['step_ms']:.3f}" if r["step_ms"] is not None else "-"
+        sp = f"{r['speedup_vs_torch']:.0f}" if "speedup_vs_torch" in r else "-"
+        print(f"| {r['method']} | {r['particles']:,} | {step} | {r['weighting_ms']:.3f} | {sp} |")
+    out = Path(a.out) / f"mcl-{device.split(':')[0]}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, {"device": device, "device_name": name, "nog": src, "nog_shape": list(nog.shape), "far_m": far,
+                     "argv": vars(a), "rows": rows})
+    print(f"-> {out}")
+    return rows
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("mcl", help="ms per MCL step (Warp variants) vs the authors' torch NOG weighting")
+    p.add_argument("--device", default=None)
+    p.add_argument("--particles", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    p.add_argument("--torch-max", type=int, default=1_000_000, help="largest particle count for the torch reference")
+    p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
+    p.add_argument("--far", type=float, default=40.0)
+    p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--out", default="outputs/bench")
