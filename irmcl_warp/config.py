@@ -131,7 +131,7 @@ class MCLConfig:
     num_samples: int = 256  # IR-MCL: samples per beam on the NOG
     near_m: float = 0.02
     far_m: float = 40.0  # the filter's far bound; the localize stage sets it from data.usable_range_m
-    t_min: float = 0.0  # early termination of the ray march (0 = the authors' formulation)
+    t_min: float = 1e-3  # early termination once the transmittance is below (0 = the authors' formulation)
     empty_below: float = 0.0  # NOG nodes below this p_occ read as 0 and are jumped over (0 = authors')
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4

@@ -170,6 +170,9 @@ def run_localize(cfg) -> Path:
     t = log.stamps - log.stamps[0]
     starts = np.linspace(0.0, max(t[-1] - m.run_s, 0.0), m.num_starts)
     runs, kidnapped = [], m.kidnap_at_s > 0
+    if kidnapped and not (0 < m.kidnap_at_s < m.run_s and m.num_starts >= 2):
+        raise ValueError(f"mcl.kidnap_at_s={m.kidnap_at_s} must lie inside the run (mcl.run_s={m.run_s}) and the "
+                         f"robot needs another start time to be teleported to (mcl.num_starts={m.num_starts})")
     for k, t0 in enumerate(starts):
         pf = ParticleFilter(view, m, log.T_base_laser, log.info.angles_rad, device, weighting=weighting)
         pf.rng = np.random.default_rng(m.seed * 1000 + k)

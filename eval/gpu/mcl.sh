@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# One GPU session of MCL measurements (docs/benchmarks.md). Usage: bash eval/gpu/mcl.sh <part>...
+#   bench    python -m eval.bench mcl on the fr079 NOG (10k / 100k / 1M particles, the torch reference)
+#   global   global localization, 100k particles: every dataset x {nog_raymarch, likelihood_field,
+#            beam_model} x {5, 10 cm} (Hydra multirun)
+#   tracking the same with 10k particles from a noisy initial pose
+#   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
+# EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
+# packed into $OUT/mcl-results.tgz (the machine returns only a few files).
+set -uo pipefail
+OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
+EXPS=${EXPS:-"sim_office fr079 intel mit_csail"}
+preset() { case "$1" in fr079|intel) echo paper;; mit_csail) echo fast;; *) echo quick;; esac; }
+sweep() {  # mode particles extra...
+  local mode=$1 n=$2; shift 2
+  for exp in $EXPS; do
+    echo "=== $exp $mode $n"
+    python -m irmcl_warp.localize -m +exp="$exp" train="$(preset "$exp")" mcl.mode="$mode" mcl.num_particles="$n" \
+      "$@" ${EXTRA:-} 2>&1 | grep -E "^start|success|Error|error" | grep -v "^\[" | tail -40
+  done
+}
+for part in "$@"; do
+  case "$part" in
+    bench) python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" \
+             --out "$OUT/bench" 2>&1 | tail -16 ;;
+    global) sweep global "${N_GLOBAL:-100000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
+    tracking) sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
+    kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
+              mcl.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
+    *) echo "unknown part $part" >&2 ;;
+  esac
+done
+# keep what the tables need: metrics, settings, the first start's plot and the trajectories
+find outputs -path "*/localize-*-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name start0.png \
+  -o -name "*.tum" \) > "$OUT/files.txt"
+tar czf "$OUT/mcl-results.tgz" -T "$OUT/files.txt" 2>/dev/null
+ls -la "$OUT"
