@@ -46,7 +46,10 @@ def build_maps(cfg, device):
     m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_m(cfg)
     grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
                            device=device)
-    occupancy = np.where(grid.known, grid.probability, 1.0).astype(np.float32)  # unknown: not free
+    # unknown cells stop the beam model's rays (AMCL's map_calc_range), but they are no obstacle for the
+    # likelihood field, whose distance map counts occupied cells only (as AMCL's)
+    unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
+    occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
     centre = (grid.origin_xy[0] + res / 2, grid.origin_xy[1] + res / 2)
     free_view = NOG(np.where(grid.known & (grid.probability < 0.35), 0.0, 1.0).astype(np.float32), centre, res)
     n_beams = min(m.num_beams, len(train.angles_rad))
