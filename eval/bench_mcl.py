@@ -73,12 +73,23 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) 
         pf.step(u, measured)
     _sync(device)
     step_s = (time.perf_counter() - t0) / steps
-    t0 = time.perf_counter()  # the weighting alone, on the same particles
-    for _ in range(steps):
-        pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik)
-    _sync(device)
-    weigh_s = (time.perf_counter() - t0) / steps
-    return {"method": variant, "particles": n, "step_ms": 1e3 * step_s, "weighting_ms": 1e3 * weigh_s}
+    parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
+        "motion": lambda: pf.motion(pf.particles, u, seed=1),
+        "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
+        "weights": lambda: pf.weights.update(pf.log_w, pf.particles),
+        "estimate": lambda: pf.estimator.launch(pf.particles, pf.log_w),
+        "resample": lambda: pf.resampler(pf.weights.cdf, pf.particles, pf.scratch, 0.5),
+        "read back": lambda: pf.weights.summary(),
+    }
+    part_ms = {}
+    for name, fn in parts.items():
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            fn()
+        _sync(device)
+        part_ms[name] = 1e3 * (time.perf_counter() - t0) / steps
+    return {"method": variant, "particles": n, "step_ms": 1e3 * step_s, "weighting_ms": part_ms["weighting"],
+            "parts_ms": part_ms}
 
 
 def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
@@ -148,6 +159,8 @@ def run_mcl_bench(a) -> list[dict]:
         step = f"{r['step_ms']:.3f}" if r["step_ms"] is not None else "-"
         sp = f"{r['speedup_vs_torch']:.0f}" if "speedup_vs_torch" in r else "-"
         print(f"| {r['method']} | {r['particles']:,} | {step} | {r['weighting_ms']:.3f} | {sp} |")
+    print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
+        f"{k} {v:.3f}" for k, v in r["parts_ms"].items()) for r in rows if "parts_ms" in r))
     out = Path(a.out) / f"mcl-{device.split(':')[0]}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "nog": src, "nog_shape": list(nog.shape), "far_m": far,

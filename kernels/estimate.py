@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import ESTIMATE, pick_device
+from kernels import ESTIMATE, launch_reduction, pick_device
 
 
 @wp.kernel
@@ -31,16 +31,28 @@ def rank_keys_kernel(log_w: wp.array(dtype=wp.float32), keys: wp.array(dtype=wp.
 
 @wp.kernel
 def top_sums_kernel(order: wp.array(dtype=wp.int32), sorted_keys: wp.array(dtype=wp.float32),
-                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32)):
-    r = wp.tid()
-    j = order[r]
-    w = wp.exp(log_w[j] + sorted_keys[0])  # sorted_keys[0] = -(largest log-weight): a stable exp
-    p = particles[j]
-    wp.atomic_add(sums, 0, w)
-    wp.atomic_add(sums, 1, w * p[0])
-    wp.atomic_add(sums, 2, w * p[1])
-    wp.atomic_add(sums, 3, w * wp.cos(p[2]))
-    wp.atomic_add(sums, 4, w * wp.sin(p[2]))
+                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32),
+                    k: int, stride: int):
+    """Sums over the first k ranks; sorted_keys[0] = -(largest log-weight) makes the exp stable."""
+    s0 = float(0.0)
+    s1 = float(0.0)
+    s2 = float(0.0)
+    s3 = float(0.0)
+    s4 = float(0.0)
+    for r in range(wp.tid(), k, stride):
+        j = order[r]
+        w = wp.exp(log_w[j] + sorted_keys[0])
+        p = particles[j]
+        s0 += w
+        s1 += w * p[0]
+        s2 += w * p[1]
+        s3 += w * wp.cos(p[2])
+        s4 += w * wp.sin(p[2])
+    wp.atomic_add(sums, 0, s0)
+    wp.atomic_add(sums, 1, s1)
+    wp.atomic_add(sums, 2, s2)
+    wp.atomic_add(sums, 3, s3)
+    wp.atomic_add(sums, 4, s4)
 
 
 class TopShareMean:
@@ -55,10 +67,18 @@ class TopShareMean:
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
         """[x, y, yaw] from the top ``share`` of the particles by weight."""
+        self.launch(particles, log_w)
+        return self.result()
+
+    def launch(self, particles: wp.array, log_w: wp.array) -> None:
+        """Rank and sum on the device, nothing read back (the filter reads once per step)."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
         self.sums.zero_()
-        wp.launch(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles, self.sums], device=self.device)
+        launch_reduction(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles, self.sums, self.k],
+                         self.device)
+
+    def result(self) -> np.ndarray:
         s = self.sums.numpy().astype(np.float64)
         return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
 
@@ -84,19 +104,29 @@ def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=w
 @wp.kernel
 def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
                         top: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, yaw_radius: float,
-                        sums: wp.array(dtype=wp.float32)):
-    i = wp.tid()
-    p = particles[i]
-    dx = p[0] - centre[0]
-    dy = p[1] - centre[1]
-    da = wp.atan2(wp.sin(p[2] - centre[2]), wp.cos(p[2] - centre[2]))
-    if dx * dx + dy * dy <= radius * radius and wp.abs(da) <= yaw_radius:
-        w = wp.exp(log_w[i] - top[0])
-        wp.atomic_add(sums, 0, w)
-        wp.atomic_add(sums, 1, w * p[0])
-        wp.atomic_add(sums, 2, w * p[1])
-        wp.atomic_add(sums, 3, w * wp.cos(p[2]))
-        wp.atomic_add(sums, 4, w * wp.sin(p[2]))
+                        sums: wp.array(dtype=wp.float32), stride: int):
+    s0 = float(0.0)
+    s1 = float(0.0)
+    s2 = float(0.0)
+    s3 = float(0.0)
+    s4 = float(0.0)
+    for i in range(wp.tid(), particles.shape[0], stride):
+        p = particles[i]
+        dx = p[0] - centre[0]
+        dy = p[1] - centre[1]
+        da = wp.atan2(wp.sin(p[2] - centre[2]), wp.cos(p[2] - centre[2]))
+        if dx * dx + dy * dy <= radius * radius and wp.abs(da) <= yaw_radius:
+            w = wp.exp(log_w[i] - top[0])
+            s0 += w
+            s1 += w * p[0]
+            s2 += w * p[1]
+            s3 += w * wp.cos(p[2])
+            s4 += w * wp.sin(p[2])
+    wp.atomic_add(sums, 0, s0)
+    wp.atomic_add(sums, 1, s1)
+    wp.atomic_add(sums, 2, s2)
+    wp.atomic_add(sums, 3, s3)
+    wp.atomic_add(sums, 4, s4)
 
 
 def heaviest_bin(hist: np.ndarray) -> tuple[int, int, int]:
@@ -126,15 +156,21 @@ class BestCluster:
         self.top.fill_(-3.0e38)
         self.hist.zero_()
         self.sums.zero_()
-        wp.launch(max_kernel, n, [log_w, self.top], device=d)
+        launch_reduction(max_kernel, n, [log_w, self.top], d)
         wp.launch(histogram_kernel, n, [particles, log_w, self.top, self.lo, self.cell, self.nx, self.ny, self.nyaw,
                                         self.hist], device=d)
         ia, iy, ix = heaviest_bin(self.hist.numpy().reshape(self.nyaw, self.ny, self.nx))
         bin_yaw = 2 * np.pi / self.nyaw
         centre = wp.vec3(self.lo[0] + (ix + 0.5) * self.cell, self.lo[1] + (iy + 0.5) * self.cell,
                          -np.pi + (ia + 0.5) * bin_yaw)
-        wp.launch(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell, 1.5 * bin_yaw,
-                                           self.sums], device=d)
+        launch_reduction(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell, 1.5 * bin_yaw,
+                                                  self.sums], d)
+        return self.result()
+
+    def launch(self, particles: wp.array, log_w: wp.array) -> None:
+        self(particles, log_w)  # the heaviest bin is found on the host: nothing to defer
+
+    def result(self) -> np.ndarray:
         s = self.sums.numpy().astype(np.float64)
         return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
 

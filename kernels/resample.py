@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import RESAMPLE, pick_device
+from kernels import RESAMPLE, launch_reduction, pick_device
 
 
 @wp.kernel
@@ -23,29 +23,48 @@ def accumulate_kernel(log_w: wp.array(dtype=wp.float32), log_likelihood: wp.arra
 
 
 @wp.kernel
-def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
-    wp.atomic_max(out, 0, log_w[wp.tid()])
+def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32), stride: int):
+    top = float(-3.0e38)
+    for i in range(wp.tid(), log_w.shape[0], stride):
+        top = wp.max(top, log_w[i])
+    wp.atomic_max(out, 0, top)
 
 
 @wp.kernel
 def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
-               sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2):
+               sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2, stride: int):
     """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w, sum w x^2,
     sum w y^2], x and y taken relative to ``centre`` (so that the spread does not cancel in float32)."""
-    i = wp.tid()
-    v = wp.exp(log_w[i] - top[0])
-    w[i] = v
-    p = particles[i]
-    x = p[0] - centre[0]
-    y = p[1] - centre[1]
-    wp.atomic_add(sums, 0, v * v)
-    wp.atomic_add(sums, 1, v * x)
-    wp.atomic_add(sums, 2, v * y)
-    wp.atomic_add(sums, 3, v * wp.cos(p[2]))
-    wp.atomic_add(sums, 4, v * wp.sin(p[2]))
-    wp.atomic_add(sums, 5, v)
-    wp.atomic_add(sums, 6, v * x * x)
-    wp.atomic_add(sums, 7, v * y * y)
+    s0 = float(0.0)
+    s1 = float(0.0)
+    s2 = float(0.0)
+    s3 = float(0.0)
+    s4 = float(0.0)
+    s5 = float(0.0)
+    s6 = float(0.0)
+    s7 = float(0.0)
+    for i in range(wp.tid(), log_w.shape[0], stride):
+        v = wp.exp(log_w[i] - top[0])
+        w[i] = v
+        p = particles[i]
+        x = p[0] - centre[0]
+        y = p[1] - centre[1]
+        s0 += v * v
+        s1 += v * x
+        s2 += v * y
+        s3 += v * wp.cos(p[2])
+        s4 += v * wp.sin(p[2])
+        s5 += v
+        s6 += v * x * x
+        s7 += v * y * y
+    wp.atomic_add(sums, 0, s0)
+    wp.atomic_add(sums, 1, s1)
+    wp.atomic_add(sums, 2, s2)
+    wp.atomic_add(sums, 3, s3)
+    wp.atomic_add(sums, 4, s4)
+    wp.atomic_add(sums, 5, s5)
+    wp.atomic_add(sums, 6, s6)
+    wp.atomic_add(sums, 7, s7)
 
 
 @wp.func
@@ -62,21 +81,38 @@ def search(cdf: wp.array(dtype=wp.float32), u: float) -> int:
     return lo
 
 
+@wp.func
+def resample_now(sums: wp.array(dtype=wp.float32), limit: float) -> bool:
+    """Selective resampling decided on the device: N_eff = (sum w)^2 / sum w^2 < limit (sums of ParticleWeights)."""
+    return sums[5] * sums[5] / sums[0] < limit
+
+
 @wp.kernel
 def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: float, src: wp.array(dtype=wp.vec3),
-                      dst: wp.array(dtype=wp.vec3)):
+                      dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
+                      log_w: wp.array(dtype=wp.float32)):
+    """dst = the low-variance draw from src and log_w = 0 when N_eff < limit, else dst = src (weights kept)."""
     i = wp.tid()
-    n = dst.shape[0]
-    u = (offset + float(i)) / float(n) * cdf[cdf.shape[0] - 1]
-    dst[i] = src[search(cdf, u)]
+    if resample_now(sums, limit):
+        n = dst.shape[0]
+        u = (offset + float(i)) / float(n) * cdf[cdf.shape[0] - 1]
+        dst[i] = src[search(cdf, u)]
+        log_w[i] = 0.0
+    else:
+        dst[i] = src[i]
 
 
 @wp.kernel
 def multinomial_kernel(cdf: wp.array(dtype=wp.float32), seed: int, src: wp.array(dtype=wp.vec3),
-                       dst: wp.array(dtype=wp.vec3)):
+                       dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
+                       log_w: wp.array(dtype=wp.float32)):
     i = wp.tid()
-    state = wp.rand_init(seed, i)
-    dst[i] = src[search(cdf, wp.randf(state) * cdf[cdf.shape[0] - 1])]
+    if resample_now(sums, limit):
+        state = wp.rand_init(seed, i)
+        dst[i] = src[search(cdf, wp.randf(state) * cdf[cdf.shape[0] - 1])]
+        log_w[i] = 0.0
+    else:
+        dst[i] = src[i]
 
 
 class ParticleWeights:
@@ -97,9 +133,9 @@ class ParticleWeights:
             raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
         self.top.fill_(-3.0e38)
         self.sums.zero_()
-        wp.launch(max_kernel, log_w.shape[0], [log_w, self.top], device=self.device)
-        wp.launch(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.sums, particles, self.centre],
-                  device=self.device)
+        launch_reduction(max_kernel, log_w.shape[0], [log_w, self.top], self.device)
+        launch_reduction(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.sums, particles, self.centre],
+                         self.device)
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
     def summary(self) -> tuple[np.ndarray, float, float]:
@@ -114,15 +150,31 @@ class ParticleWeights:
 
 
 class Resampler:
+    """Draws dst from src by the cumulative weights. Given ParticleWeights' ``sums`` and ``neff_below``, the
+    decision is taken on the device (no read back): below it, resample and zero ``log_w``; else copy."""
+
     def __init__(self, method: str, device: str = "auto"):
         self.method, self.device = method, pick_device(device)
+        self._always = wp.array(np.array([1, 0, 0, 0, 0, 1, 0, 0], np.float32), dtype=wp.float32, device=self.device)
+        self._scratch = None
 
-    def __call__(self, cdf: wp.array, src: wp.array, dst: wp.array, draw: float) -> None:
-        """``draw``: a uniform number in [0, 1) (low_variance offset) or an integer seed (multinomial)."""
+    def __call__(self, cdf: wp.array, src: wp.array, dst: wp.array, draw: float, sums: wp.array | None = None,
+                 neff_below: float = np.inf, log_w: wp.array | None = None) -> None:
+        """``draw``: a uniform number in [0, 1) (low_variance offset; multinomial derives its seed from it).
+        Without ``sums`` every call resamples."""
+        if sums is None:
+            sums, neff_below = self._always, np.inf
+        if log_w is None:
+            if self._scratch is None or self._scratch.shape[0] != dst.shape[0]:
+                self._scratch = wp.zeros(dst.shape[0], dtype=wp.float32, device=self.device)
+            log_w = self._scratch
+        limit = float(min(neff_below, 3.0e38))
         if self.method == "low_variance":
-            wp.launch(systematic_kernel, dst.shape[0], [cdf, float(draw), src, dst], device=self.device)
+            wp.launch(systematic_kernel, dst.shape[0], [cdf, float(draw), src, dst, sums, limit, log_w],
+                      device=self.device)
         else:
-            wp.launch(multinomial_kernel, dst.shape[0], [cdf, int(draw * 2**31), src, dst], device=self.device)
+            wp.launch(multinomial_kernel, dst.shape[0], [cdf, int(draw * 2**31), src, dst, sums, limit, log_w],
+                      device=self.device)
 
 
 @RESAMPLE.register("low_variance")
@@ -136,20 +188,27 @@ def make_multinomial(device: str = "auto") -> Resampler:
 
 
 @wp.kernel
-def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32)):
-    i = wp.tid()
-    if skip[i] == 0:
-        wp.atomic_max(out, 0, values[i])
+def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32),
+                      stride: int):
+    top = float(-3.0e38)
+    for i in range(wp.tid(), values.shape[0], stride):
+        if skip[i] == 0:
+            top = wp.max(top, values[i])
+    wp.atomic_max(out, 0, top)
 
 
 @wp.kernel
 def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32),
-                        top: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
+                        top: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32), stride: int):
     """out = [sum of exp(log_lik - top), count] over the particles not marked in ``skip``."""
-    i = wp.tid()
-    if skip[i] == 0:
-        wp.atomic_add(out, 0, wp.exp(log_lik[i] - top[0]))
-        wp.atomic_add(out, 1, 1.0)
+    total = float(0.0)
+    count = float(0.0)
+    for i in range(wp.tid(), log_lik.shape[0], stride):
+        if skip[i] == 0:
+            total += wp.exp(log_lik[i] - top[0])
+            count += 1.0
+    wp.atomic_add(out, 0, total)
+    wp.atomic_add(out, 1, count)
 
 
 @wp.kernel
@@ -185,8 +244,8 @@ class LogMeanLikelihood:
             skip = self.none
         self.top.fill_(-3.0e38)
         self.acc.zero_()
-        wp.launch(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], device=self.device)
-        wp.launch(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top, self.acc], device=self.device)
+        launch_reduction(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], self.device)
+        launch_reduction(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top, self.acc], self.device)
         acc = self.acc.numpy()
         if acc[1] == 0:
             return -np.inf

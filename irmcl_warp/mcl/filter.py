@@ -128,19 +128,22 @@ class ParticleFilter:
         self.weighting(self.particles, self.T_base_laser, self.angles, self.measured, self.log_lik)
         wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
         self.weights.update(self.log_w, self.particles)
+        if self.estimator is not None:
+            self.estimator.launch(self.particles, self.log_w)
+        p_inject = self.recovery_probability()  # reads back (only when recovery is on)
+        # selective resampling decided on the device: one read back per step, after everything is launched
+        limit = np.inf if p_inject > 0 else self.cfg.resample_threshold * self.num_particles
+        self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()), self.weights.sums,
+                       limit, self.log_w)
+        self.particles, self.scratch = self.scratch, self.particles
+        if p_inject > 0 and self.free_xy is not None:
+            wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.nog.resolution_m,
+                      float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
         pose, neff, self.spread = self.weights.summary()
         if self.estimator is not None:
-            pose = self.estimator(self.particles, self.log_w)
-        p_inject = self.recovery_probability()
-        if neff < self.cfg.resample_threshold * self.num_particles or p_inject > 0:
-            self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()))
-            self.particles, self.scratch = self.scratch, self.particles
-            self.log_w.zero_()
-            if p_inject > 0 and self.free_xy is not None:
-                wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.nog.resolution_m,
-                          float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
-            else:
-                self.injected.zero_()
+            pose = self.estimator.result()
+        if p_inject <= 0 and neff < limit:
+            self.injected.zero_()  # resampled without injection: every particle comes from the posterior
         return pose, neff
 
     def recovery_probability(self) -> float:
