@@ -14,6 +14,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 ROOTS = (REPO / "results" / "nof", REPO / "outputs")
+MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
+METHODS = {"nog_raymarch": "IR-MCL (NOG)", "nof_direct": "IR-MCL (NOF, no grid)", "likelihood_field": "likelihood field",
+           "beam_model": "beam model"}
+# localize-<weighting>-<mode>-<particles>-<res>cm[-kidnap<s>s][-recovery], see irmcl_warp.localize.run_tag
+TAG = re.compile(r"localize-(?P<w>[a-z_]+)-(?P<mode>global|tracking)-(?P<n>\d+k?)-(?P<res>\d+)cm(?P<rest>.*)$")
 DATASET_ORDER = ("fr079", "intel", "mit_csail", "sim_office")
 
 
@@ -65,6 +70,75 @@ def synthesis_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def collect_localization(roots=MCL_ROOTS) -> dict:
+    """{(exp, run folder): metrics} of the localize stage; later roots override earlier ones. Folders that do
+    not follow the run-tag naming (older layouts) are left out."""
+    runs = {}
+    for root in roots:
+        for f in sorted(Path(root).glob("*/localize-*/metrics.json")):
+            if TAG.match(f.parent.name):
+                runs[(f.parent.parent.name, f.parent.name)] = _load(f)
+    return runs
+
+
+def _f(v, fmt="{:.1f}"):
+    return "-" if v is None else fmt.format(v)
+
+
+def localization_table(runs: dict) -> str:
+    """Per dataset and map: global localization and pose tracking side by side (means over the starts that
+    succeeded; the starts are seeded and spread over the sequence). Where a cell was run with several
+    particle counts, the largest is shown (the paper's setting; smaller ones are quick checks)."""
+    cells = {}
+    for (exp, tag), m in runs.items():
+        t = TAG.match(tag)
+        if t["rest"]:
+            continue  # kidnapping runs: kidnap_table
+        key = (m["dataset"], t["w"], int(t["res"]), t["mode"])
+        if key not in cells or m["summary"]["num_particles"] >= cells[key]["num_particles"]:
+            cells[key] = m["summary"]
+    ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
+    w_rank = {w: i for i, w in enumerate(METHODS)}
+    keys = sorted({k[:3] for k in cells}, key=lambda k: (ds_rank.get(k[0], 99), k[0], w_rank.get(k[1], 99), k[2]))
+    lines = ["| dataset | method | map | global: particles | success | converged after (s) | RMSE (cm / deg) | "
+             "within 10 cm / 1 deg (%) | tracking: particles | success | RMSE (cm / deg) | diverged |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for ds, w, res in keys:
+        g, tr = cells.get((ds, w, res, "global")), cells.get((ds, w, res, "tracking"))
+        row = [ds, METHODS.get(w, w), f"{res} cm"]
+        for s_, full in ((g, True), (tr, False)):
+            if s_ is None:
+                row += ["-"] * (5 if full else 4)
+                continue
+            row += [f"{s_['num_particles'] // 1000}k", f"{s_['successes']}/{s_['starts']}"]
+            if full:
+                row.append(_f(s_["time_to_converge_s_mean"]))
+            row.append(f"{_f(s_['location_rmse_cm_mean'])} / {_f(s_['yaw_rmse_deg_mean'], '{:.2f}')}")
+            if full:
+                row.append(f"{_f(s_['within_10cm_pct_mean'], '{:.0f}')} / {_f(s_['within_1deg_pct_mean'], '{:.0f}')}")
+            else:
+                row.append(str(s_["divergences"]))
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def kidnap_table(runs: dict) -> str:
+    lines = ["| dataset | method | map | particles | kidnapped at (s) | recovery rates (slow / fast) | recovered | "
+             "recovery time (s) | divergences |", "|---|---|---|---|---|---|---|---|---|"]
+    rows = []
+    for (exp, tag), m in runs.items():
+        t, s_ = TAG.match(tag), m["summary"]
+        if "recovered" not in s_:
+            continue
+        st = m.get("settings", {})
+        rates = f"{st.get('recovery_alpha_slow', '?')} / {st.get('recovery_alpha_fast', '?')}"
+        rows.append((DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99,
+                     f"| {m['dataset']} | {METHODS.get(t['w'], t['w'])} | {t['res']} cm | {s_['num_particles'] // 1000}k | "
+                     f"{s_['kidnap_at_s']:g} | {rates} | {s_['recovered']}/{s_['starts']} | "
+                     f"{_f(s_['recovery_time_s_mean'])} | {s_['divergences']} |"))
+    return "\n".join(lines + [r for _, r in sorted(rows)])
+
+
 def replace_block(text: str, name: str, table: str) -> str:
     begin, end = f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
     pattern = re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
@@ -77,15 +151,28 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m eval.tables")
     ap.add_argument("--write", action="store_true", help="update the generated blocks of README.md")
     a = ap.parse_args(argv)
+    tables = {}
     runs = collect_synthesis()
-    if not runs:
-        raise SystemExit("no scan-synthesis results found under results/nof or outputs (run python -m eval.synthesis)")
-    table = synthesis_table(runs)
-    print("Scan synthesis (IR-MCL protocol; NOF rendered with 256 samples, grids by ray casting)\n")
-    print(table)
+    if runs:
+        tables["nof"] = ("Scan synthesis (IR-MCL protocol; NOF rendered with 256 samples, grids by ray casting)",
+                         synthesis_table(runs))
+    loc = collect_localization()
+    if loc:
+        tables["mcl"] = ("Localization (10 seeded starts per cell, 60 s each; means over the successful starts)",
+                         localization_table(loc))
+        tables["kidnap"] = ("Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)",
+                            kidnap_table(loc))
+    if not tables:
+        raise SystemExit("no results found under results/ or outputs/ (run python -m eval.synthesis or "
+                         "python -m irmcl_warp.localize)")
+    for title, table in tables.values():
+        print(f"{title}\n\n{table}\n")
     if a.write:
         readme = REPO / "README.md"
-        readme.write_text(replace_block(readme.read_text(), "nof", table))
+        text = readme.read_text()
+        for name, (_, table) in tables.items():
+            text = replace_block(text, name, table)
+        readme.write_text(text)
         print(f"-> {readme}")
 
 

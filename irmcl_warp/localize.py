@@ -41,7 +41,8 @@ from kernels.motion import odometry_step
 
 
 def build_maps(cfg, device):
-    """(free-space view for initialisation as a NOG, weighting object) from the training split."""
+    """(free-space view for initialisation as a NOG, weighting object, occupancy image for plots: p_occ,
+    0.5 where unknown) from the training split."""
     train = prepare_beams(cfg)["train"]
     m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_m(cfg)
     grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
@@ -52,6 +53,7 @@ def build_maps(cfg, device):
     occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
     centre = (grid.origin_xy[0] + res / 2, grid.origin_xy[1] + res / 2)
     free_view = NOG(np.where(grid.known & (grid.probability < 0.35), 0.0, 1.0).astype(np.float32), centre, res)
+    image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     n_beams = min(m.num_beams, len(train.angles_rad))
     if m.weighting in ("nog_raymarch", "nof_direct"):
         from irmcl_warp.train import train_dir
@@ -62,14 +64,14 @@ def build_maps(cfg, device):
         shared = dict(num_particles=m.num_particles, num_beams=n_beams, num_samples=m.num_samples, near_m=m.near_m,
                       far_m=far, sigma_m=m.sigma_m, device=device)
         if m.weighting == "nof_direct":
-            return free_view, WEIGHTING.build("nof_direct", checkpoint=ckpt, **shared)
+            return free_view, WEIGHTING.build("nof_direct", checkpoint=ckpt, **shared), image
         nog = bake_nog(ckpt, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
                        cache_dir=stage_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
         weighting = WEIGHTING.build("nog_raymarch", nog=nog, t_min=m.t_min, empty_below=m.empty_below, **shared)
     else:
         weighting = WEIGHTING.build(m.weighting, occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=res,
                                     max_range_m=far, device=device)
-    return free_view, weighting
+    return free_view, weighting, image
 
 
 STREAM_FIELDS = ("stamps", "ranges_m", "odom", "T_base_laser", "ground_truth")
@@ -126,19 +128,41 @@ def write_tum(path: Path, stamps, poses) -> None:
     atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
 
 
-def plot_run(path: Path, view: NOG, gt, est) -> None:
+def plot_run(path: Path, view: NOG, image: np.ndarray, stamps, gt, est, particles, converged_s=None,
+             kidnap_s=None) -> None:
+    """Left: the map (white free, black occupied, grey unknown) with ground truth, estimates and the final
+    particles; right: position error over time, the convergence (and kidnapping) time marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     H, W = view.shape
-    x0, y0, r = view.origin_xy[0] - view.resolution_m / 2, view.origin_xy[1] - view.resolution_m / 2, view.resolution_m
-    fig, ax = plt.subplots(figsize=(8, 8 * H / max(W, 1) + 1))
-    ax.imshow(1 - view.occupancy, cmap="gray", origin="lower", extent=(x0, x0 + W * r, y0, y0 + H * r))
-    ax.plot(gt[:, 0], gt[:, 1], "g-", lw=1.5, label="ground truth")
-    ax.plot(est[:, 0], est[:, 1], "r.", ms=2, label="estimate")
-    ax.legend()
+    r = view.resolution_m
+    x0, y0 = view.origin_xy[0] - r / 2, view.origin_xy[1] - r / 2
+    ok = np.all(np.isfinite(gt), axis=1)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(14, 5.5), gridspec_kw={"width_ratios": [2.2, 1]})
+    ax.imshow(1 - image, cmap="gray", vmin=0, vmax=1, origin="lower", extent=(x0, x0 + W * r, y0, y0 + H * r))
+    keep = np.random.default_rng(0).permutation(len(particles))[:3000]
+    ax.plot(particles[keep, 0], particles[keep, 1], ".", color="tab:blue", ms=1, alpha=0.5, label="particles (end)")
+    ax.plot(est[:, 0], est[:, 1], ".", color="tab:red", ms=2, label="estimate")
+    ax.plot(gt[ok, 0], gt[ok, 1], "-", color="tab:green", lw=1.2, label="ground truth")
+    ax.plot(*gt[ok][0, :2], "o", color="tab:green", mfc="none", ms=4, label="start")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="upper right", fontsize=8, markerscale=2)
+    t = np.asarray(stamps) - stamps[0]
+    err = np.hypot(*(est[ok, :2] - gt[ok, :2]).T)
+    bx.semilogy(t[ok], np.maximum(err, 1e-3), "-", color="tab:red", lw=1)
+    if converged_s is not None:
+        bx.axvline(converged_s, color="tab:green", ls="--", lw=1, label=f"converged ({converged_s:.1f} s)")
+    if kidnap_s is not None:
+        bx.axvline(kidnap_s, color="k", ls=":", lw=1, label=f"kidnapped ({kidnap_s:.1f} s)")
+    bx.axhline(0.3, color="gray", lw=0.8, label="0.3 m (success)")
+    bx.set_xlabel("time since start (s)")
+    bx.set_ylabel("position error (m)")
+    bx.legend(fontsize=8)
     save_figure(fig, path)
 
 
@@ -169,7 +193,7 @@ def run_localize(cfg) -> Path:
     log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
-    view, weighting = build_maps(cfg, device)
+    view, weighting, image = build_maps(cfg, device)
     t = log.stamps - log.stamps[0]
     starts = np.linspace(0.0, max(t[-1] - m.run_s, 0.0), m.num_starts)
     runs, kidnapped = [], m.kidnap_at_s > 0
@@ -210,7 +234,8 @@ def run_localize(cfg) -> Path:
               f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge")
               + (f"; recovered from the kidnapping: {metrics['recovered']}" if kidnapped else ""))
         if k == 0:
-            plot_run(out / "start0.png", view, gt, est)
+            plot_run(out / "start0.png", view, image, stamps, gt, est, pf.particles.numpy(),
+                     metrics["time_to_converge_s"], stamps[cut] - stamps[0] if kidnapped else None)
     summary = summarise(runs, m, device)
     write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs,
                                       "settings": OmegaConf.to_container(m)})

@@ -160,3 +160,68 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
         assert end.max() < 0.3, end.max()
     else:
         assert end.min() > 1.0, end.min()
+
+
+def _sim_cfg(*overrides):
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose("config", overrides=["+exp=sim_office", "device=cpu", "sim.duration_s=60",
+                                            "mcl.map_resolution_m=0.1", *overrides])
+
+
+def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
+    """The beam model's rays stop in unknown cells; the likelihood field's distances count occupied cells
+    only (with unknown as an obstacle every beam ending beyond a wall scored as a hit)."""
+    from irmcl_warp.localize import build_maps
+
+    monkeypatch.chdir(tmp_path)
+    view, lf, image = build_maps(_sim_cfg("mcl.weighting=likelihood_field"), "cpu")
+    unknown = image == 0.5
+    assert unknown.mean() > 0.05  # the training scans leave parts of the office unseen
+    dist = lf.grid.numpy()
+    assert dist[unknown].max() > 0.5 and np.median(dist[unknown]) > 0.0
+    _, beam, _ = build_maps(_sim_cfg("mcl.weighting=beam_model"), "cpu")
+    assert np.all(beam.grid.numpy()[unknown] == 1.0)
+    assert np.all(view.occupancy[unknown] == 1.0)  # and no particle starts there
+
+
+def test_stream_cache_serves_the_log_without_its_source(tmp_path, monkeypatch):
+    import irmcl_warp.localize as loc
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _sim_cfg()
+    first = loc.load_stream(cfg)
+    monkeypatch.setattr(loc, "load_log", lambda cfg: (_ for _ in ()).throw(AssertionError("read the source again")))
+    again = loc.load_stream(cfg)
+    assert np.array_equal(first.ranges_m, again.ranges_m, equal_nan=True) and np.array_equal(first.odom, again.odom)
+    assert np.array_equal(first.ground_truth, again.ground_truth) and again.info == first.info
+    assert "cache" in again.source
+
+
+def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):
+    from irmcl_warp.localize import run_localize
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _sim_cfg("mcl.weighting=likelihood_field", "mcl.mode=tracking", "mcl.run_s=10", "mcl.kidnap_at_s=12",
+                   "mcl.num_particles=100")
+    with pytest.raises(ValueError, match="kidnap_at_s=12.0 must lie inside the run"):
+        run_localize(cfg)
+
+
+def test_reduce_keeps_the_heaviest_particles_and_their_weights():
+    import warp as wp
+
+    log, nog = _world_and_map(duration_s=2.0)
+    pf = ParticleFilter(nog, MCLConfig(num_particles=400, num_samples=32, far_m=10.0), log.T_base_laser,
+                        log.info.angles_rad, device="cpu")
+    pf.init_uniform()
+    before, log_w = pf.particles.numpy().copy(), np.random.default_rng(0).normal(0, 3, 400).astype(np.float32)
+    pf.log_w.assign(wp.array(log_w, dtype=wp.float32, device="cpu"))
+    pf.reduce(50)
+    best = np.argsort(-log_w)[:50]
+    assert pf.num_particles == 50 and np.allclose(pf.particles.numpy(), before[best])
+    assert np.allclose(pf.log_w.numpy(), log_w[best] - log_w.max())
+    pose, neff = pf.step((0.0, 0.05, 0.0), log.ranges_m[1])  # the smaller set steps on
+    assert np.all(np.isfinite(pose)) and 0 < neff <= 50
+    pf.init_uniform()  # a new run gets the full set back
+    assert pf.num_particles == 400

@@ -132,3 +132,19 @@ def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
     assert np.hypot(*(weighted_mean(particles, log_w)[:2] - a[:2])) > 1.0  # the plain mean is lost between them
     with pytest.raises(ValueError, match="do not make a histogram"):
         ESTIMATE.build("best_cluster", num_particles=n, bounds=(0, 0, -1, 1), device="cpu")
+
+
+def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
+    n = 300
+    log_w, particles, pw, weights = _weights(rng, n)
+    neff = effective_sample_size(log_w)
+    lw = wp.array(log_w, dtype=wp.float32, device="cpu")
+    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
+    resample = RESAMPLE.build("low_variance", device="cpu")
+    resample(weights.cdf, pw, dst, 0.3, weights.sums, neff * 0.99, lw)  # N_eff above the limit: keep
+    assert np.array_equal(dst.numpy(), particles) and np.array_equal(lw.numpy(), log_w)
+    resample(weights.cdf, pw, dst, 0.3, weights.sums, neff * 1.01, lw)  # below: draw, weights reset
+    index = {tuple(p): i for i, p in enumerate(particles)}
+    drawn = np.array([index[tuple(p)] for p in dst.numpy()])
+    assert (drawn == low_variance_indices(log_w, 0.3)).mean() > 0.99, f"seed {rng.seed}"
+    assert np.all(lw.numpy() == 0.0)

@@ -44,3 +44,30 @@ def test_a_half_written_metrics_file_is_reported(tmp_path):
     f.write_text('{"dataset": "fr0')
     with pytest.raises(SystemExit, match="unreadable metrics file"):
         collect_synthesis((tmp_path,))
+
+
+def _loc(dataset, weighting, mode, n, successes, rmse, **extra):
+    summary = {"weighting": weighting, "mode": mode, "num_particles": n, "starts": 10, "successes": successes,
+               "time_to_converge_s_mean": 2.0, "location_rmse_cm_mean": rmse, "yaw_rmse_deg_mean": 1.5,
+               "within_10cm_pct_mean": 80.0, "within_1deg_pct_mean": 50.0, "divergences": 0, **extra}
+    return {"dataset": dataset, "summary": summary, "settings": {"recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.2}}
+
+
+def test_localization_table_pairs_global_and_tracking_and_keeps_the_largest_particle_count(tmp_path):
+    from eval.tables import collect_localization, kidnap_table, localization_table
+
+    kept, mine = tmp_path / "results", tmp_path / "outputs"
+    _write(kept / "fr079/localize-nog_raymarch-global-100k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "global", 100000, 10, 6.3))
+    _write(kept / "fr079/localize-nog_raymarch-tracking-10k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "tracking", 10000, 9, 6.1))
+    _write(mine / "fr079/localize-nog_raymarch-global-2k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "global", 2000, 0, None))
+    _write(kept / "fr079/localize-likelihood_field-global-100k-10cm/metrics.json", _loc("fr079", "likelihood_field", "global", 100000, 5, 5.6))
+    _write(kept / "fr079/localize-nog_raymarch-tracking-10k-5cm-kidnap30s-recovery/metrics.json",
+           _loc("fr079", "nog_raymarch", "tracking", 10000, 0, None, recovered=8, recovery_time_s_mean=7.04, kidnap_at_s=30.0))
+    _write(mine / "fr079/localize-nog_raymarch/metrics.json", {"an": "older layout"})  # left out by name
+    runs = collect_localization((kept, mine))
+    lines = localization_table(runs).splitlines()
+    assert len(lines) == 4, lines  # header, rule, IR-MCL 5 cm (global + tracking in one row), likelihood field 10 cm
+    assert lines[2].startswith("| fr079 | IR-MCL (NOG) | 5 cm | 100k | 10/10 | 2.0 | 6.3 / 1.50 | 80 / 50 | 10k | 9/10 | 6.1 / 1.50 | 0 |")
+    assert lines[3].startswith("| fr079 | likelihood field | 10 cm | 100k | 5/10 |") and lines[3].endswith("| - | - | - | - |")
+    kid = kidnap_table(runs).splitlines()
+    assert len(kid) == 3 and "| 30 | 0.01 / 0.2 | 8/10 | 7.0 |" in kid[2]
