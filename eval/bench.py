@@ -32,14 +32,15 @@ def _sync(device):
         torch.cuda.synchronize()
 
 
-def _time(fn, device, steps: int, warmup: int = 2) -> float:
+def time_per_call(fn, sync, steps: int, warmup: int = 2) -> float:
+    """Seconds per call of ``fn`` over ``steps`` calls after ``warmup`` ones; ``sync()`` waits for the device."""
     for _ in range(warmup):
         fn()
-    _sync(device)
+    sync()
     t0 = time.perf_counter()
     for _ in range(steps):
         fn()
-    _sync(device)
+    sync()
     return (time.perf_counter() - t0) / steps
 
 
@@ -63,7 +64,7 @@ def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=Fal
         loss.backward()
         opt.step()
 
-    s = _time(step, device, steps)
+    s = time_per_call(step, lambda: _sync(device), steps)
     return {"what": "train step", "model": model_name, "renderer": renderer_name, "amp": "bf16" if amp else "off",
             "batch_rays": batch, "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
 
@@ -80,7 +81,7 @@ def bench_composite(renderer_name, batch, samples, steps, device) -> dict:
         r, _ = render(p, z)
         (r * g).sum().backward()
 
-    s = _time(step, device, steps)
+    s = time_per_call(step, lambda: _sync(device), steps)
     return {"what": "composite fwd+bwd", "model": "-", "renderer": renderer_name, "amp": "off", "batch_rays": batch,
             "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
 

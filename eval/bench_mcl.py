@@ -18,13 +18,13 @@ outputs/bench/mcl-<device>.json. Absolute times count only from a GPU; on a CPU 
 from __future__ import annotations
 
 import platform
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 import warp as wp
 
+from eval.bench import time_per_call
 from irmcl_warp.mcl import MCLConfig, ParticleFilter
 from irmcl_warp.nog import NOG
 from irmcl_warp.outputs import write_json
@@ -65,14 +65,8 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) 
     pf = ParticleFilter(nog, cfg, (0.0, 0.0, 0.0), angles, device=device)
     pf.init_uniform()
     u = (0.01, 0.05, -0.01)
-    for _ in range(2):
-        pf.step(u, measured)
-    _sync(device)
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        pf.step(u, measured)
-    _sync(device)
-    step_s = (time.perf_counter() - t0) / steps
+    sync = lambda: _sync(device)  # noqa: E731
+    step_s = time_per_call(lambda: pf.step(u, measured), sync, steps)
     parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
         "motion": lambda: pf.motion(pf.particles, u, seed=1),
         "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
@@ -81,13 +75,7 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) 
         "resample": lambda: pf.resampler(pf.weights.cdf, pf.particles, pf.scratch, 0.5),
         "read back": lambda: pf.weights.summary(),
     }
-    part_ms = {}
-    for name, fn in parts.items():
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            fn()
-        _sync(device)
-        part_ms[name] = 1e3 * (time.perf_counter() - t0) / steps
+    part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
     return {"method": variant, "particles": n, "step_ms": 1e3 * step_s, "weighting_ms": part_ms["weighting"],
             "parts_ms": part_ms}
 
@@ -108,13 +96,7 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
                                      0.02, far, 0.5, chunk=500)
 
     with torch.no_grad():
-        once()
-        _sync(device)
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            once()
-        _sync(device)
-    s = (time.perf_counter() - t0) / steps
+        s = time_per_call(once, lambda: _sync(device), steps, warmup=1)
     return {"method": "torch (authors' formulation)", "particles": n, "step_ms": None, "weighting_ms": 1e3 * s}
 
 

@@ -29,30 +29,31 @@ def rank_keys_kernel(log_w: wp.array(dtype=wp.float32), keys: wp.array(dtype=wp.
     values[i] = i
 
 
+vec5 = wp.types.vector(length=5, dtype=wp.float32)
+
+
+@wp.func
+def pose_moments(w: float, p: wp.vec3) -> vec5:
+    """(w, w x, w y, w cos yaw, w sin yaw): what a weighted mean pose with a circular yaw sums."""
+    return vec5(w, w * p[0], w * p[1], w * wp.cos(p[2]), w * wp.sin(p[2]))
+
+
+@wp.func
+def add_moments(sums: wp.array(dtype=wp.float32), acc: vec5):
+    for c in range(5):
+        wp.atomic_add(sums, c, acc[c])
+
+
 @wp.kernel
 def top_sums_kernel(order: wp.array(dtype=wp.int32), sorted_keys: wp.array(dtype=wp.float32),
                     log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32),
                     k: int, stride: int):
     """Sums over the first k ranks; sorted_keys[0] = -(largest log-weight) makes the exp stable."""
-    s0 = float(0.0)
-    s1 = float(0.0)
-    s2 = float(0.0)
-    s3 = float(0.0)
-    s4 = float(0.0)
+    acc = vec5()
     for r in range(wp.tid(), k, stride):
         j = order[r]
-        w = wp.exp(log_w[j] + sorted_keys[0])
-        p = particles[j]
-        s0 += w
-        s1 += w * p[0]
-        s2 += w * p[1]
-        s3 += w * wp.cos(p[2])
-        s4 += w * wp.sin(p[2])
-    wp.atomic_add(sums, 0, s0)
-    wp.atomic_add(sums, 1, s1)
-    wp.atomic_add(sums, 2, s2)
-    wp.atomic_add(sums, 3, s3)
-    wp.atomic_add(sums, 4, s4)
+        acc += pose_moments(wp.exp(log_w[j] + sorted_keys[0]), particles[j])
+    add_moments(sums, acc)
 
 
 class TopShareMean:
@@ -105,28 +106,15 @@ def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=w
 def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
                         top: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, yaw_radius: float,
                         sums: wp.array(dtype=wp.float32), stride: int):
-    s0 = float(0.0)
-    s1 = float(0.0)
-    s2 = float(0.0)
-    s3 = float(0.0)
-    s4 = float(0.0)
+    acc = vec5()
     for i in range(wp.tid(), particles.shape[0], stride):
         p = particles[i]
         dx = p[0] - centre[0]
         dy = p[1] - centre[1]
         da = wp.atan2(wp.sin(p[2] - centre[2]), wp.cos(p[2] - centre[2]))
         if dx * dx + dy * dy <= radius * radius and wp.abs(da) <= yaw_radius:
-            w = wp.exp(log_w[i] - top[0])
-            s0 += w
-            s1 += w * p[0]
-            s2 += w * p[1]
-            s3 += w * wp.cos(p[2])
-            s4 += w * wp.sin(p[2])
-    wp.atomic_add(sums, 0, s0)
-    wp.atomic_add(sums, 1, s1)
-    wp.atomic_add(sums, 2, s2)
-    wp.atomic_add(sums, 3, s3)
-    wp.atomic_add(sums, 4, s4)
+            acc += pose_moments(wp.exp(log_w[i] - top[0]), p)
+    add_moments(sums, acc)
 
 
 def heaviest_bin(hist: np.ndarray) -> tuple[int, int, int]:

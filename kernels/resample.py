@@ -30,41 +30,24 @@ def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32
     wp.atomic_max(out, 0, top)
 
 
+vec8 = wp.types.vector(length=8, dtype=wp.float32)
+
+
 @wp.kernel
 def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
                sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2, stride: int):
     """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w, sum w x^2,
     sum w y^2], x and y taken relative to ``centre`` (so that the spread does not cancel in float32)."""
-    s0 = float(0.0)
-    s1 = float(0.0)
-    s2 = float(0.0)
-    s3 = float(0.0)
-    s4 = float(0.0)
-    s5 = float(0.0)
-    s6 = float(0.0)
-    s7 = float(0.0)
+    acc = vec8()
     for i in range(wp.tid(), log_w.shape[0], stride):
         v = wp.exp(log_w[i] - top[0])
         w[i] = v
         p = particles[i]
         x = p[0] - centre[0]
         y = p[1] - centre[1]
-        s0 += v * v
-        s1 += v * x
-        s2 += v * y
-        s3 += v * wp.cos(p[2])
-        s4 += v * wp.sin(p[2])
-        s5 += v
-        s6 += v * x * x
-        s7 += v * y * y
-    wp.atomic_add(sums, 0, s0)
-    wp.atomic_add(sums, 1, s1)
-    wp.atomic_add(sums, 2, s2)
-    wp.atomic_add(sums, 3, s3)
-    wp.atomic_add(sums, 4, s4)
-    wp.atomic_add(sums, 5, s5)
-    wp.atomic_add(sums, 6, s6)
-    wp.atomic_add(sums, 7, s7)
+        acc += vec8(v * v, v * x, v * y, v * wp.cos(p[2]), v * wp.sin(p[2]), v, v * x * x, v * y * y)
+    for c in range(8):
+        wp.atomic_add(sums, c, acc[c])
 
 
 @wp.func
