@@ -6,6 +6,8 @@ default ``../shared/data`` beside the repository).
 
 from __future__ import annotations
 
+import builtins
+
 from dataclasses import dataclass, field
 from typing import List, Optional
 
@@ -157,6 +159,38 @@ class MCLConfig:
 
 
 @dataclass
+class SlamConfig:
+    """GMapping (Grisetti et al. T-RO 2007); defaults = the released code / ROS wrapper's, named as there."""
+    # (string fields say builtins.str: the odometry noise field below is named `str`, as in GMapping)
+    particles: int = 30
+    proposal: builtins.str = "paper"  # paper (Gaussian fitted around the match) | gmapping_code (the match) | odometry
+    resample: builtins.str = "selective"  # selective (N_eff < threshold * N) | always
+    resample_threshold: float = 0.5
+    sigma: float = 0.05  # matcher score exp(-|mu|^2 / sigma)
+    kernel_size: int = 1  # search window (2k + 1)^2 cells around each end point
+    lstep: float = 0.05  # hill-climbing steps (m, rad), halved `iterations` times
+    astep: float = 0.05
+    iterations: int = 5
+    lsigma: float = 0.075  # likelihood -|mu|^2 / lsigma
+    ogain: float = 3.0  # weights smoothed as exp((l - max) / (ogain * N)) for N_eff and resampling
+    lskip: int = 0  # use every (lskip + 1)-th beam in the likelihood
+    null_likelihood: float = -0.5  # a beam without a match
+    fullness: float = 0.1  # a cell is occupied above this hits / visits
+    minimum_score: float = 0.0  # the match replaces the pose only above this score
+    srr: float = 0.1  # odometry noise: translation from translation ...
+    srt: float = 0.2  # ... rotation from translation
+    str: float = 0.1  # translation from rotation
+    stt: float = 0.2  # rotation from rotation
+    linear_update: float = 1.0  # process a scan after this much travel (m) ...
+    angular_update: float = 0.5  # ... or rotation (rad)
+    resolution_m: float = 0.05
+    usable_range_m: Optional[float] = None  # beams beyond: free space only; None = data.usable_range_m
+    map_margin_m: float = 10.0  # map = odometry's bounding box + this margin
+    proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses spaced lstep, lstep, astep around the match
+    seed: int = 0
+
+
+@dataclass
 class Config:
     data: DataConfig = field(default_factory=DataConfig)
     sim: SimConfig = field(default_factory=SimConfig)
@@ -166,6 +200,7 @@ class Config:
     render: RenderConfig = field(default_factory=RenderConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     mcl: MCLConfig = field(default_factory=MCLConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

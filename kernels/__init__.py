@@ -74,6 +74,7 @@ WEIGHTING = Registry("weighting")
 MOTION = Registry("motion")
 RESAMPLE = Registry("resample")
 ESTIMATE = Registry("estimate")
+SLAM = Registry("slam")
 
 # importing the families registers their entries
-from kernels import estimate, mapping, motion, raycast, render, resample, sim, weighting  # noqa: E402,F401
+from kernels import estimate, mapping, motion, raycast, render, resample, sim, slam, weighting  # noqa: E402,F401

@@ -10,7 +10,7 @@ def test_kernels_package_is_ours_not_the_pypi_one():
 
 
 def test_every_registry_entry_has_a_reference_twin():
-    from kernels import ESTIMATE, MAPPING, MOTION, RAYCAST, RENDER, RESAMPLE, SIM, WEIGHTING
+    from kernels import ESTIMATE, MAPPING, MOTION, RAYCAST, RENDER, RESAMPLE, SIM, SLAM, WEIGHTING
 
     assert RAYCAST.names() == ["dda", "distance_field"]
     assert MAPPING.names() == ["logodds"]
@@ -19,5 +19,6 @@ def test_every_registry_entry_has_a_reference_twin():
     assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch"]
     assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
     assert ESTIMATE.names() == ["best_cluster", "top_share"]
-    for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample", "estimate"):
+    assert SLAM.names() == ["integrate", "motion", "score"]
+    for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample", "estimate", "slam"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

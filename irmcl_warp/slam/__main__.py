@@ -1,0 +1,17 @@
+"""``python -m irmcl_warp.slam +exp=gmapping_intel``: see irmcl_warp/slam/stage.py."""
+
+import hydra
+
+from irmcl_warp.config import register
+from irmcl_warp.slam.stage import run_slam
+
+register()
+
+
+@hydra.main(version_base="1.3", config_path="../../conf", config_name="config")
+def main(cfg) -> None:
+    run_slam(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,269 @@
+"""GMapping's Rao-Blackwellized particle filter (Grisetti, Stachniss, Burgard, T-RO 2007) on Warp kernels.
+
+Every scan moves the particles by the odometry motion model. Once the robot has travelled
+``linear_update`` or turned ``angular_update`` since the last processed scan, the scan is processed:
+
+1. scan matching: hill climbing over (x, y, theta) from each particle's pose on its own map, steps
+   lstep / astep halved ``iterations`` times; each round scores all particles x 6 moves x beams in one
+   launch (kernels/slam.py ``score``);
+2. the proposal (``proposal``):
+   * ``paper``: the scan likelihood (times the motion prior) at (2g + 1)^3 poses around the match defines
+     a Gaussian (mean, covariance); the new pose is drawn from it and the weight multiplied by
+     eta = the sum of those values (the paper's eqs. 19-21);
+   * ``gmapping_code``: the pose becomes the match, the weight is multiplied by the likelihood there
+     (what the released C++ does);
+   * ``odometry``: the motion model's sample, weighted by its likelihood (the baseline);
+3. weights smoothed as exp((log w - max) / (ogain * N)) (the released code); N_eff = 1 / sum w^2;
+   low-variance resampling (maps copied on the device) when N_eff < threshold * N (``selective``) or
+   every time (``always``);
+4. each particle integrates the scan into its map (kernels/slam.py ``integrate``).
+
+The host keeps only P-sized arrays (weights, hill-climbing state) and each processed scan's poses and
+resampling parents, from which the best particle's trajectory is traced back at the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from irmcl_warp.geometry import compose, relative, wrap_angle
+from kernels import SLAM, pick_device
+from kernels.slam import ParticleMaps
+
+MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
+
+
+@dataclass
+class StepStats:
+    processed: bool
+    neff: float = float("nan")
+    resampled: bool = False
+    match_rounds: int = 0
+
+
+@dataclass
+class History:
+    """Per processed scan: its index in the log, every particle's pose, and the parents chosen after it."""
+    scans: list = field(default_factory=list)
+    poses: list = field(default_factory=list)
+    parents: list = field(default_factory=list)
+
+
+class RBPF:
+    def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float,
+                 device: str = "auto"):
+        if cfg.proposal not in ("paper", "gmapping_code", "odometry"):
+            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose paper, gmapping_code or odometry")
+        if cfg.resample not in ("selective", "always"):
+            raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
+        self.cfg, self.device = cfg, pick_device(device)
+        P, d = int(cfg.particles), self.device
+        self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
+        self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
+        self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, device=d)
+        self.scorer = SLAM.build("score", usable_range_m=usable_range_m, kernel_size=cfg.kernel_size,
+                                 fullness=cfg.fullness, sigma=cfg.sigma, lsigma=cfg.lsigma,
+                                 null_likelihood=cfg.null_likelihood, free_delta_m=cfg.resolution_m * np.sqrt(2.0),
+                                 lskip=cfg.lskip, device=d)
+        self.motion = SLAM.build("motion", srr=cfg.srr, srt=cfg.srt, str_=cfg.str, stt=cfg.stt, device=d)
+        self.angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=d)
+        self.ranges = wp.zeros(len(angles_rad), dtype=wp.float32, device=d)
+        self.poses = wp.zeros(P, dtype=wp.vec3, device=d)
+        g = int(cfg.proposal_grid)
+        offs = np.stack(np.meshgrid(*[np.arange(-g, g + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        self.grid_offsets = offs * np.array([cfg.lstep, cfg.lstep, cfg.astep])
+        self._buffers = {}
+        self.log_w = np.zeros(P)  # since the last resampling
+        self.log_w_total = np.zeros(P)  # over the whole run (inherited on resampling): picks the best particle
+        self.history = History()
+        self.rng = np.random.default_rng(cfg.seed)
+        self.steps = 0
+        self.last_odom = None  # odometry at the last processed scan
+        self.prev_odom = None  # odometry at the previous scan
+
+    # --- device helpers -----------------------------------------------------------------------------
+    def _buf(self, C: int):
+        if C not in self._buffers:
+            d = self.device
+            self._buffers[C] = (wp.zeros((self.P, C), dtype=wp.vec3, device=d),
+                                wp.zeros((self.P, C), dtype=wp.float32, device=d),
+                                wp.zeros((self.P, C), dtype=wp.float32, device=d))
+        return self._buffers[C]
+
+    def _set_ranges(self, ranges_m) -> None:
+        r = np.asarray(ranges_m, np.float32)
+        if r.shape != (self.ranges.shape[0],):
+            raise ValueError(f"slam: a scan of {r.size} beams, the filter was built for {self.ranges.shape[0]} "
+                             f"(set data.beam_policy to reject or resample such scans when reading the log)")
+        self.ranges.assign(r)
+
+    def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
+        cand, score, loglik = self._buf(candidates.shape[1])
+        cand.assign(wp.array(candidates.astype(np.float32), dtype=wp.vec3, device=self.device))
+        self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
+        return score.numpy().astype(np.float64), loglik.numpy().astype(np.float64)
+
+    # --- the filter ---------------------------------------------------------------------------------
+    def start(self, odom_pose, ranges_m) -> None:
+        """All particles at the first odometry pose; the first scan is integrated as it is."""
+        pose = np.asarray(odom_pose, np.float64)
+        self.poses.assign(wp.array(np.tile(pose, (self.P, 1)).astype(np.float32), dtype=wp.vec3, device=self.device))
+        self._set_ranges(ranges_m)
+        self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+        self.last_odom = self.prev_odom = pose
+        self._record(0, parents=np.arange(self.P))
+
+    def step(self, k: int, odom_pose, ranges_m) -> StepStats:
+        """Scan k with its odometry pose; returns what happened."""
+        odom_pose = np.asarray(odom_pose, np.float64)
+        self.steps += 1
+        delta = relative(self.prev_odom[None], odom_pose[None])[0]
+        self.prev_odom = odom_pose
+        if np.any(delta != 0):
+            self.motion(self.poses, delta, seed=self.cfg.seed * 1_000_003 + self.steps)
+        moved = relative(self.last_odom[None], odom_pose[None])[0]
+        if np.hypot(moved[0], moved[1]) < self.cfg.linear_update and abs(moved[2]) < self.cfg.angular_update:
+            return StepStats(processed=False)
+        self._set_ranges(ranges_m)
+        sampled = self.poses.numpy().astype(np.float64)
+        if self.cfg.proposal == "odometry":
+            new, gain, rounds = sampled, self.evaluate(sampled[:, None])[1][:, 0], 0
+        else:
+            matched, score, rounds = self.match(sampled)
+            ok = score > self.cfg.minimum_score
+            if self.cfg.proposal == "gmapping_code":
+                new = np.where(ok[:, None], matched, sampled)
+                gain = self.evaluate(new[:, None])[1][:, 0]
+            else:
+                new, gain = self.gaussian_proposal(matched, sampled, moved)
+                fallback = self.evaluate(sampled[:, None])[1][:, 0]
+                new, gain = np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback)
+        self.log_w += gain
+        self.log_w_total += gain
+        self.poses.assign(wp.array(new.astype(np.float32), dtype=wp.vec3, device=self.device))
+        w = self.smoothed_weights()
+        neff = 1.0 / np.sum(w ** 2)
+        parents = np.arange(self.P)
+        resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
+        if resampled:
+            parents = low_variance(w, self.rng.uniform())
+            self.maps.resample(parents)
+            self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
+            self.log_w = np.zeros(self.P)
+            self.log_w_total = self.log_w_total[parents]
+        self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+        self.last_odom = odom_pose
+        self._record(k, parents)
+        return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
+
+    def match(self, start: np.ndarray, max_rounds: int = 200):
+        """GMapping's hill climbing for every particle at once: try the 6 moves of the current step sizes;
+        take the best if it raises the score, else halve the steps, `iterations` times."""
+        c = self.cfg
+        pose = start.copy()
+        best = self.evaluate(pose[:, None])[0][:, 0]
+        steps = np.tile([c.lstep, c.lstep, c.astep], (self.P, 1)).astype(np.float64)
+        halvings = np.zeros(self.P, int)
+        rounds = 0
+        while (halvings < c.iterations).any() and rounds < max_rounds:
+            rounds += 1
+            cand = pose[:, None, :] + MOVES[None] * steps[:, None, :]
+            score = self.evaluate(cand)[0]
+            k = np.argmax(score, 1)
+            top = score[np.arange(self.P), k]
+            active = halvings < c.iterations
+            better = active & (top > best)
+            pose[better] = cand[better, k[better]]
+            best[better] = top[better]
+            worse = active & ~better
+            steps[worse] *= 0.5
+            halvings[worse] += 1
+        pose[:, 2] = wrap_angle(pose[:, 2])
+        return pose, best, rounds
+
+    def gaussian_proposal(self, matched: np.ndarray, sampled: np.ndarray, moved: np.ndarray):
+        """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match; new pose
+        ~ N(mu, Sigma) of the normalised tau; log-weight gain = log sum tau_j."""
+        cand = matched[:, None, :] + self.grid_offsets[None]  # [P, K, 3]
+        loglik = self.evaluate(cand)[1]
+        std = np.maximum(motion_std(moved, self.cfg), [0.01, 0.01, 0.005])  # the prior around the odometry sample
+        d = cand - sampled[:, None, :]
+        d[..., 2] = wrap_angle(d[..., 2])
+        log_prior = -0.5 * np.sum((d / std) ** 2, -1) - np.sum(np.log(std))
+        mu, cov, log_eta = fit_gaussian(cand, loglik + log_prior)
+        z = self.rng.standard_normal((self.P, 3))
+        new = mu + np.einsum("pij,pj->pi", np.linalg.cholesky(cov), z)
+        new[:, 2] = wrap_angle(new[:, 2])
+        return new, log_eta
+
+    def smoothed_weights(self) -> np.ndarray:
+        g = 1.0 / (self.cfg.ogain * self.P)
+        w = np.exp(g * (self.log_w - self.log_w.max()))
+        return w / w.sum()
+
+    def _record(self, k: int, parents: np.ndarray) -> None:
+        self.history.scans.append(k)
+        self.history.poses.append(self.poses.numpy().astype(np.float64))
+        self.history.parents.append(np.asarray(parents))
+
+    # --- results ------------------------------------------------------------------------------------
+    def best_particle(self) -> int:
+        return int(np.argmax(self.log_w_total))
+
+    def trajectory(self, particle: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(scan indices, poses [K, 3]) of one particle's ancestry at the processed scans."""
+        i = self.best_particle() if particle is None else particle
+        h, out = self.history, []
+        for t in range(len(h.scans) - 1, -1, -1):
+            out.append(h.poses[t][i])
+            i = int(h.parents[t][i])  # poses[t] were recorded after resampling at t: step to the parent before it
+        return np.array(h.scans), np.array(out[::-1])
+
+
+def fit_gaussian(cand: np.ndarray, log_tau: np.ndarray, floor=(1e-6, 1e-6, 1e-7)):
+    """The paper's eqs. 19-21 per particle: mu = sum tau_j x_j / eta, Sigma = sum tau_j (x_j - mu)(x_j - mu)^T
+    / eta, eta = sum tau_j, from log tau [P, K] at poses cand [P, K, 3] (yaw offsets taken relative to the
+    first pose, so that the mean does not wrap). Returns (mu [P, 3], Sigma [P, 3, 3] + floor, log eta [P])."""
+    top = log_tau.max(1, keepdims=True)
+    tau = np.exp(log_tau - top)
+    eta = tau.sum(1)
+    wn = tau / eta[:, None]
+    ref = cand[:, :1, :]
+    rel = cand - ref
+    rel[..., 2] = wrap_angle(rel[..., 2])
+    mu_rel = np.einsum("pk,pkd->pd", wn, rel)
+    d = rel - mu_rel[:, None, :]
+    cov = np.einsum("pk,pki,pkj->pij", wn, d, d) + np.diag(floor)
+    mu = ref[:, 0, :] + mu_rel
+    mu[:, 2] = wrap_angle(mu[:, 2])
+    return mu, cov, top[:, 0] + np.log(eta)
+
+
+def motion_std(delta, cfg) -> np.ndarray:
+    ax, ay, at = np.abs(np.asarray(delta, np.float64))
+    sxy = 0.3 * cfg.srr
+    return np.array([cfg.srr * ax + cfg.str * at + sxy * ay, cfg.srr * ay + cfg.str * at + sxy * ax,
+                     cfg.stt * at + cfg.srt * np.hypot(delta[0], delta[1])])
+
+
+def low_variance(w: np.ndarray, offset: float) -> np.ndarray:
+    """Parent index of each new particle: N evenly spaced pointers (offset + i) / N into the cumulative
+    normalised weights (Thrun et al. Table 4.4)."""
+    cdf = np.cumsum(w / w.sum())
+    u = (offset + np.arange(len(w))) / len(w)
+    return np.minimum(np.searchsorted(cdf, u, side="right"), len(w) - 1)
+
+
+def per_scan_poses(stamps_idx: np.ndarray, processed_idx: np.ndarray, processed_poses: np.ndarray, odom: np.ndarray):
+    """A pose at every scan: the last processed scan's corrected pose plus the raw odometry since then."""
+    out = np.full((len(stamps_idx), 3), np.nan)
+    j = np.searchsorted(processed_idx, stamps_idx, side="right") - 1
+    ok = j >= 0
+    base = processed_poses[j[ok]]
+    since = relative(odom[processed_idx[j[ok]]], odom[stamps_idx[ok]])
+    out[ok] = compose(base, since)
+    return out

@@ -1,0 +1,266 @@
+"""Grid SLAM kernels for the Rao-Blackwellized particle filter (GMapping, Grisetti et al. T-RO 2007):
+per-particle maps held as one [P, H, W] set of arrays, updated and read by one launch for all particles.
+
+Cells are GMapping's point accumulators: ``visits`` (times a beam passed or ended in the cell), ``hits``
+(times a beam ended in it) and the sum of the hit points (``sx``, ``sy``), so that a cell knows where in
+it the walls were seen. Occupancy = hits / visits, -1 where never visited.
+
+* ``SLAM["integrate"]``: one thread per (particle, beam) walks the cells from the laser to the end point
+  (a DDA over the cell grid), adding a visit to each traversed cell and a hit (with its point) to the end
+  cell; beams longer than the usable range mark free space up to it and no hit.
+* ``SLAM["score"]``: the matcher's measurement model at candidate poses [P, C] (one thread per
+  particle x candidate x beam): for each beam end point, the cells of a (2k+1)^2 window around it that
+  are occupied (> fullness) while the cell one free-delta before the end point, shifted alike, is not;
+  mu = the end point minus the nearest such cell's mean hit point. Adds exp(-|mu|^2 / sigma) to the score
+  and -|mu|^2 / lsigma (or null_likelihood / lsigma without a match) to the log-likelihood.
+* ``SLAM["motion"]``: GMapping's odometry model: the odometry step in the old pose's frame, each
+  component perturbed by a Gaussian whose std grows with the motion (srr, srt, str, stt).
+
+Numpy twins: irmcl_warp/reference/slam.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from kernels import SLAM, pick_device
+
+UNKNOWN = -1.0
+
+
+@wp.func
+def occupancy(hits: wp.array3d(dtype=wp.float32), visits: wp.array3d(dtype=wp.float32), p: int, ix: int,
+              iy: int) -> float:
+    if ix < 0 or iy < 0 or ix >= visits.shape[2] or iy >= visits.shape[1]:
+        return UNKNOWN
+    v = visits[p, iy, ix]
+    if v <= 0.0:
+        return UNKNOWN
+    return hits[p, iy, ix] / v
+
+
+@wp.func
+def cell_of(x: float, y: float, origin: wp.vec2, res: float) -> wp.vec2i:
+    return wp.vec2i(int(wp.floor((x - origin[0]) / res)), int(wp.floor((y - origin[1]) / res)))
+
+
+@wp.func
+def laser_of(pose: wp.vec3, T_base_laser: wp.vec3) -> wp.vec3:
+    c = wp.cos(pose[2])
+    s = wp.sin(pose[2])
+    return wp.vec3(pose[0] + c * T_base_laser[0] - s * T_base_laser[1],
+                   pose[1] + s * T_base_laser[0] + c * T_base_laser[1], pose[2] + T_base_laser[2])
+
+
+@wp.kernel
+def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+                     angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
+                     visits: wp.array3d(dtype=wp.float32), hits: wp.array3d(dtype=wp.float32),
+                     sx: wp.array3d(dtype=wp.float32), sy: wp.array3d(dtype=wp.float32)):
+    p, b = wp.tid()
+    r = ranges[b]
+    if not (r == r) or r <= 0.0:
+        return
+    hit = r <= usable
+    r = wp.min(r, usable)
+    lp = laser_of(poses[p], T_base_laser)
+    a = lp[2] + angles[b]
+    ex = lp[0] + r * wp.cos(a)
+    ey = lp[1] + r * wp.sin(a)
+    c0 = cell_of(lp[0], lp[1], origin, res)
+    c1 = cell_of(ex, ey, origin, res)
+    H = visits.shape[1]
+    W = visits.shape[2]
+    # DDA from the laser's cell to the end cell (Amanatides & Woo), the end cell excluded
+    dx = ex - lp[0]
+    dy = ey - lp[1]
+    ix = c0[0]
+    iy = c0[1]
+    step_x = 1
+    if dx < 0.0:
+        step_x = -1
+    step_y = 1
+    if dy < 0.0:
+        step_y = -1
+    inv_dx = 1.0e30
+    if wp.abs(dx) > 1.0e-9:
+        inv_dx = 1.0 / wp.abs(dx)
+    inv_dy = 1.0e30
+    if wp.abs(dy) > 1.0e-9:
+        inv_dy = 1.0 / wp.abs(dy)
+    bx = origin[0] + float(ix + wp.max(step_x, 0)) * res
+    by = origin[1] + float(iy + wp.max(step_y, 0)) * res
+    t_x = wp.abs(bx - lp[0]) * inv_dx
+    t_y = wp.abs(by - lp[1]) * inv_dy
+    dt_x = res * inv_dx
+    dt_y = res * inv_dy
+    n = wp.abs(c1[0] - c0[0]) + wp.abs(c1[1] - c0[1])
+    for _ in range(n):
+        if ix >= 0 and iy >= 0 and ix < W and iy < H:
+            wp.atomic_add(visits, p, iy, ix, 1.0)
+        if t_x < t_y:
+            ix += step_x
+            t_x += dt_x
+        else:
+            iy += step_y
+            t_y += dt_y
+    if c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
+        wp.atomic_add(visits, p, c1[1], c1[0], 1.0)
+        if hit:
+            wp.atomic_add(hits, p, c1[1], c1[0], 1.0)
+            wp.atomic_add(sx, p, c1[1], c1[0], ex)
+            wp.atomic_add(sy, p, c1[1], c1[0], ey)
+
+
+def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: float, null_likelihood: float,
+                      free_delta: float, beam_stride: int):
+    @wp.kernel(module="unique")
+    def score(poses: wp.array2d(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+              angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
+              visits: wp.array3d(dtype=wp.float32), hits: wp.array3d(dtype=wp.float32),
+              sx: wp.array3d(dtype=wp.float32), sy: wp.array3d(dtype=wp.float32),
+              out_score: wp.array2d(dtype=wp.float32), out_loglik: wp.array2d(dtype=wp.float32)):
+        p, c, b = wp.tid()
+        if b % wp.static(beam_stride) != 0:
+            return
+        r = ranges[b]
+        if not (r == r) or r <= 0.0 or r > usable:
+            return
+        lp = laser_of(poses[p, c], T_base_laser)
+        a = lp[2] + angles[b]
+        ca = wp.cos(a)
+        sa = wp.sin(a)
+        ex = lp[0] + r * ca
+        ey = lp[1] + r * sa
+        hit_cell = cell_of(ex, ey, origin, res)
+        free_cell = cell_of(ex - wp.static(free_delta) * ca, ey - wp.static(free_delta) * sa, origin, res)
+        best = float(1.0e30)
+        found = int(0)
+        for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+            for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+                hx = hit_cell[0] + ox
+                hy = hit_cell[1] + oy
+                if occupancy(hits, visits, p, hx, hy) > wp.static(fullness):
+                    if occupancy(hits, visits, p, free_cell[0] + ox, free_cell[1] + oy) < wp.static(fullness):
+                        n = hits[p, hy, hx]
+                        mx = ex - sx[p, hy, hx] / n
+                        my = ey - sy[p, hy, hx] / n
+                        d2 = mx * mx + my * my
+                        if d2 < best:
+                            best = d2
+                        found = 1
+        if found == 1:
+            wp.atomic_add(out_score, p, c, wp.exp(-best / wp.static(sigma)))
+            wp.atomic_add(out_loglik, p, c, -best / wp.static(lsigma))
+        else:
+            wp.atomic_add(out_loglik, p, c, wp.static(null_likelihood / lsigma))
+
+    return score
+
+
+@wp.kernel
+def motion_kernel(poses: wp.array(dtype=wp.vec3), delta: wp.vec3, srr: float, srt: float, str_: float, stt: float,
+                  seed: int):
+    """GMapping's drawFromMotion: delta = the odometry step in the old pose's frame."""
+    i = wp.tid()
+    state = wp.rand_init(seed, i)
+    sxy = 0.3 * srr
+    ax = wp.abs(delta[0])
+    ay = wp.abs(delta[1])
+    at = wp.abs(delta[2])
+    nx = delta[0] + wp.randn(state) * (srr * ax + str_ * at + sxy * ay)
+    ny = delta[1] + wp.randn(state) * (srr * ay + str_ * at + sxy * ax)
+    nt = delta[2] + wp.randn(state) * (stt * at + srt * wp.sqrt(delta[0] * delta[0] + delta[1] * delta[1]))
+    p = poses[i]
+    c = wp.cos(p[2])
+    s = wp.sin(p[2])
+    t = p[2] + nt
+    poses[i] = wp.vec3(p[0] + c * nx - s * ny, p[1] + s * nx + c * ny, wp.atan2(wp.sin(t), wp.cos(t)))
+
+
+@wp.kernel
+def copy_maps_kernel(src: wp.array3d(dtype=wp.float32), dst: wp.array3d(dtype=wp.float32),
+                     parent: wp.array(dtype=wp.int32)):
+    p, iy, ix = wp.tid()
+    dst[p, iy, ix] = src[parent[p], iy, ix]
+
+
+class ParticleMaps:
+    """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0))."""
+
+    FIELDS = ("visits", "hits", "sx", "sy")
+
+    def __init__(self, num_particles: int, shape_hw, origin_xy, resolution_m: float, device: str = "auto"):
+        H, W = map(int, shape_hw)
+        if num_particles < 1 or H < 1 or W < 1 or not resolution_m > 0:
+            raise ValueError(f"ParticleMaps: {num_particles} particles of {H} x {W} cells at {resolution_m} m")
+        self.device = pick_device(device)
+        self.origin, self.res = wp.vec2(float(origin_xy[0]), float(origin_xy[1])), float(resolution_m)
+        self.arrays = {f: wp.zeros((num_particles, H, W), dtype=wp.float32, device=self.device) for f in self.FIELDS}
+        self._spare = None
+
+    @property
+    def shape(self):
+        return self.arrays["visits"].shape
+
+    def resample(self, parents: np.ndarray) -> None:
+        """Map i becomes a copy of map parents[i] (through one spare array per field)."""
+        parent = wp.array(np.asarray(parents, np.int32), dtype=wp.int32, device=self.device)
+        if self._spare is None:
+            self._spare = wp.zeros(self.shape, dtype=wp.float32, device=self.device)
+        for f in self.FIELDS:
+            wp.launch(copy_maps_kernel, self.shape, [self.arrays[f], self._spare, parent], device=self.device)
+            self.arrays[f], self._spare = self._spare, self.arrays[f]
+
+    def occupancy(self, p: int) -> np.ndarray:
+        """[H, W] hits / visits of map p, -1 where never visited."""
+        v, h = self.arrays["visits"].numpy()[p], self.arrays["hits"].numpy()[p]
+        return np.where(v > 0, h / np.maximum(v, 1), UNKNOWN).astype(np.float32)
+
+
+class Integrator:
+    def __init__(self, usable_range_m: float, device: str = "auto"):
+        self.usable, self.device = float(usable_range_m), pick_device(device)
+
+    def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
+        a = maps.arrays
+        wp.launch(integrate_kernel, (poses.shape[0], ranges.shape[0]),
+                  [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
+                   a["visits"], a["hits"], a["sx"], a["sy"]], device=self.device)
+
+
+class Scorer:
+    """Score and log-likelihood of candidate poses [P, C] against each particle's own map."""
+
+    def __init__(self, usable_range_m: float, kernel_size: int = 1, fullness: float = 0.1, sigma: float = 0.05,
+                 lsigma: float = 0.075, null_likelihood: float = -0.5, free_delta_m: float = 0.05 * np.sqrt(2),
+                 lskip: int = 0, device: str = "auto"):
+        self.usable, self.device = float(usable_range_m), pick_device(device)
+        self.kernel = make_score_kernel(int(kernel_size), float(fullness), float(sigma), float(lsigma),
+                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1)
+
+    def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
+                 score: wp.array, loglik: wp.array) -> None:
+        """candidates [P, C] (vec3); fills score and loglik [P, C] (zeroed here)."""
+        a = maps.arrays
+        score.zero_()
+        loglik.zero_()
+        P, C = candidates.shape
+        wp.launch(self.kernel, (P, C, ranges.shape[0]),
+                  [candidates, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
+                   a["visits"], a["hits"], a["sx"], a["sy"], score, loglik], device=self.device)
+
+
+class GmappingMotion:
+    def __init__(self, srr: float = 0.1, srt: float = 0.2, str_: float = 0.1, stt: float = 0.2, device: str = "auto"):
+        self.noise, self.device = (float(srr), float(srt), float(str_), float(stt)), pick_device(device)
+
+    def __call__(self, poses: wp.array, delta, seed: int) -> None:
+        wp.launch(motion_kernel, poses.shape[0], [poses, wp.vec3(*map(float, delta)), *self.noise, int(seed)],
+                  device=self.device)
+
+
+SLAM.register("integrate")(lambda **kw: Integrator(**kw))
+SLAM.register("score")(lambda **kw: Scorer(**kw))
+SLAM.register("motion")(lambda **kw: GmappingMotion(**kw))

@@ -1,0 +1,179 @@
+"""GMapping's RBPF: kernels against their numpy twins, the matcher, the proposal, weights, and SLAM on the
+simulator against its exact ground truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import warp as wp
+from hydra import compose, initialize_config_dir
+
+from irmcl_warp.config import SlamConfig, register
+from irmcl_warp.reference import slam as twin
+from irmcl_warp.sim import simulate
+from irmcl_warp.slam import RBPF, low_variance
+from irmcl_warp.slam.rbpf import fit_gaussian
+from kernels import SLAM
+from kernels.slam import ParticleMaps
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def _sim(duration_s=20.0, **extra):
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=[f"sim.duration_s={duration_s}", "sim.width_m=14", "sim.height_m=10",
+                                           *[f"{k}={v}" for k, v in extra.items()]])
+    return simulate(cfg.sim, "cpu")[0]
+
+
+def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
+    return {f: maps.arrays[f].numpy()[p].astype(np.float64) for f in ParticleMaps.FIELDS}
+
+
+def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None):
+    maps = ParticleMaps(P, shape, origin, res, device="cpu")
+    ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
+    integ = SLAM.build("integrate", usable_range_m=8.0, device="cpu")
+    angles = wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu")
+    for k in scans:
+        poses = np.tile(log.ground_truth[k], (P, 1))
+        if jitter:
+            poses = poses + rng.normal(0, jitter, poses.shape)
+        integ(maps, wp.array(poses.astype(np.float32), dtype=wp.vec3, device="cpu"), log.T_base_laser,
+              wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"), angles)
+        for p in range(P):
+            twin.integrate(ref[p], poses[p].astype(np.float32), log.T_base_laser, log.ranges_m[k],
+                           log.info.angles_rad, 8.0, origin, res)
+    return maps, ref
+
+
+def test_integrate_matches_twin(rng):
+    log = _sim(5.0)
+    maps, ref = _integrate_both(log, [0, 7, 14], P=2, jitter=0.2, rng=rng)
+    for p in range(2):
+        got = _maps_numpy(maps, p)
+        same = (got["visits"] == ref[p]["visits"]).mean()
+        assert same > 0.998, f"seed {rng.seed}: {same:.4f} of cells agree"  # float32 poses at cell borders
+        assert (got["hits"] == ref[p]["hits"]).mean() > 0.998
+        assert got["hits"].sum() > 500 and got["visits"].sum() > 20 * got["hits"].sum()  # walls seen, space crossed
+
+
+def test_score_matches_twin_and_peaks_at_the_true_pose(rng):
+    log = _sim(5.0)
+    maps, ref = _integrate_both(log, [0, 5, 10], P=1)
+    k = 12
+    true = log.ground_truth[k]
+    cands = true + np.concatenate([np.zeros((1, 3)), rng.normal(0, [0.1, 0.1, 0.05], (7, 3))])
+    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2), device="cpu")
+    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device="cpu")
+    score = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
+    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
+    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"),
+           wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu"), score, loglik)
+    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
+                                log.info.angles_rad, 8.0, (-1.0, -1.0), 0.1, free_delta=0.1 * np.sqrt(2)) for c in cands])
+    assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
+    assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
+    assert np.argmax(score.numpy()[0]) == 0  # the true pose scores best
+
+
+def test_motion_kernel_noise_follows_the_gmapping_model(rng):
+    n, delta = 40000, np.array([0.4, 0.05, 0.2])
+    start = np.array([1.0, -2.0, 0.7])
+    poses = wp.array(np.tile(start, (n, 1)).astype(np.float32), dtype=wp.vec3, device="cpu")
+    SLAM.build("motion", device="cpu")(poses, delta, seed=int(rng.integers(1 << 30)))
+    from irmcl_warp.geometry import relative
+
+    steps = relative(np.tile(start, (n, 1)), poses.numpy().astype(np.float64))
+    want = twin.motion_std(delta)
+    assert np.allclose(steps.mean(0), delta, atol=3 * want / np.sqrt(n) + 1e-4)
+    assert np.allclose(steps.std(0), want, rtol=0.03), (steps.std(0), want)
+
+
+def _matcher(log, P=4, proposal="gmapping_code", **kw):
+    cfg = SlamConfig(particles=P, proposal=proposal, resolution_m=0.05, map_margin_m=2.0, **kw)
+    lo = log.ground_truth[:, :2].min(0) - 12.0
+    shape = tuple((np.ceil((log.ground_truth[:, :2].max(0) + 12.0 - lo) / 0.05).astype(int) + 1)[::-1])
+    rbpf = RBPF(cfg, shape, lo, log.T_base_laser, log.info.angles_rad, 8.0, device="cpu")
+    return rbpf
+
+
+def test_scan_matcher_recovers_a_known_offset():
+    log = _sim(10.0)
+    rbpf = _matcher(log)
+    rbpf.start(log.ground_truth[0], log.ranges_m[0])
+    for k in (5, 10):  # the map from three true poses
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device="cpu"))
+        rbpf._set_ranges(log.ranges_m[k])
+        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    k = 20
+    offsets = np.array([[0.15, -0.10, 0.05], [-0.12, 0.08, -0.04], [0.0, 0.18, 0.0], [0.1, 0.1, -0.06]])
+    rbpf._set_ranges(log.ranges_m[k])
+    matched, score, rounds = rbpf.match(log.ground_truth[k] + offsets)
+    err = matched - log.ground_truth[k]
+    dist = np.hypot(err[:, 0], err[:, 1])  # started 0.14-0.21 m off
+    assert np.median(dist) < 0.02 and dist.max() < 0.05 and np.all(np.abs(err[:, 2]) < 0.01), err
+    assert rounds >= 5 and np.all(score > 100)
+
+
+def test_gaussian_fit_matches_brute_force(rng):
+    cand = np.array([0.3, -0.2, 3.1]) + rng.normal(0, [0.05, 0.05, 0.03], (27, 3))
+    log_tau = rng.normal(0, 2, 27) - 500.0  # far below exp's range: only the normalised values matter
+    mu, cov, log_eta = fit_gaussian(cand[None], log_tau[None], floor=(0, 0, 0))
+    w = np.exp(log_tau - log_tau.max())
+    w /= w.sum()
+    ang = np.unwrap(cand[:, 2])  # yaw near pi: offsets relative to one pose, no wrap-around
+    x = np.column_stack([cand[:, :2], ang])
+    m = w @ x
+    c = sum(wi * np.outer(xi - m, xi - m) for wi, xi in zip(w, x))
+    assert np.allclose(mu[0, :2], m[:2]) and np.isclose(np.cos(mu[0, 2] - m[2]), 1.0)
+    assert np.allclose(cov[0], c, atol=1e-12)
+    assert np.isclose(log_eta[0], np.log(np.exp(log_tau - log_tau.max()).sum()) + log_tau.max())
+
+
+def test_low_variance_resampling_keeps_floor_or_ceil_of_each_share(rng):
+    w = rng.gamma(0.5, 1.0, 30)
+    w /= w.sum()
+    parents = low_variance(w, rng.uniform())
+    counts = np.bincount(parents, minlength=30)
+    assert counts.sum() == 30 and np.all(np.abs(counts - 30 * w) < 1.0 + 1e-9), f"seed {rng.seed}"
+    cfg = SlamConfig(particles=30)
+    rbpf_like = type("R", (), {"cfg": cfg, "P": 30, "log_w": np.log(w) * 200})
+    from irmcl_warp.slam.rbpf import RBPF as R
+
+    smooth = R.smoothed_weights(rbpf_like)  # tempered by 1 / (ogain N): flatter than the raw weights
+    neff = 1 / np.sum(smooth ** 2)
+    raw = np.exp(rbpf_like.log_w - rbpf_like.log_w.max())
+    raw /= raw.sum()
+    assert 1 / np.sum(raw ** 2) < neff <= 30
+
+
+def test_a_scan_of_another_beam_count_is_a_clear_error():
+    log = _sim(3.0)
+    rbpf = _matcher(log, P=2)
+    rbpf.start(log.ground_truth[0], log.ranges_m[0])
+    with pytest.raises(ValueError, match="a scan of 180 beams, the filter was built for 360"):
+        rbpf.step(1, log.odom[1] + [5.0, 0, 0], log.ranges_m[1][::2])
+
+
+def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
+    from irmcl_warp.slam.stage import run_slam
+
+    monkeypatch.chdir(tmp_path)
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=60",
+                                           "slam.particles=10"])
+    out = run_slam(cfg)
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["processed_scans"] > 20
+    assert m["trajectory"]["ate_rmse_m"] < 0.1, m["trajectory"]
+    assert m["trajectory"]["ate_rmse_m"] < 0.25 * m["trajectory_odometry"]["ate_rmse_m"], m
+    rows = np.loadtxt(out / "trajectory.tum")
+    assert rows.shape == (300, 8)
+    for f in ("map.pgm", "map.yaml", "map.png", "neff.csv", "config.yaml", "manifest.json"):
+        assert (out / f).is_file(), f
