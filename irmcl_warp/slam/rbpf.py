@@ -81,6 +81,7 @@ class RBPF:
         self.history = History()
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
+        self.timing = {"motion": 0.0, "matching": 0.0, "weights_resampling": 0.0, "integration": 0.0}
         self.last_odom = None  # odometry at the last processed scan
         self.prev_odom = None  # odometry at the previous scan
 
@@ -121,11 +122,13 @@ class RBPF:
         """Scan k with its odometry pose; returns what happened."""
         odom_pose = np.asarray(odom_pose, np.float64)
         self.steps += 1
+        t = self._tick()
         delta = relative(self.prev_odom[None], odom_pose[None])[0]
         self.prev_odom = odom_pose
         if np.any(delta != 0):
             self.motion(self.poses, delta, seed=self.cfg.seed * 1_000_003 + self.steps)
         moved = relative(self.last_odom[None], odom_pose[None])[0]
+        t = self._tick("motion", t)
         if np.hypot(moved[0], moved[1]) < self.cfg.linear_update and abs(moved[2]) < self.cfg.angular_update:
             return StepStats(processed=False)
         self._set_ranges(ranges_m)
@@ -142,6 +145,7 @@ class RBPF:
                 new, gain = self.gaussian_proposal(matched, sampled, moved)
                 fallback = self.evaluate(sampled[:, None])[1][:, 0]
                 new, gain = np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback)
+        t = self._tick("matching", t)
         self.log_w += gain
         self.log_w_total += gain
         self.poses.assign(wp.array(new.astype(np.float32), dtype=wp.vec3, device=self.device))
@@ -155,7 +159,9 @@ class RBPF:
             self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
+        t = self._tick("weights_resampling", t)
         self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+        self._tick("integration", t)
         self.last_odom = odom_pose
         self._record(k, parents)
         return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
@@ -204,6 +210,16 @@ class RBPF:
         g = 1.0 / (self.cfg.ogain * self.P)
         w = np.exp(g * (self.log_w - self.log_w.max()))
         return w / w.sum()
+
+    def _tick(self, part: str | None = None, since: float = 0.0) -> float:
+        """Time stamp after the device finished; adds the time since ``since`` to ``part``."""
+        import time
+
+        wp.synchronize_device(self.device)
+        now = time.perf_counter()
+        if part is not None:
+            self.timing[part] += now - since
+        return now
 
     def _record(self, k: int, parents: np.ndarray) -> None:
         self.history.scans.append(k)

@@ -106,6 +106,8 @@ def run_slam(cfg) -> Path:
     metrics = {"dataset": cfg.data.name, "particles": s.particles, "proposal": s.proposal, "resample": s.resample,
                "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
                "resamplings": int(sum(r for _, _, r, _ in neff_rows)), "wall_time_s": wall,
+               "time_s": dict(rbpf.timing),
+               "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
                "settings": OmegaConf.to_container(s)}
     if cfg.data.relations_path:
         from irmcl_warp.io import read_relations, resolve
