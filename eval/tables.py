@@ -15,6 +15,24 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 ROOTS = (REPO / "results" / "nof", REPO / "outputs")
 MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
+SLAM_ROOTS = (REPO / "results" / "slam", REPO / "outputs")
+CONVERGED_M = 0.15  # a SLAM run "converged" below this mean relations error (the threshold of issue 6's reference)
+# GMapping references (facts cited, scored with the relations metric, mean translational error):
+# * "released C++": issue 6 of this project: the public GMapping source built without ROS, ROS wrapper defaults,
+#   30 particles, 10 seeds, the same 2-core CPU, on the same derived logs; converged seeds (< 0.15 m), error of
+#   converged runs (mean +- std);
+# * "published": Kümmerle et al. 2009 (Auton. Robots 27(4)) / the Cartographer paper (Hess et al. ICRA 2016).
+SLAM_REFERENCES = {
+    "intel": [("released C++, derived/intel.fileorder", "10/10", "0.051 +- 0.047", "57 s"),
+              ("released C++, intel as in the bag", "8/10", "0.068 +- 0.072", "65-72 s"),
+              ("published GMapping (Kümmerle et al. 2009)", "", "0.070", ""),
+              ("published Cartographer (Hess et al. 2016)", "", "0.0229", "")],
+    "fr079": [("released C++, derived/fr079.revfix", "9/10", "0.080 +- 0.058", "68 s"),
+              ("published GMapping (Kümmerle et al. 2009)", "", "0.061", ""),
+              ("published Cartographer (Hess et al. 2016)", "", "0.0452", "")],
+    "mit_csail": [("published GMapping (Kümmerle et al. 2009)", "", "0.049", ""),
+                  ("published Cartographer (Hess et al. 2016)", "", "0.0319", "")],
+}
 METHODS = {"nog_raymarch": "IR-MCL (NOG)", "nof_direct": "IR-MCL (NOF, no grid)", "likelihood_field": "likelihood field",
            "beam_model": "beam model"}
 # localize-<weighting>-<mode>-<particles>-<res>cm[-kidnap<s>s][-recovery], see irmcl_warp.localize.run_tag
@@ -139,6 +157,50 @@ def kidnap_table(runs: dict) -> str:
     return "\n".join(lines + [r for _, r in sorted(rows)])
 
 
+def collect_slam(roots=SLAM_ROOTS) -> dict:
+    """{(exp, run folder): metrics} of the slam stage; later roots override earlier ones."""
+    runs = {}
+    for root in roots:
+        for f in sorted(Path(root).glob("*/slam-*/metrics.json")):
+            runs[(f.parent.parent.name, f.parent.name)] = _load(f)
+    return runs
+
+
+def slam_table(runs: dict) -> str:
+    """Per dataset and filter variant, over seeds: how many converged (relations error < CONVERGED_M), the
+    error of the converged runs (their mean and std over the relations, averaged over those runs: the
+    reference's convention), the mean over all runs, and the wall time; the references below each dataset."""
+    import numpy as np
+
+    groups = {}
+    for (exp, tag), m in runs.items():
+        if not isinstance(m.get("relations"), dict):
+            continue
+        key = (m["dataset"], m["proposal"], m["resample"], m["particles"], m.get("device", "?"))
+        groups.setdefault(key, []).append(m)
+    ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
+    lines = ["| dataset | method | particles | converged seeds | error of converged runs (m, mean +- std over relations) | rot. (deg) | "
+             "mean of all runs (m) | wall time per run | device |", "|---|---|---|---|---|---|---|---|---|"]
+    for ds in sorted({k[0] for k in groups}, key=lambda d: (ds_rank.get(d, 99), d)):
+        for key in sorted(k for k in groups if k[0] == ds):
+            rows = groups[key]
+            t = np.array([r["relations"]["trans_abs_mean_m"] for r in rows])
+            t_std = np.array([r["relations"]["trans_abs_std_m"] for r in rows])
+            rot = np.array([r["relations"]["rot_abs_mean_deg"] for r in rows])
+            ok = t < CONVERGED_M
+            wall = np.array([r["wall_time_s"] for r in rows])
+            conv = f"{t[ok].mean():.3f} +- {t_std[ok].mean():.3f}" if ok.any() else "-"
+            lines.append(f"| {ds} | {key[1]} + {key[2]} | {key[3]} | {ok.sum()}/{len(rows)} | {conv} | "
+                         f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | "
+                         f"{'H100' if str(key[4]).startswith('cuda') else key[4]} |" if ok.any() else
+                         f"| {ds} | {key[1]} + {key[2]} | {key[3]} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
+                         f"{wall.min():.0f}-{wall.max():.0f} s | {'H100' if str(key[4]).startswith('cuda') else key[4]} |")
+        for name, conv, err, wall in SLAM_REFERENCES.get(ds, []):
+            lines.append(f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
+                         if conv else f"| {ds} | *{name}* | | | | | {err} | | |")
+    return "\n".join(lines)
+
+
 def replace_block(text: str, name: str, table: str) -> str:
     begin, end = f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
     pattern = re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
@@ -162,6 +224,10 @@ def main(argv=None):
                          localization_table(loc))
         tables["kidnap"] = ("Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)",
                             kidnap_table(loc))
+    slam = collect_slam()
+    if slam:
+        tables["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
+                          slam_table(slam))
     if not tables:
         raise SystemExit("no results found under results/ or outputs/ (run python -m eval.synthesis or "
                          "python -m irmcl_warp.localize)")

@@ -71,3 +71,21 @@ def test_localization_table_pairs_global_and_tracking_and_keeps_the_largest_part
     assert lines[3].startswith("| fr079 | likelihood field | 10 cm | 100k | 5/10 |") and lines[3].endswith("| - | - | - | - |")
     kid = kidnap_table(runs).splitlines()
     assert len(kid) == 3 and "| 30 | 0.01 / 0.2 | 8/10 | 7.0 |" in kid[2]
+
+
+def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
+    from eval.tables import collect_slam, slam_table
+
+    def run(seed, err, std=0.05):
+        return {"dataset": "intel", "proposal": "paper", "resample": "selective", "particles": 30, "seed": seed,
+                "device": "cuda:0", "wall_time_s": 10.0 + seed,
+                "relations": {"trans_abs_mean_m": err, "trans_abs_std_m": std, "rot_abs_mean_deg": 2.0}}
+
+    for seed, err in enumerate([0.05, 0.07, 1.9]):
+        _write(tmp_path / f"gmapping_intel/slam-paper-selective-30p-seed{seed}/metrics.json", run(seed, err))
+    _write(tmp_path / "gmapping_intel/slam-paper-selective-30p-seed9/metrics.json",
+           {**run(9, 0.0), "relations": "not scored: no relations file"})  # left out
+    lines = slam_table(collect_slam((tmp_path,))).splitlines()
+    ours = [l for l in lines if "paper + selective" in l]
+    assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |"]
+    assert any("*released C++, derived/intel.fileorder*" in l and "10/10" in l for l in lines)
