@@ -120,9 +120,10 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
               angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
               visits: wp.array3d(dtype=wp.float32), hits: wp.array3d(dtype=wp.float32),
               sx: wp.array3d(dtype=wp.float32), sy: wp.array3d(dtype=wp.float32),
-              out_score: wp.array2d(dtype=wp.float32), out_loglik: wp.array2d(dtype=wp.float32)):
+              out_score: wp.array2d(dtype=wp.float32), out_loglik: wp.array2d(dtype=wp.float32),
+              active: wp.array(dtype=wp.int32)):
         p, c, b = wp.tid()
-        if b % wp.static(beam_stride) != 0:
+        if b % wp.static(beam_stride) != 0 or active[p] == 0:
             return
         r = ranges[b]
         if not (r == r) or r <= 0.0 or r > usable:
@@ -186,6 +187,53 @@ def copy_maps_kernel(src: wp.array3d(dtype=wp.float32), dst: wp.array3d(dtype=wp
     dst[p, iy, ix] = src[parent[p], iy, ix]
 
 
+@wp.func
+def move(m: int) -> wp.vec3:
+    """The 6 hill-climbing moves in units of the current steps: +-x, +-y, +-theta (map frame)."""
+    if m == 0:
+        return wp.vec3(1.0, 0.0, 0.0)
+    if m == 1:
+        return wp.vec3(-1.0, 0.0, 0.0)
+    if m == 2:
+        return wp.vec3(0.0, 1.0, 0.0)
+    if m == 3:
+        return wp.vec3(0.0, -1.0, 0.0)
+    if m == 4:
+        return wp.vec3(0.0, 0.0, 1.0)
+    return wp.vec3(0.0, 0.0, -1.0)
+
+
+@wp.kernel
+def climb_candidates_kernel(pose: wp.array(dtype=wp.vec3), steps: wp.array(dtype=wp.vec3),
+                            cand: wp.array2d(dtype=wp.vec3)):
+    p, m = wp.tid()
+    cand[p, m] = pose[p] + wp.cw_mul(move(m), steps[p])
+
+
+@wp.kernel
+def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype=wp.float32),
+                        pose: wp.array(dtype=wp.vec3), best: wp.array(dtype=wp.float32),
+                        steps: wp.array(dtype=wp.vec3), halvings: wp.array(dtype=wp.int32),
+                        active: wp.array(dtype=wp.int32), iterations: int):
+    """Take the best move if it raises the score, else halve the steps; a particle is done after
+    ``iterations`` halvings (GMapping's optimize)."""
+    p = wp.tid()
+    if active[p] == 0:
+        return
+    k = int(0)
+    for m in range(1, 6):
+        if score[p, m] > score[p, k]:
+            k = m
+    if score[p, k] > best[p]:
+        pose[p] = cand[p, k]
+        best[p] = score[p, k]
+    else:
+        steps[p] = 0.5 * steps[p]
+        halvings[p] = halvings[p] + 1
+        if halvings[p] >= iterations:
+            active[p] = 0
+
+
 class ParticleMaps:
     """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0))."""
 
@@ -241,15 +289,20 @@ class Scorer:
                                         float(null_likelihood), float(free_delta_m), int(lskip) + 1)
 
     def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
-                 score: wp.array, loglik: wp.array) -> None:
-        """candidates [P, C] (vec3); fills score and loglik [P, C] (zeroed here)."""
+                 score: wp.array, loglik: wp.array, active: wp.array | None = None) -> None:
+        """candidates [P, C] (vec3); fills score and loglik [P, C] (zeroed here); ``active`` [P] (int32):
+        particles marked 0 are skipped (all scored when None)."""
         a = maps.arrays
         score.zero_()
         loglik.zero_()
         P, C = candidates.shape
+        if active is None:
+            if getattr(self, "_all", None) is None or self._all.shape[0] != P:
+                self._all = wp.ones(P, dtype=wp.int32, device=self.device)
+            active = self._all
         wp.launch(self.kernel, (P, C, ranges.shape[0]),
                   [candidates, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
-                   a["visits"], a["hits"], a["sx"], a["sy"], score, loglik], device=self.device)
+                   a["visits"], a["hits"], a["sx"], a["sy"], score, loglik, active], device=self.device)
 
 
 class GmappingMotion:

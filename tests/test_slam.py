@@ -177,3 +177,20 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
     assert rows.shape == (300, 8)
     for f in ("map.pgm", "map.yaml", "map.png", "neff.csv", "config.yaml", "manifest.json"):
         assert (out / f).is_file(), f
+
+
+def test_device_hill_climbing_matches_the_host_twin(rng):
+    log = _sim(10.0)
+    rbpf = _matcher(log, P=6)
+    rbpf.start(log.ground_truth[0], log.ranges_m[0])
+    for k in (5, 10):
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (6, 1)).astype(np.float32), dtype=wp.vec3, device="cpu"))
+        rbpf._set_ranges(log.ranges_m[k])
+        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    rbpf._set_ranges(log.ranges_m[20])
+    start = (log.ground_truth[20] + rng.normal(0, [0.1, 0.1, 0.04], (6, 3))).astype(np.float32).astype(np.float64)
+    ours, score, _ = rbpf.match(start)
+    want, want_score, rounds = twin.hill_climb(lambda c: rbpf.evaluate(c)[0], start, 0.05, 0.05, 5)
+    close = np.all(np.abs(ours - want) < [1e-3, 1e-3, 1e-3], axis=1)
+    assert close.sum() >= 5, f"seed {rng.seed}: {ours - want}"  # float32 poses may tip one tie
+    assert np.allclose(score[close], want_score[close], rtol=1e-4)

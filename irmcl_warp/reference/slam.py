@@ -96,3 +96,32 @@ def motion_std(delta, srr=0.1, srt=0.2, str_=0.1, stt=0.2):
     sxy = 0.3 * srr
     return np.array([srr * ax + str_ * at + sxy * ay, srr * ay + str_ * at + sxy * ax,
                      stt * at + srt * np.hypot(delta[0], delta[1])])
+
+
+MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
+
+
+def hill_climb(evaluate, start, lstep: float, astep: float, iterations: int, max_rounds: int = 200):
+    """GMapping's matcher search for P poses at once: try the 6 moves (+-x, +-y, +-theta) of the current steps;
+    take the best if it raises the score, else halve the steps, ``iterations`` times. ``evaluate(cand
+    [P, C, 3]) -> scores [P, C]``. Returns (poses, scores, rounds)."""
+    pose = np.array(start, np.float64)
+    P = len(pose)
+    best = evaluate(pose[:, None])[:, 0]
+    steps = np.tile([lstep, lstep, astep], (P, 1)).astype(np.float64)
+    halvings = np.zeros(P, int)
+    rounds = 0
+    while (halvings < iterations).any() and rounds < max_rounds:
+        rounds += 1
+        cand = pose[:, None, :] + MOVES[None] * steps[:, None, :]
+        score = evaluate(cand)
+        k = np.argmax(score, 1)
+        top = score[np.arange(P), k]
+        active = halvings < iterations
+        better = active & (top > best)
+        pose[better] = cand[better, k[better]]
+        best[better] = top[better]
+        worse = active & ~better
+        steps[worse] *= 0.5
+        halvings[worse] += 1
+    return pose, best, rounds

@@ -33,8 +33,6 @@ from irmcl_warp.geometry import compose, relative, wrap_angle
 from kernels import SLAM, pick_device
 from kernels.slam import ParticleMaps
 
-MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
-
 
 @dataclass
 class StepStats:
@@ -166,30 +164,43 @@ class RBPF:
         self._record(k, parents)
         return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
 
-    def match(self, start: np.ndarray, max_rounds: int = 200):
-        """GMapping's hill climbing for every particle at once: try the 6 moves of the current step sizes;
-        take the best if it raises the score, else halve the steps, `iterations` times."""
-        c = self.cfg
-        pose = start.copy()
-        best = self.evaluate(pose[:, None])[0][:, 0]
-        steps = np.tile([c.lstep, c.lstep, c.astep], (self.P, 1)).astype(np.float64)
-        halvings = np.zeros(self.P, int)
+    def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8):
+        """GMapping's hill climbing for every particle at once, on the device: each round builds the 6 moves
+        of the current step sizes (one launch), scores all particles x moves x beams (one launch) and takes
+        the best move if it raises the score, else halves the steps (one launch); a particle stops after
+        ``iterations`` halvings. The host looks at the active flags every ``check_every`` rounds only.
+        Returns (poses [P, 3], scores [P], rounds). Twin: irmcl_warp/reference/slam.py ``hill_climb``."""
+        from kernels.slam import climb_candidates_kernel, climb_update_kernel
+
+        c, d, P = self.cfg, self.device, self.P
+        if not hasattr(self, "_climb"):
+            self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
+                               steps=wp.zeros(P, dtype=wp.vec3, device=d), halvings=wp.zeros(P, dtype=wp.int32, device=d),
+                               active=wp.zeros(P, dtype=wp.int32, device=d))
+        st = self._climb
+        st["pose"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
+        st["steps"].assign(wp.array(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32), dtype=wp.vec3,
+                                    device=d))
+        st["halvings"].zero_()
+        st["active"].fill_(1)
+        cand1, score1, loglik1 = self._buf(1)
+        wp.copy(cand1.flatten(), st["pose"])
+        self.scorer(self.maps, cand1, self.T_base_laser, self.ranges, self.angles, score1, loglik1)
+        wp.copy(st["best"], score1.flatten())
+        cand, score, loglik = self._buf(6)
         rounds = 0
-        while (halvings < c.iterations).any() and rounds < max_rounds:
-            rounds += 1
-            cand = pose[:, None, :] + MOVES[None] * steps[:, None, :]
-            score = self.evaluate(cand)[0]
-            k = np.argmax(score, 1)
-            top = score[np.arange(self.P), k]
-            active = halvings < c.iterations
-            better = active & (top > best)
-            pose[better] = cand[better, k[better]]
-            best[better] = top[better]
-            worse = active & ~better
-            steps[worse] *= 0.5
-            halvings[worse] += 1
+        while rounds < max_rounds:
+            for _ in range(check_every):
+                wp.launch(climb_candidates_kernel, (P, 6), [st["pose"], st["steps"], cand], device=d)
+                self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik, st["active"])
+                wp.launch(climb_update_kernel, P, [cand, score, st["pose"], st["best"], st["steps"], st["halvings"],
+                                                   st["active"], int(c.iterations)], device=d)
+                rounds += 1
+            if not st["active"].numpy().any():
+                break
+        pose = st["pose"].numpy().astype(np.float64)
         pose[:, 2] = wrap_angle(pose[:, 2])
-        return pose, best, rounds
+        return pose, st["best"].numpy().astype(np.float64), rounds
 
     def gaussian_proposal(self, matched: np.ndarray, sampled: np.ndarray, moved: np.ndarray):
         """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match; new pose
