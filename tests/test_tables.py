@@ -89,3 +89,16 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     ours = [l for l in lines if "paper + selective" in l]
     assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |"]
     assert any("*released C++, derived/intel.fileorder*" in l and "10/10" in l for l in lines)
+
+
+def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path):
+    from eval.plots import particles_vs_success
+
+    runs = {("gmapping_intel", f"slam-paper-selective-{n}p-seed{s}"): {
+        "dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n,
+        "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0}} for n in (5, 15) for s in range(3)}
+    runs[("gmapping_fr079", "slam-x")] = {"dataset": "fr079", "proposal": "paper", "resample": "selective",
+                                          "particles": 30, "relations": "not scored"}
+    assert particles_vs_success(runs, "fr079", tmp_path / "fr079.png") is None
+    out = particles_vs_success(runs, "intel", tmp_path / "intel.png")
+    assert out.is_file() and out.stat().st_size > 5000

@@ -1,0 +1,69 @@
+"""``python -m eval.plots``: every figure, generated from the runs' metrics.json files (results/ and outputs/,
+the latter winning) into docs/figures/.
+
+* slam_particles_vs_success_<dataset>.png: GMapping's converged runs (relations error < 0.15 m) over seeds
+  against the particle count, per proposal and resampling (Grisetti et al. 2007, Fig. 7 style).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+from pathlib import Path
+
+from eval.tables import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam
+from irmcl_warp.outputs import save_figure
+
+
+def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = defaultdict(lambda: defaultdict(list))
+    for (_, _), m in runs.items():
+        if m["dataset"] == dataset and isinstance(m.get("relations"), dict):
+            groups[f"{m['proposal']} + {m['resample']}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
+    if not groups:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    markers = "osD^v"
+    for i, (name, by_n) in enumerate(sorted(groups.items())):
+        ns = sorted(by_n)
+        rate = [100 * sum(e < CONVERGED_M for e in by_n[n]) / len(by_n[n]) for n in ns]
+        line, = ax.plot(ns, rate, markers[i % len(markers)] + "-", label=name, alpha=0.85)
+        for n, r in zip(ns, rate):  # k/n under each point, staggered per series
+            ax.annotate(f"{sum(e < CONVERGED_M for e in by_n[n])}/{len(by_n[n])}", (n, r), textcoords="offset points",
+                        xytext=(0, -11 - 9 * i), ha="center", fontsize=7, color=line.get_color())
+    ax.set_xscale("log")
+    ax.minorticks_off()
+    ax.set_xticks(sorted({n for g in groups.values() for n in g}))
+    ax.get_xaxis().set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.set_ylim(-40, 105)
+    ax.set_yticks(range(0, 101, 20))
+    ax.set_xlabel("particles")
+    ax.set_ylabel(f"converged seeds (%), relations error < {CONVERGED_M} m")
+    ax.set_title(f"GMapping on {dataset}: success vs particle count")
+    ax.legend(fontsize=8, loc="center right")
+    ax.grid(alpha=0.3)
+    return save_figure(fig, out)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m eval.plots")
+    ap.add_argument("--out", default=str(REPO / "docs" / "figures"))
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = collect_slam(SLAM_ROOTS)
+    made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
+            if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
+    for p in made:
+        print(f"-> {p}")
+    if not made:
+        raise SystemExit("no SLAM results under results/slam or outputs (run python -m irmcl_warp.slam)")
+
+
+if __name__ == "__main__":
+    main()
