@@ -25,6 +25,7 @@ import numpy as np
 import warp as wp
 
 from kernels import SLAM, pick_device
+from kernels.weighting import laser_pose
 
 UNKNOWN = -1.0
 
@@ -45,14 +46,6 @@ def cell_of(x: float, y: float, origin: wp.vec2, res: float) -> wp.vec2i:
     return wp.vec2i(int(wp.floor((x - origin[0]) / res)), int(wp.floor((y - origin[1]) / res)))
 
 
-@wp.func
-def laser_of(pose: wp.vec3, T_base_laser: wp.vec3) -> wp.vec3:
-    c = wp.cos(pose[2])
-    s = wp.sin(pose[2])
-    return wp.vec3(pose[0] + c * T_base_laser[0] - s * T_base_laser[1],
-                   pose[1] + s * T_base_laser[0] + c * T_base_laser[1], pose[2] + T_base_laser[2])
-
-
 @wp.kernel
 def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
                      angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
@@ -64,7 +57,7 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
         return
     hit = r <= usable
     r = wp.min(r, usable)
-    lp = laser_of(poses[p], T_base_laser)
+    lp = laser_pose(poses[p], T_base_laser)
     a = lp[2] + angles[b]
     ex = lp[0] + r * wp.cos(a)
     ey = lp[1] + r * wp.sin(a)
@@ -128,7 +121,7 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
         r = ranges[b]
         if not (r == r) or r <= 0.0 or r > usable:
             return
-        lp = laser_of(poses[p, c], T_base_laser)
+        lp = laser_pose(poses[p, c], T_base_laser)
         a = lp[2] + angles[b]
         ca = wp.cos(a)
         sa = wp.sin(a)
