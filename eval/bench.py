@@ -1,5 +1,6 @@
 """``python -m eval.bench train [--device cuda] [--batch 1024] [--samples 256] [--steps 10]``
-(``python -m eval.bench mcl ...``: the MCL step, eval/bench_mcl.py.)
+(``python -m eval.bench mcl ...``: the MCL step, eval/bench_mcl.py; ``python -m eval.bench slam ...``: the
+GMapping RBPF, eval/bench_slam.py.)
 
 Side-by-side speed of NOF training on one device, in one run: rays/s of a whole training step
 (encode + MLP forward, composite, loss, backward, Adam) with the Warp renderer and with
@@ -124,14 +125,17 @@ def main(argv=None):
     t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
     t.add_argument("--tf32", action="store_true")
     t.add_argument("--out", default="outputs/bench")
-    from eval.bench_mcl import add_parser, run_mcl_bench
+    from eval import bench_mcl, bench_slam
 
-    add_parser(sub)
+    bench_mcl.add_parser(sub)
+    bench_slam.add_parser(sub)
     a = ap.parse_args(argv)
     if a.what == "train":
         run_train_bench(a)
     elif a.what == "mcl":
-        run_mcl_bench(a)
+        bench_mcl.run_mcl_bench(a)
+    elif a.what == "slam":
+        bench_slam.run_slam_bench(a)
 
 
 if __name__ == "__main__":

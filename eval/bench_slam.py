@@ -1,0 +1,76 @@
+"""``python -m eval.bench slam [--exp gmapping_sim] [--particles 30] [--device cpu|cuda:0] [--scans N]``
+
+Wall time of GMapping's RBPF over a whole log (or its first N scans) and the time per processed scan split
+into motion (all scans since the last processed one), scan matching, weights + resampling and map
+integration, per particle count. Prints a table and writes outputs/bench/slam-<exp>-<device>.json. The
+default log is the simulator (no data needed); real logs need their stream cache or raw files.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+from irmcl_warp.outputs import write_json
+
+
+def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
+    from hydra import compose, initialize_config_dir
+
+    from irmcl_warp.config import register
+    from irmcl_warp.localize import load_stream
+    from irmcl_warp.nof.prepare import far_m
+    from irmcl_warp.slam.rbpf import RBPF
+    from irmcl_warp.slam.stage import map_frame
+
+    register()
+    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
+        cfg = compose("config", overrides=[f"+exp={exp}", f"device={device}", f"slam.particles={particles}",
+                                           *overrides])
+    s = cfg.slam
+    log = load_stream(cfg)
+    n = len(log) if scans is None else min(int(scans), len(log))
+    usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
+    shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
+    rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
+    rbpf.start(log.odom[0], log.ranges_m[0])
+    t0 = time.perf_counter()
+    processed = sum(rbpf.step(k, log.odom[k], log.ranges_m[k]).processed for k in range(1, n))
+    wall = time.perf_counter() - t0
+    return {"exp": exp, "particles": particles, "device": rbpf.device, "scans": n, "processed_scans": processed,
+            "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}
+
+
+def run_slam_bench(a) -> list[dict]:
+    from kernels import pick_device
+
+    device = pick_device(a.device or "auto")
+    rows = [run_one(a.exp, p, device, a.scans, a.override) for p in a.particles]
+    name = platform.processor() or "cpu"
+    if device.startswith("cuda"):
+        import torch
+
+        name = torch.cuda.get_device_name()
+    print(f"\nGMapping RBPF on {name} ({device}), {a.exp}, {rows[0]['scans']} scans")
+    print("| particles | processed scans | wall (s) | matching | motion | weights + resampling | integration |  (ms per processed scan)")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        t = r["ms_per_processed_scan"]
+        print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} | {t['matching']:.1f} | {t['motion']:.1f} | "
+              f"{t['weights_resampling']:.1f} | {t['integration']:.1f} |")
+    out = Path(a.out) / f"slam-{a.exp}-{device.split(':')[0]}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, {"device": device, "device_name": name, "argv": vars(a), "rows": rows})
+    print(f"-> {out}")
+    return rows
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("slam", help="wall time of GMapping's RBPF over a log, per part of a processed scan")
+    p.add_argument("--exp", default="gmapping_sim")
+    p.add_argument("--particles", type=int, nargs="+", default=[30])
+    p.add_argument("--device", default=None)
+    p.add_argument("--scans", type=int, default=None, help="only the first N scans")
+    p.add_argument("--override", nargs="*", default=[], help="more Hydra overrides, e.g. sim.duration_s=60")
+    p.add_argument("--out", default="outputs/bench")
