@@ -140,7 +140,10 @@ class RBPF:
                 new = np.where(ok[:, None], matched, sampled)
                 gain = self.evaluate(new[:, None])[1][:, 0]
             else:
-                new, gain = self.gaussian_proposal(matched, sampled, moved)
+                # the motion prior is centred on each particle's noise-free odometry prediction from its pose
+                # at the last processed scan (the sampled pose already carries the motion noise once)
+                predicted = compose(self.history.poses[-1], np.broadcast_to(moved, (self.P, 3)))
+                new, gain = self.gaussian_proposal(matched, predicted, moved)
                 fallback = self.evaluate(sampled[:, None])[1][:, 0]
                 new, gain = np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback)
         t = self._tick("matching", t)
@@ -202,13 +205,14 @@ class RBPF:
         pose[:, 2] = wrap_angle(pose[:, 2])
         return pose, st["best"].numpy().astype(np.float64), rounds
 
-    def gaussian_proposal(self, matched: np.ndarray, sampled: np.ndarray, moved: np.ndarray):
-        """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match; new pose
-        ~ N(mu, Sigma) of the normalised tau; log-weight gain = log sum tau_j."""
+    def gaussian_proposal(self, matched: np.ndarray, predicted: np.ndarray, moved: np.ndarray):
+        """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match, the motion
+        prior a Gaussian around ``predicted`` with GMapping's noise for the step ``moved``; new pose ~ N(mu,
+        Sigma) of the normalised tau; log-weight gain = log sum tau_j."""
         cand = matched[:, None, :] + self.grid_offsets[None]  # [P, K, 3]
         loglik = self.evaluate(cand)[1]
-        std = np.maximum(motion_std(moved, self.cfg), [0.01, 0.01, 0.005])  # the prior around the odometry sample
-        d = cand - sampled[:, None, :]
+        std = np.maximum(motion_std(moved, self.cfg), [0.01, 0.01, 0.005])
+        d = cand - predicted[:, None, :]
         d[..., 2] = wrap_angle(d[..., 2])
         log_prior = -0.5 * np.sum((d / std) ** 2, -1) - np.sum(np.log(std))
         mu, cov, log_eta = fit_gaussian(cand, loglik + log_prior)
