@@ -173,13 +173,6 @@ def motion_kernel(poses: wp.array(dtype=wp.vec3), delta: wp.vec3, srr: float, sr
     poses[i] = wp.vec3(p[0] + c * nx - s * ny, p[1] + s * nx + c * ny, wp.atan2(wp.sin(t), wp.cos(t)))
 
 
-@wp.kernel
-def copy_maps_kernel(src: wp.array3d(dtype=wp.float32), dst: wp.array3d(dtype=wp.float32),
-                     parent: wp.array(dtype=wp.int32)):
-    p, iy, ix = wp.tid()
-    dst[p, iy, ix] = src[parent[p], iy, ix]
-
-
 @wp.func
 def move(m: int) -> wp.vec3:
     """The 6 hill-climbing moves in units of the current steps: +-x, +-y, +-theta (map frame)."""
@@ -227,6 +220,20 @@ def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype
             active[p] = 0
 
 
+def keep_slots(parents: np.ndarray) -> np.ndarray:
+    """The same multiset of parents, ordered so that every chosen parent j sits at slot j; the extra
+    copies fill the slots of the parents nobody chose. No slot is then both overwritten and copied from."""
+    parents = np.asarray(parents, int)
+    P = len(parents)
+    counts = np.bincount(parents, minlength=P)
+    order = np.full(P, -1)
+    chosen = counts > 0
+    order[chosen] = np.flatnonzero(chosen)
+    extra = np.repeat(np.arange(P), np.maximum(counts - 1, 0))
+    order[~chosen] = extra
+    return order
+
+
 class ParticleMaps:
     """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0))."""
 
@@ -239,20 +246,23 @@ class ParticleMaps:
         self.device = pick_device(device)
         self.origin, self.res = wp.vec2(float(origin_xy[0]), float(origin_xy[1])), float(resolution_m)
         self.arrays = {f: wp.zeros((num_particles, H, W), dtype=wp.float32, device=self.device) for f in self.FIELDS}
-        self._spare = None
 
     @property
     def shape(self):
         return self.arrays["visits"].shape
 
-    def resample(self, parents: np.ndarray) -> None:
-        """Map i becomes a copy of map parents[i] (through one spare array per field)."""
-        parent = wp.array(np.asarray(parents, np.int32), dtype=wp.int32, device=self.device)
-        if self._spare is None:
-            self._spare = wp.zeros(self.shape, dtype=wp.float32, device=self.device)
-        for f in self.FIELDS:
-            wp.launch(copy_maps_kernel, self.shape, [self.arrays[f], self._spare, parent], device=self.device)
-            self.arrays[f], self._spare = self._spare, self.arrays[f]
+    def resample(self, parents: np.ndarray) -> np.ndarray:
+        """Resample the maps: the new set holds map parents[k] once per k. Particles are exchangeable, so
+        each surviving map keeps its slot and only the slots of dropped maps receive copies (in place, one
+        contiguous block per map and field); returns the parent of each slot in the new order."""
+        order = keep_slots(parents)
+        P, H, W = self.shape
+        n = H * W
+        for dst in np.flatnonzero(order != np.arange(P)):
+            for f in self.FIELDS:
+                a = self.arrays[f].flatten()
+                wp.copy(a, a, dest_offset=int(dst) * n, src_offset=int(order[dst]) * n, count=n)
+        return order
 
     def occupancy(self, p: int) -> np.ndarray:
         """[H, W] hits / visits of map p, -1 where never visited."""

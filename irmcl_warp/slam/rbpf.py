@@ -155,8 +155,7 @@ class RBPF:
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
-            parents = low_variance(w, self.rng.uniform())
-            self.maps.resample(parents)
+            parents = self.maps.resample(low_variance(w, self.rng.uniform()))
             self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
