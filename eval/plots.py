@@ -24,7 +24,8 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
     groups = defaultdict(lambda: defaultdict(list))
     for (_, _), m in runs.items():
         if m["dataset"] == dataset and isinstance(m.get("relations"), dict):
-            groups[f"{m['proposal']} + {m['resample']}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
+            where = "" if str(m.get("device", "")).startswith("cuda") else f" ({m.get('device', '?')})"
+            groups[f"{m['proposal']} + {m['resample']}{where}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
     if not groups:
         return None
     fig, ax = plt.subplots(figsize=(7, 4.2))

@@ -95,7 +95,7 @@ def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path
     from eval.plots import particles_vs_success
 
     runs = {("gmapping_intel", f"slam-paper-selective-{n}p-seed{s}"): {
-        "dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n,
+        "dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n, "device": "cuda:0",
         "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0}} for n in (5, 15) for s in range(3)}
     runs[("gmapping_fr079", "slam-x")] = {"dataset": "fr079", "proposal": "paper", "resample": "selective",
                                           "particles": 30, "relations": "not scored"}
