@@ -210,3 +210,24 @@ def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
     assert np.all(order[np.unique(parents)] == np.unique(parents))  # survivors keep their slot
     for f in ParticleMaps.FIELDS:
         assert np.array_equal(maps.arrays[f].numpy(), before[f][order]), f
+
+
+def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
+    """Documented handling: the jump is reported in metrics.json and the filter takes it as motion."""
+    import irmcl_warp.localize as loc
+    from irmcl_warp.slam.stage import run_slam
+
+    monkeypatch.chdir(tmp_path)
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=20", "slam.particles=4"])
+    real = loc.load_stream
+
+    def jumping(cfg):
+        log = real(cfg)
+        log.odom[50:, 0] += 3.0  # 3 m in one step
+        return log
+
+    monkeypatch.setattr(loc, "load_stream", jumping)
+    m = json.loads((run_slam(cfg) / "metrics.json").read_text())
+    assert m["odometry_jumps"] == 1 and m["processed_scans"] > 5

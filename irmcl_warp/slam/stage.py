@@ -6,6 +6,10 @@ trajectory at every scan (trajectory.tum: the last processed scan's corrected po
 since then), the N_eff trace (neff.csv) and metrics.json: the relations metric of Kümmerle et al. 2009
 where the log has relations, and the trajectory error against the ground truth after a rigid alignment
 (the simulator's exact poses, or the matched corrected poses), with the raw odometry scored the same way.
+
+Odometry jumps (steps over data.max_step_m or data.max_speed_mps) are not repaired here: they are counted
+in metrics.json (``odometry_jumps``) and passed to the motion model as they are. A scan whose beam count
+differs from the first is an error (the readers' data.beam_policy can reject or resample such scans).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from omegaconf import OmegaConf
 
 from eval.metrics import relations_error
 from irmcl_warp.geometry import wrap_angle
+from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.mapping.grid import OccupancyGrid
 from irmcl_warp.mapping.mapio import atomic_write_bytes, save_map
 from irmcl_warp.nof.prepare import far_m, recorded_inputs
@@ -78,6 +83,11 @@ def run_slam(cfg) -> Path:
     s = cfg.slam
     usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
     log = load_stream(cfg)
+    jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
+    if jumps:  # documented handling: kept as the motion model's input, counted in metrics.json
+        print(f"{cfg.data.name}: {jumps} odometry steps jump (over {cfg.data.max_step_m} m or {cfg.data.max_speed_mps} "
+              f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
+              f"map there; the derived logs of ../shared/data repair known jumps")
     out = stage_dir(cfg, run_tag(s))
     shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
     rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
@@ -105,6 +115,7 @@ def run_slam(cfg) -> Path:
     save_map(best_map(rbpf, best), out / "map")
     metrics = {"dataset": cfg.data.name, "particles": s.particles, "proposal": s.proposal, "resample": s.resample,
                "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
+               "odometry_jumps": int(jumps),
                "resamplings": int(sum(r for _, _, r, _ in neff_rows)), "wall_time_s": wall,
                "time_s": dict(rbpf.timing),
                "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
