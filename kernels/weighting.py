@@ -67,8 +67,28 @@ def slab(o: float, d: float, lo: float, hi: float) -> wp.vec2:
     return wp.vec2(wp.min(a, b), wp.max(a, b))
 
 
-def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma: float, empty_below: float,
-                 eps: float = 1e-10):
+def make_likelihood_kernel(sigma: float):
+    """IR-MCL eq. 6 from the per-particle sums of |r_rendered - r_measured|: D = the sum / valid beams,
+    log w = -0.5 D^2 / sigma^2; the sums are reset for the next scan. Shared by nog_raymarch and nof_direct."""
+
+    @wp.kernel(module="unique")
+    def likelihood(err_sum: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+                   log_weights: wp.array(dtype=wp.float32)):
+        p = wp.tid()
+        n = float(0.0)
+        for b in range(measured.shape[0]):
+            m = measured[b]
+            if m == m:
+                n += 1.0
+        D = err_sum[p] / wp.max(n, 1.0)
+        err_sum[p] = 0.0  # ready for the next scan
+        log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
+
+    return likelihood
+
+
+def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, empty_below: float,
+                       eps: float = 1e-10):
     step = (far - near) / float(num_samples - 1)
     skip = empty_below > 0.0
 
@@ -118,20 +138,9 @@ def make_kernels(num_samples: int, near: float, far: float, t_min: float, sigma:
         if m == m:  # NaN: invalid beam
             wp.atomic_add(err_sum, p, wp.abs(r - m))
 
-    @wp.kernel(module="unique")
-    def likelihood(err_sum: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-                   log_weights: wp.array(dtype=wp.float32)):
-        p = wp.tid()
-        n = float(0.0)
-        for b in range(measured.shape[0]):
-            m = measured[b]
-            if m == m:
-                n += 1.0
-        D = err_sum[p] / wp.max(n, 1.0)
-        err_sum[p] = 0.0  # ready for the next scan
-        log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
+    return render
 
-    return render, likelihood
+
 
 
 def pack_empty_space(occupancy: np.ndarray, res: float, empty_below: float) -> np.ndarray:
@@ -167,8 +176,8 @@ class NogRaymarch:
         self.num_beams = num_beams
         self.rendered = wp.zeros((num_particles, num_beams), dtype=wp.float32, device=self.device)
         self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
-        self.render_kernel, self.likelihood_kernel = make_kernels(num_samples, near_m, far_m, t_min, sigma_m,
-                                                                  empty_below)
+        self.render_kernel = make_render_kernel(num_samples, near_m, far_m, t_min, empty_below)
+        self.likelihood_kernel = make_likelihood_kernel(sigma_m)
 
     def _launch(self, particles, T_base_laser, angles, measured):
         if particles.shape[0] > self.err_sum.shape[0]:
@@ -225,7 +234,7 @@ class NofDirect:
         self.z = torch.linspace(near_m, far_m, num_samples, device=self.torch_device)
         self.compositor = RENDER.build("composite", normalize=True)
         self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
-        self.likelihood_kernel = make_kernels(2, near_m, far_m, 0.0, sigma_m, 0.0)[1]
+        self.likelihood_kernel = make_likelihood_kernel(sigma_m)
 
     def render(self, particles: wp.array, T_base_laser, angles: wp.array):
         """Rendered ranges [P, B] as a torch tensor."""
