@@ -14,7 +14,8 @@ from hydra import compose, initialize_config_dir
 from irmcl_warp.config import SlamConfig, register
 from irmcl_warp.reference import slam as twin
 from irmcl_warp.sim import simulate
-from irmcl_warp.slam import RBPF, low_variance
+from irmcl_warp.reference.resample import low_variance_indices
+from irmcl_warp.slam import RBPF
 from irmcl_warp.slam.rbpf import fit_gaussian
 from kernels import SLAM
 from kernels.slam import ParticleMaps
@@ -140,7 +141,7 @@ def test_gaussian_fit_matches_brute_force(rng):
 def test_low_variance_resampling_keeps_floor_or_ceil_of_each_share(rng):
     w = rng.gamma(0.5, 1.0, 30)
     w /= w.sum()
-    parents = low_variance(w, rng.uniform())
+    parents = low_variance_indices(np.log(w), rng.uniform())
     counts = np.bincount(parents, minlength=30)
     assert counts.sum() == 30 and np.all(np.abs(counts - 30 * w) < 1.0 + 1e-9), f"seed {rng.seed}"
     cfg = SlamConfig(particles=30)
@@ -148,10 +149,11 @@ def test_low_variance_resampling_keeps_floor_or_ceil_of_each_share(rng):
     from irmcl_warp.slam.rbpf import RBPF as R
 
     smooth = R.smoothed_weights(rbpf_like)  # tempered by 1 / (ogain N): flatter than the raw weights
-    neff = 1 / np.sum(smooth ** 2)
+    want = np.exp((rbpf_like.log_w - rbpf_like.log_w.max()) / (3.0 * 30))
+    assert np.allclose(smooth, want / want.sum(), rtol=1e-12)
     raw = np.exp(rbpf_like.log_w - rbpf_like.log_w.max())
     raw /= raw.sum()
-    assert 1 / np.sum(raw ** 2) < neff <= 30
+    assert 1 / np.sum(raw ** 2) < 1 / np.sum(smooth ** 2)
 
 
 def test_a_scan_of_another_beam_count_is_a_clear_error():

@@ -1,5 +1,5 @@
 """Grid SLAM: GMapping's Rao-Blackwellized particle filter (rbpf.py) and its stage (stage.py)."""
 
-from irmcl_warp.slam.rbpf import RBPF, low_variance, per_scan_poses  # noqa: F401
+from irmcl_warp.slam.rbpf import RBPF, per_scan_poses  # noqa: F401
 
-__all__ = ["RBPF", "low_variance", "per_scan_poses"]
+__all__ = ["RBPF", "per_scan_poses"]

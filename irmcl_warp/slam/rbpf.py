@@ -30,6 +30,7 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.geometry import compose, relative, wrap_angle
+from irmcl_warp.reference.resample import low_variance_indices  # P is small: the numpy draw is the filter's
 from kernels import SLAM, pick_device
 from kernels.slam import ParticleMaps
 
@@ -155,7 +156,7 @@ class RBPF:
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
-            parents = self.maps.resample(low_variance(w, self.rng.uniform()))
+            parents = self.maps.resample(low_variance_indices(np.log(w), self.rng.uniform()))
             self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
@@ -278,14 +279,6 @@ def motion_std(delta, cfg) -> np.ndarray:
     sxy = 0.3 * cfg.srr
     return np.array([cfg.srr * ax + cfg.str * at + sxy * ay, cfg.srr * ay + cfg.str * at + sxy * ax,
                      cfg.stt * at + cfg.srt * np.hypot(delta[0], delta[1])])
-
-
-def low_variance(w: np.ndarray, offset: float) -> np.ndarray:
-    """Parent index of each new particle: N evenly spaced pointers (offset + i) / N into the cumulative
-    normalised weights (Thrun et al. Table 4.4)."""
-    cdf = np.cumsum(w / w.sum())
-    u = (offset + np.arange(len(w))) / len(w)
-    return np.minimum(np.searchsorted(cdf, u, side="right"), len(w) - 1)
 
 
 def per_scan_poses(stamps_idx: np.ndarray, processed_idx: np.ndarray, processed_poses: np.ndarray, odom: np.ndarray):
