@@ -20,21 +20,15 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
 
     from irmcl_warp.config import register
     from irmcl_warp.localize import load_stream
-    from irmcl_warp.nof.prepare import far_m
-    from irmcl_warp.slam.rbpf import RBPF
-    from irmcl_warp.slam.stage import map_frame
+    from irmcl_warp.slam.stage import start_filter
 
     register()
     with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
         cfg = compose("config", overrides=[f"+exp={exp}", f"device={device}", f"slam.particles={particles}",
                                            *overrides])
-    s = cfg.slam
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
-    usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
-    shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
-    rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
-    rbpf.start(log.odom[0], log.ranges_m[0])
+    rbpf = start_filter(cfg, log, device)
     t0 = time.perf_counter()
     processed = sum(rbpf.step(k, log.odom[k], log.ranges_m[k]).processed for k in range(1, n))
     wall = time.perf_counter() - t0

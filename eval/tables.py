@@ -91,10 +91,15 @@ def synthesis_table(runs: dict) -> str:
 def collect_localization(roots=MCL_ROOTS) -> dict:
     """{(exp, run folder): metrics} of the localize stage; later roots override earlier ones. Folders that do
     not follow the run-tag naming (older layouts) are left out."""
+    return _collect_runs(roots, "localize-*", TAG.match)
+
+
+def _collect_runs(roots, folders: str, keep=lambda name: True) -> dict:
+    """{(exp, run folder): metrics} of root/<exp>/<folders>/metrics.json; later roots override earlier ones."""
     runs = {}
     for root in roots:
-        for f in sorted(Path(root).glob("*/localize-*/metrics.json")):
-            if TAG.match(f.parent.name):
+        for f in sorted(Path(root).glob(f"*/{folders}/metrics.json")):
+            if keep(f.parent.name):
                 runs[(f.parent.parent.name, f.parent.name)] = _load(f)
     return runs
 
@@ -159,11 +164,7 @@ def kidnap_table(runs: dict) -> str:
 
 def collect_slam(roots=SLAM_ROOTS) -> dict:
     """{(exp, run folder): metrics} of the slam stage; later roots override earlier ones."""
-    runs = {}
-    for root in roots:
-        for f in sorted(Path(root).glob("*/slam-*/metrics.json")):
-            runs[(f.parent.parent.name, f.parent.name)] = _load(f)
-    return runs
+    return _collect_runs(roots, "slam-*")
 
 
 def slam_table(runs: dict) -> str:

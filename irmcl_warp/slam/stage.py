@@ -46,6 +46,16 @@ def map_frame(odom: np.ndarray, margin_m: float, res: float, max_cells: int = 60
     return (H, W), (float(lo[0]), float(lo[1]))
 
 
+def start_filter(cfg, log, device: str) -> RBPF:
+    """The RBPF of ``cfg.slam`` for ``log`` (map framed on its odometry), started on its first scan."""
+    s = cfg.slam
+    usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
+    shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
+    rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
+    rbpf.start(log.odom[0], log.ranges_m[0])
+    return rbpf
+
+
 def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
     """RMSE of positions after the rigid 2D alignment (Horn / Umeyama without scale) of est onto gt, and the
     mean absolute yaw error after it; over poses where both are finite."""
@@ -81,7 +91,6 @@ def run_slam(cfg) -> Path:
 
     started, device = time.time(), pick_device(cfg.device)
     s = cfg.slam
-    usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
     log = load_stream(cfg)
     jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
     if jumps:  # documented handling: kept as the motion model's input, counted in metrics.json
@@ -89,9 +98,7 @@ def run_slam(cfg) -> Path:
               f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
               f"map there; the derived logs of ../shared/data repair known jumps")
     out = stage_dir(cfg, run_tag(s))
-    shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
-    rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
-    rbpf.start(log.odom[0], log.ranges_m[0])
+    rbpf = start_filter(cfg, log, device)
     neff_rows, t0 = [], time.perf_counter()
     try:
         from tqdm import tqdm
