@@ -1,9 +1,11 @@
 """The particle filter: motion -> weighting -> (selective) resampling -> estimate, every part a Warp kernel
-chosen from a registry once, in ``__init__``; particle arrays are allocated once and only launched on.
+chosen from a registry once, in ``__init__``; particle arrays are allocated once (again only when
+``reduce`` shrinks the set) and only launched on.
 
 Per step the host sends the odometry step and the measured ranges of the chosen beams, and reads back
-five sums (weighted mean and N_eff). Resampling runs when N_eff < ``resample_threshold`` * N
-(selective resampling; 1.0 = every step).
+once after everything is launched: the eight weight sums (mean, N_eff, spread) and the estimate's sums.
+Resampling runs when N_eff < ``resample_threshold`` * N (selective resampling; 1.0 = every step),
+decided on the device. With recovery on, the log mean likelihood is read back as well.
 """
 
 from __future__ import annotations
