@@ -23,6 +23,7 @@ class DataConfig:
     laser_frame_path: Optional[str] = None  # a bag whose /tf_static gives base->laser (CARMEN logs carry none)
     ground_truth_path: Optional[str] = None  # matched CSV, or a GMapping-corrected CARMEN log
     relations_path: Optional[str] = None  # Kümmerle et al. 2009 relations
+    relation_stamps_path: Optional[str] = None  # g2o file whose laser stamps stand in for synthetic log stamps
     splits_path: Optional[str] = None  # benchmark split ids (stamps)
     scan_topic: Optional[str] = None  # bags: auto when the bag has exactly one LaserScan topic
     odom_topic: Optional[str] = None

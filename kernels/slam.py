@@ -1,20 +1,23 @@
 """Grid SLAM kernels for the Rao-Blackwellized particle filter (GMapping, Grisetti et al. T-RO 2007):
 per-particle maps held as one [P, H, W] set of arrays, updated and read by one launch for all particles.
 
-Cells are GMapping's point accumulators: ``visits`` (times a beam passed or ended in the cell), ``hits``
-(times a beam ended in it) and the sum of the hit points (``sx``, ``sy``), so that a cell knows where in
-it the walls were seen. Occupancy = hits / visits, -1 where never visited.
+Cells are GMapping's point accumulators, one vec4 per cell (visits, hits, sx, sy): the times a beam passed
+or ended in the cell, the times a beam ended in it, and the sum of those end points, so that a cell knows
+where in it the walls were seen. Occupancy = hits / visits, -1 where never visited. One vec4 rather than
+four arrays: a lookup reads one 16-byte value (on the CPU, the matcher's cost is these cache misses).
 
 * ``SLAM["integrate"]``: one thread per (particle, beam) walks the cells from the laser to the end point
-  (a DDA over the cell grid), adding a visit to each traversed cell and a hit (with its point) to the end
-  cell; beams longer than the usable range mark free space up to it and no hit.
+  (a DDA over the cell grid), adding a visit to each traversed cell and a visit and a hit (with its point)
+  to the end cell; beams longer than the usable range mark free space up to it and leave the cell there
+  untouched (the released code's registerScan).
 * ``SLAM["score"]``: the matcher's measurement model at candidate poses [P, C] (one thread per
   particle x candidate x beam): for each beam end point, the cells of a (2k+1)^2 window around it that
   are occupied (> fullness) while the cell one free-delta before the end point, shifted alike, is not;
   mu = the end point minus the nearest such cell's mean hit point. Adds exp(-|mu|^2 / sigma) to the score
   and -|mu|^2 / lsigma (or null_likelihood / lsigma without a match) to the log-likelihood.
 * ``SLAM["motion"]``: GMapping's odometry model: the odometry step in the old pose's frame, each
-  component perturbed by a Gaussian whose std grows with the motion (srr, srt, str, stt).
+  component perturbed by a Gaussian whose std grows with the motion (srr, srt, str, stt). It takes the
+  steps of several scans at once and applies them in order (one launch per processed scan, not per scan).
 
 Numpy twins: irmcl_warp/reference/slam.py.
 """
@@ -31,14 +34,18 @@ UNKNOWN = -1.0
 
 
 @wp.func
-def occupancy(hits: wp.array3d(dtype=wp.float32), visits: wp.array3d(dtype=wp.float32), p: int, ix: int,
-              iy: int) -> float:
-    if ix < 0 or iy < 0 or ix >= visits.shape[2] or iy >= visits.shape[1]:
+def occupancy(c: wp.vec4) -> float:
+    if c[0] <= 0.0:
         return UNKNOWN
-    v = visits[p, iy, ix]
-    if v <= 0.0:
-        return UNKNOWN
-    return hits[p, iy, ix] / v
+    return c[1] / c[0]
+
+
+@wp.func
+def cell_at(cells: wp.array3d(dtype=wp.vec4), p: int, ix: int, iy: int) -> wp.vec4:
+    """The cell, or an unvisited one outside the map."""
+    if ix < 0 or iy < 0 or ix >= cells.shape[2] or iy >= cells.shape[1]:
+        return wp.vec4(0.0)
+    return cells[p, iy, ix]
 
 
 @wp.func
@@ -49,8 +56,7 @@ def cell_of(x: float, y: float, origin: wp.vec2, res: float) -> wp.vec2i:
 @wp.kernel
 def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
                      angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-                     visits: wp.array3d(dtype=wp.float32), hits: wp.array3d(dtype=wp.float32),
-                     sx: wp.array3d(dtype=wp.float32), sy: wp.array3d(dtype=wp.float32)):
+                     cells: wp.array3d(dtype=wp.vec4)):
     p, b = wp.tid()
     r = ranges[b]
     if not (r == r) or r <= 0.0:
@@ -63,8 +69,8 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
     ey = lp[1] + r * wp.sin(a)
     c0 = cell_of(lp[0], lp[1], origin, res)
     c1 = cell_of(ex, ey, origin, res)
-    H = visits.shape[1]
-    W = visits.shape[2]
+    H = cells.shape[1]
+    W = cells.shape[2]
     # DDA from the laser's cell to the end cell (Amanatides & Woo), the end cell excluded
     dx = ex - lp[0]
     dy = ey - lp[1]
@@ -91,86 +97,93 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
     n = wp.abs(c1[0] - c0[0]) + wp.abs(c1[1] - c0[1])
     for _ in range(n):
         if ix >= 0 and iy >= 0 and ix < W and iy < H:
-            wp.atomic_add(visits, p, iy, ix, 1.0)
+            wp.atomic_add(cells, p, iy, ix, wp.vec4(1.0, 0.0, 0.0, 0.0))
         if t_x < t_y:
             ix += step_x
             t_x += dt_x
         else:
             iy += step_y
             t_y += dt_y
-    if c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
-        wp.atomic_add(visits, p, c1[1], c1[0], 1.0)
-        if hit:
-            wp.atomic_add(hits, p, c1[1], c1[0], 1.0)
-            wp.atomic_add(sx, p, c1[1], c1[0], ex)
-            wp.atomic_add(sy, p, c1[1], c1[0], ey)
+    if hit and c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
+        wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, ex, ey))
 
 
 def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: float, null_likelihood: float,
-                      free_delta: float, beam_stride: int):
+                      free_delta: float, beam_stride: int, beams_per_thread: int):
+    """One thread per particle x candidate x ``beams_per_thread`` beams (1 on a GPU for parallelism; all
+    beams on the CPU, where Warp runs the threads one after another and a thread per beam costs its own
+    index arithmetic and atomics)."""
+
     @wp.kernel(module="unique")
     def score(poses: wp.array2d(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
               angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-              visits: wp.array3d(dtype=wp.float32), hits: wp.array3d(dtype=wp.float32),
-              sx: wp.array3d(dtype=wp.float32), sy: wp.array3d(dtype=wp.float32),
-              out_score: wp.array2d(dtype=wp.float32), out_loglik: wp.array2d(dtype=wp.float32),
-              active: wp.array(dtype=wp.int32)):
-        p, c, b = wp.tid()
-        if b % wp.static(beam_stride) != 0 or active[p] == 0:
-            return
-        r = ranges[b]
-        if not (r == r) or r <= 0.0 or r > usable:
+              cells: wp.array3d(dtype=wp.vec4), out_score: wp.array2d(dtype=wp.float32),
+              out_loglik: wp.array2d(dtype=wp.float32), active: wp.array(dtype=wp.int32)):
+        p, c, j = wp.tid()
+        if active[p] == 0:
             return
         lp = laser_pose(poses[p, c], T_base_laser)
-        a = lp[2] + angles[b]
-        ca = wp.cos(a)
-        sa = wp.sin(a)
-        ex = lp[0] + r * ca
-        ey = lp[1] + r * sa
-        hit_cell = cell_of(ex, ey, origin, res)
-        free_cell = cell_of(ex - wp.static(free_delta) * ca, ey - wp.static(free_delta) * sa, origin, res)
-        best = float(1.0e30)
-        found = int(0)
-        for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
-            for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
-                hx = hit_cell[0] + ox
-                hy = hit_cell[1] + oy
-                if occupancy(hits, visits, p, hx, hy) > wp.static(fullness):
-                    if occupancy(hits, visits, p, free_cell[0] + ox, free_cell[1] + oy) < wp.static(fullness):
-                        n = hits[p, hy, hx]
-                        mx = ex - sx[p, hy, hx] / n
-                        my = ey - sy[p, hy, hx] / n
-                        d2 = mx * mx + my * my
-                        if d2 < best:
-                            best = d2
-                        found = 1
-        if found == 1:
-            wp.atomic_add(out_score, p, c, wp.exp(-best / wp.static(sigma)))
-            wp.atomic_add(out_loglik, p, c, -best / wp.static(lsigma))
-        else:
-            wp.atomic_add(out_loglik, p, c, wp.static(null_likelihood / lsigma))
+        s = float(0.0)
+        ll = float(0.0)
+        b0 = j * wp.static(beams_per_thread)
+        b1 = wp.min(b0 + wp.static(beams_per_thread), ranges.shape[0])
+        for b in range(b0, b1):
+            r = ranges[b]
+            if b % wp.static(beam_stride) == 0 and r == r and r > 0.0 and r <= usable:
+                a = lp[2] + angles[b]
+                ca = wp.cos(a)
+                sa = wp.sin(a)
+                ex = lp[0] + r * ca
+                ey = lp[1] + r * sa
+                hit_cell = cell_of(ex, ey, origin, res)
+                free_cell = cell_of(ex - wp.static(free_delta) * ca, ey - wp.static(free_delta) * sa, origin, res)
+                best = float(1.0e30)
+                found = int(0)
+                for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+                    for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+                        h = cell_at(cells, p, hit_cell[0] + ox, hit_cell[1] + oy)
+                        # hits / visits > fullness, and the free cell's < fullness (or unvisited), without dividing
+                        if h[0] > 0.0 and h[1] > wp.static(fullness) * h[0]:
+                            f = cell_at(cells, p, free_cell[0] + ox, free_cell[1] + oy)
+                            if f[0] <= 0.0 or f[1] < wp.static(fullness) * f[0]:
+                                mx = ex - h[2] / h[1]
+                                my = ey - h[3] / h[1]
+                                d2 = mx * mx + my * my
+                                if d2 < best:
+                                    best = d2
+                                found = 1
+                if found == 1:
+                    s += wp.exp(-best / wp.static(sigma))
+                    ll += -best / wp.static(lsigma)
+                else:
+                    ll += wp.static(null_likelihood / lsigma)
+        wp.atomic_add(out_score, p, c, s)
+        wp.atomic_add(out_loglik, p, c, ll)
 
     return score
 
 
 @wp.kernel
-def motion_kernel(poses: wp.array(dtype=wp.vec3), delta: wp.vec3, srr: float, srt: float, str_: float, stt: float,
-                  seed: int):
-    """GMapping's drawFromMotion: delta = the odometry step in the old pose's frame."""
+def motion_kernel(poses: wp.array(dtype=wp.vec3), deltas: wp.array(dtype=wp.vec3), srr: float, srt: float,
+                  str_: float, stt: float, seed: int):
+    """GMapping's drawFromMotion, once per odometry step in order: delta = the step in the old pose's frame."""
     i = wp.tid()
     state = wp.rand_init(seed, i)
     sxy = 0.3 * srr
-    ax = wp.abs(delta[0])
-    ay = wp.abs(delta[1])
-    at = wp.abs(delta[2])
-    nx = delta[0] + wp.randn(state) * (srr * ax + str_ * at + sxy * ay)
-    ny = delta[1] + wp.randn(state) * (srr * ay + str_ * at + sxy * ax)
-    nt = delta[2] + wp.randn(state) * (stt * at + srt * wp.sqrt(delta[0] * delta[0] + delta[1] * delta[1]))
     p = poses[i]
-    c = wp.cos(p[2])
-    s = wp.sin(p[2])
-    t = p[2] + nt
-    poses[i] = wp.vec3(p[0] + c * nx - s * ny, p[1] + s * nx + c * ny, wp.atan2(wp.sin(t), wp.cos(t)))
+    for k in range(deltas.shape[0]):
+        delta = deltas[k]
+        ax = wp.abs(delta[0])
+        ay = wp.abs(delta[1])
+        at = wp.abs(delta[2])
+        nx = delta[0] + wp.randn(state) * (srr * ax + str_ * at + sxy * ay)
+        ny = delta[1] + wp.randn(state) * (srr * ay + str_ * at + sxy * ax)
+        nt = delta[2] + wp.randn(state) * (stt * at + srt * wp.sqrt(delta[0] * delta[0] + delta[1] * delta[1]))
+        c = wp.cos(p[2])
+        s = wp.sin(p[2])
+        t = p[2] + nt
+        p = wp.vec3(p[0] + c * nx - s * ny, p[1] + s * nx + c * ny, wp.atan2(wp.sin(t), wp.cos(t)))
+    poses[i] = p
 
 
 @wp.func
@@ -201,8 +214,8 @@ def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype
                         pose: wp.array(dtype=wp.vec3), best: wp.array(dtype=wp.float32),
                         steps: wp.array(dtype=wp.vec3), halvings: wp.array(dtype=wp.int32),
                         active: wp.array(dtype=wp.int32), iterations: int):
-    """Take the best move if it raises the score, else halve the steps; a particle is done after
-    ``iterations`` halvings (GMapping's optimize)."""
+    """Take the best move if it raises the score, else halve the steps; a particle is done when a round at
+    the steps halved ``iterations`` times fails too (GMapping's optimize: iterations + 1 step sizes)."""
     p = wp.tid()
     if active[p] == 0:
         return
@@ -213,11 +226,11 @@ def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype
     if score[p, k] > best[p]:
         pose[p] = cand[p, k]
         best[p] = score[p, k]
+    elif halvings[p] >= iterations:
+        active[p] = 0
     else:
         steps[p] = 0.5 * steps[p]
         halvings[p] = halvings[p] + 1
-        if halvings[p] >= iterations:
-            active[p] = 0
 
 
 def keep_slots(parents: np.ndarray) -> np.ndarray:
@@ -235,7 +248,8 @@ def keep_slots(parents: np.ndarray) -> np.ndarray:
 
 
 class ParticleMaps:
-    """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0))."""
+    """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0));
+    ``cells`` [P, H, W] vec4 = (visits, hits, sx, sy)."""
 
     FIELDS = ("visits", "hits", "sx", "sy")
 
@@ -245,11 +259,16 @@ class ParticleMaps:
             raise ValueError(f"ParticleMaps: {num_particles} particles of {H} x {W} cells at {resolution_m} m")
         self.device = pick_device(device)
         self.origin, self.res = wp.vec2(float(origin_xy[0]), float(origin_xy[1])), float(resolution_m)
-        self.arrays = {f: wp.zeros((num_particles, H, W), dtype=wp.float32, device=self.device) for f in self.FIELDS}
+        self.cells = wp.zeros((num_particles, H, W), dtype=wp.vec4, device=self.device)
 
     @property
     def shape(self):
-        return self.arrays["visits"].shape
+        return self.cells.shape
+
+    def fields(self, p: int) -> dict:
+        """Map p as numpy arrays [H, W] by field name (visits, hits, sx, sy)."""
+        c = self.cells.numpy()[p]
+        return {f: c[..., i] for i, f in enumerate(self.FIELDS)}
 
     def resample(self, parents: np.ndarray) -> np.ndarray:
         """Resample the maps: the new set holds map parents[k] once per k. Particles are exchangeable, so
@@ -258,15 +277,15 @@ class ParticleMaps:
         order = keep_slots(parents)
         P, H, W = self.shape
         n = H * W
+        a = self.cells.flatten()
         for dst in np.flatnonzero(order != np.arange(P)):
-            for f in self.FIELDS:
-                a = self.arrays[f].flatten()
-                wp.copy(a, a, dest_offset=int(dst) * n, src_offset=int(order[dst]) * n, count=n)
+            wp.copy(a, a, dest_offset=int(dst) * n, src_offset=int(order[dst]) * n, count=n)
         return order
 
     def occupancy(self, p: int) -> np.ndarray:
         """[H, W] hits / visits of map p, -1 where never visited."""
-        v, h = self.arrays["visits"].numpy()[p], self.arrays["hits"].numpy()[p]
+        c = self.cells.numpy()[p]
+        v, h = c[..., 0], c[..., 1]
         return np.where(v > 0, h / np.maximum(v, 1), UNKNOWN).astype(np.float32)
 
 
@@ -275,27 +294,35 @@ class Integrator:
         self.usable, self.device = float(usable_range_m), pick_device(device)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
-        a = maps.arrays
         wp.launch(integrate_kernel, (poses.shape[0], ranges.shape[0]),
                   [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
-                   a["visits"], a["hits"], a["sx"], a["sy"]], device=self.device)
+                   maps.cells], device=self.device)
 
 
 class Scorer:
-    """Score and log-likelihood of candidate poses [P, C] against each particle's own map."""
+    """Score and log-likelihood of candidate poses [P, C] against each particle's own map.
+
+    On the CPU, Warp runs a launch's threads one after another on the calling thread; the scorer splits
+    the particles into ``cpu_threads`` blocks (default: the machine's cores) and launches them from as many
+    host threads (ctypes drops the GIL during a launch), so that the matcher uses every core."""
 
     def __init__(self, usable_range_m: float, kernel_size: int = 1, fullness: float = 0.1, sigma: float = 0.05,
                  lsigma: float = 0.075, null_likelihood: float = -0.5, free_delta_m: float = 0.05 * np.sqrt(2),
-                 lskip: int = 0, device: str = "auto"):
+                 lskip: int = 0, cpu_threads: int | None = None, device: str = "auto"):
+        import os
+
         self.usable, self.device = float(usable_range_m), pick_device(device)
+        cuda = wp.get_device(self.device).is_cuda
+        self.per_thread = 1 if cuda else 1 << 16
+        self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
+        self._pool = None
         self.kernel = make_score_kernel(int(kernel_size), float(fullness), float(sigma), float(lsigma),
-                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1)
+                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1, self.per_thread)
 
     def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
                  score: wp.array, loglik: wp.array, active: wp.array | None = None) -> None:
         """candidates [P, C] (vec3); fills score and loglik [P, C] (zeroed here); ``active`` [P] (int32):
         particles marked 0 are skipped (all scored when None)."""
-        a = maps.arrays
         score.zero_()
         loglik.zero_()
         P, C = candidates.shape
@@ -303,18 +330,34 @@ class Scorer:
             if getattr(self, "_all", None) is None or self._all.shape[0] != P:
                 self._all = wp.ones(P, dtype=wp.int32, device=self.device)
             active = self._all
-        wp.launch(self.kernel, (P, C, ranges.shape[0]),
-                  [candidates, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
-                   a["visits"], a["hits"], a["sx"], a["sy"], score, loglik, active], device=self.device)
+        B, T = ranges.shape[0], wp.vec3(*map(float, T_base_laser))
+
+        def run(p0: int, p1: int) -> None:
+            wp.launch(self.kernel, (p1 - p0, C, (B + self.per_thread - 1) // self.per_thread),
+                      [candidates[p0:p1], T, ranges, angles, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
+                       score[p0:p1], loglik[p0:p1], active[p0:p1]], device=self.device)
+
+        n = min(self.threads, P)
+        if n == 1:
+            return run(0, P)
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="slam-score")
+        cuts = np.linspace(0, P, n + 1).astype(int)
+        for f in [self._pool.submit(run, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
+            f.result()
 
 
 class GmappingMotion:
     def __init__(self, srr: float = 0.1, srt: float = 0.2, str_: float = 0.1, stt: float = 0.2, device: str = "auto"):
         self.noise, self.device = (float(srr), float(srt), float(str_), float(stt)), pick_device(device)
 
-    def __call__(self, poses: wp.array, delta, seed: int) -> None:
-        wp.launch(motion_kernel, poses.shape[0], [poses, wp.vec3(*map(float, delta)), *self.noise, int(seed)],
-                  device=self.device)
+    def __call__(self, poses: wp.array, deltas, seed: int) -> None:
+        """Moves the poses by the odometry steps ``deltas`` ([K, 3] or one [3]), in order."""
+        d = np.asarray(deltas, np.float32).reshape(-1, 3)
+        wp.launch(motion_kernel, poses.shape[0], [poses, wp.array(d, dtype=wp.vec3, device=self.device),
+                                                  *self.noise, int(seed)], device=self.device)
 
 
 SLAM.register("integrate")(lambda **kw: Integrator(**kw))

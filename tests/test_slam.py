@@ -32,7 +32,7 @@ def _sim(duration_s=20.0, **extra):
 
 
 def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
-    return {f: maps.arrays[f].numpy()[p].astype(np.float64) for f in ParticleMaps.FIELDS}
+    return {f: a.astype(np.float64) for f, a in maps.fields(p).items()}
 
 
 def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None):
@@ -203,15 +203,14 @@ def test_device_hill_climbing_matches_the_host_twin(rng):
 def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
     P, shape = 7, (5, 6)
     maps = ParticleMaps(P, shape, (0.0, 0.0), 0.1, device="cpu")
-    before = {f: rng.uniform(0, 1, (P, *shape)).astype(np.float32) for f in ParticleMaps.FIELDS}
-    for f in ParticleMaps.FIELDS:
-        maps.arrays[f].assign(before[f])
+    before = rng.uniform(0, 1, (P, *shape, 4)).astype(np.float32)
+    maps.cells.assign(before)
     parents = np.sort(rng.integers(0, P, P))
     order = maps.resample(parents)
     assert sorted(order) == sorted(parents)  # the same multiset of parents
     assert np.all(order[np.unique(parents)] == np.unique(parents))  # survivors keep their slot
-    for f in ParticleMaps.FIELDS:
-        assert np.array_equal(maps.arrays[f].numpy(), before[f][order]), f
+    assert np.array_equal(maps.cells.numpy(), before[order])
+    assert maps.fields(3)["sx"].tolist() == before[order[3], ..., 2].tolist()
 
 
 def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):

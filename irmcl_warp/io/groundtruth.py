@@ -92,6 +92,8 @@ class G2oGraph:
     vertex_poses: np.ndarray  # [V, 3]
     edges: np.ndarray  # [E, 5]: id_from, id_to, x, y, yaw
     laser_stamps: np.ndarray  # [V] true stamps of the ROBOTLASER1 attached to each vertex, in file order
+    laser_ranges: list = None  # [V] range arrays of those ROBOTLASER1 lines
+    laser_max_range_m: float = float("nan")
 
 
 def read_g2o(path, member: str | None = None) -> G2oGraph:
@@ -106,7 +108,7 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
     else:
         with open_text(path) as f:
             lines = f.read().splitlines()
-    vid, vpose, edges, stamps = [], [], [], []
+    vid, vpose, edges, stamps, ranges, max_range = [], [], [], [], [], float("nan")
     for n_line, line in enumerate(lines, start=1):
         tok = line.split()
         if not tok or tok[0].startswith("#"):
@@ -122,7 +124,33 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
                 raise LogFormatError(path, f"line {n_line}", "EDGE_SE2: expected 'from to x y theta [information]'")
             edges.append(_floats(path, n_line, tok[1:6], "EDGE_SE2"))
         elif tok[0] == "ROBOTLASER1":
-            stamps.append(_parse_robotlaser(path, n_line, tok).stamp)
+            scan = _parse_robotlaser(path, n_line, tok)
+            stamps.append(scan.stamp)
+            ranges.append(np.asarray(scan.ranges, np.float64))
+            max_range = scan.max_range
     if not vid:
         raise LogFormatError(path, None, "no VERTEX_SE2 lines")
-    return G2oGraph(np.array(vid), np.array(vpose), np.array(edges).reshape(-1, 5), np.array(stamps))
+    return G2oGraph(np.array(vid), np.array(vpose), np.array(edges).reshape(-1, 5), np.array(stamps), ranges,
+                    max_range)
+
+
+def g2o_scan_stamps(graph: G2oGraph, ranges_m: np.ndarray, decimals: int = 2) -> np.ndarray:
+    """True stamps for a log whose own stamps are not (MIT Killian's bag): the stamp of the g2o laser with
+    the same range array, NaN for scans that are no g2o keyframe. Ranges are compared at the g2o file's
+    printed precision, with every reading at or beyond its maximum range (or missing) as "no echo"."""
+    far = graph.laser_max_range_m - 0.5 * 10.0 ** -decimals
+
+    def key(r) -> bytes:
+        r = np.asarray(r, np.float64)
+        q = np.where(np.isfinite(r) & (r < far), np.round(r * 10 ** decimals), -1).astype(np.int64)
+        return q.tobytes()
+
+    index = {}
+    for k, r in enumerate(ranges_m):
+        index.setdefault(key(r), k)
+    out = np.full(len(ranges_m), np.nan)
+    for stamp, r in zip(graph.laser_stamps, graph.laser_ranges):
+        k = index.get(key(r))
+        if k is not None:
+            out[k] = stamp
+    return out

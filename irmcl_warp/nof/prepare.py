@@ -38,7 +38,8 @@ def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
     """(key, missing-input error): the data settings (+ ``settings``), then "-" and the inputs' size and
     mtime. Without the raw files (a GPU box sent only the caches) the key stops after the settings part
     and the error says which file is missing; a cache is then accepted by that prefix."""
-    key = settings_key(OmegaConf.to_container(cfg.data), OmegaConf.to_container(cfg.sim), *settings)
+    data = {k: v for k, v in OmegaConf.to_container(cfg.data).items() if v is not None}  # a new optional field
+    key = settings_key(data, OmegaConf.to_container(cfg.sim), *settings)  # keeps the caches made before it
     try:
         files = [] if cfg.data.format == "sim" else input_files(cfg)
         return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None

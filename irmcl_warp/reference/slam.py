@@ -47,6 +47,8 @@ def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res):
         hit, r = r <= usable, min(r, usable)
         ex, ey = lp[0] + r * np.cos(lp[2] + a), lp[1] + r * np.sin(lp[2] + a)
         cells = traversed_cells(lp[0], lp[1], ex, ey, origin, res)
+        if not hit:
+            cells = cells[:-1]  # a beam without echo leaves the cell at the usable range untouched
         for k, (ix, iy) in enumerate(cells):
             if 0 <= ix < W and 0 <= iy < H:
                 maps["visits"][iy, ix] += 1
@@ -103,25 +105,28 @@ MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0
 
 def hill_climb(evaluate, start, lstep: float, astep: float, iterations: int, max_rounds: int = 200):
     """GMapping's matcher search for P poses at once: try the 6 moves (+-x, +-y, +-theta) of the current steps;
-    take the best if it raises the score, else halve the steps, ``iterations`` times. ``evaluate(cand
-    [P, C, 3]) -> scores [P, C]``. Returns (poses, scores, rounds)."""
+    take the best if it raises the score, else halve the steps; stop when a round at the steps halved
+    ``iterations`` times fails as well. ``evaluate(cand [P, C, 3]) -> scores [P, C]``. Returns (poses,
+    scores, rounds)."""
     pose = np.array(start, np.float64)
     P = len(pose)
     best = evaluate(pose[:, None])[:, 0]
     steps = np.tile([lstep, lstep, astep], (P, 1)).astype(np.float64)
     halvings = np.zeros(P, int)
     rounds = 0
-    while (halvings < iterations).any() and rounds < max_rounds:
+    active = np.ones(P, bool)
+    while active.any() and rounds < max_rounds:
         rounds += 1
         cand = pose[:, None, :] + MOVES[None] * steps[:, None, :]
         score = evaluate(cand)
         k = np.argmax(score, 1)
         top = score[np.arange(P), k]
-        active = halvings < iterations
         better = active & (top > best)
         pose[better] = cand[better, k[better]]
         best[better] = top[better]
         worse = active & ~better
-        steps[worse] *= 0.5
-        halvings[worse] += 1
+        active[worse & (halvings >= iterations)] = False
+        halve = worse & (halvings < iterations)
+        steps[halve] *= 0.5
+        halvings[halve] += 1
     return pose, best, rounds

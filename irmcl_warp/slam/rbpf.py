@@ -1,7 +1,9 @@
 """GMapping's Rao-Blackwellized particle filter (Grisetti, Stachniss, Burgard, T-RO 2007) on Warp kernels.
 
-Every scan moves the particles by the odometry motion model. Once the robot has travelled
-``linear_update`` or turned ``angular_update`` since the last processed scan, the scan is processed:
+Every scan's odometry step moves the particles by the odometry motion model (the steps are queued on the
+host and applied in one launch when a scan is processed: the same draws, one launch instead of one per
+scan). Once the robot's path since the last processed scan is ``linear_update`` long or its turns add up
+to ``angular_update`` (the released code's accumulated distances), the scan is processed:
 
 1. scan matching: hill climbing over (x, y, theta) from each particle's pose on its own map, steps
    lstep / astep halved ``iterations`` times; each round scores all particles x 6 moves x beams in one
@@ -83,6 +85,9 @@ class RBPF:
         self.timing = {"motion": 0.0, "matching": 0.0, "weights_resampling": 0.0, "integration": 0.0}
         self.last_odom = None  # odometry at the last processed scan
         self.prev_odom = None  # odometry at the previous scan
+        self.pending = []  # odometry steps not yet applied to the particles
+        self.path_m = self.turn_rad = 0.0  # travelled and turned since the last processed scan
+        self._graph = None  # CUDA graph of check_every hill-climbing rounds
 
     # --- device helpers -----------------------------------------------------------------------------
     def _buf(self, C: int):
@@ -115,21 +120,27 @@ class RBPF:
         self._set_ranges(ranges_m)
         self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
         self.last_odom = self.prev_odom = pose
+        self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
         self._record(0, parents=np.arange(self.P))
 
     def step(self, k: int, odom_pose, ranges_m) -> StepStats:
         """Scan k with its odometry pose; returns what happened."""
         odom_pose = np.asarray(odom_pose, np.float64)
         self.steps += 1
-        t = self._tick()
         delta = relative(self.prev_odom[None], odom_pose[None])[0]
+        self.path_m += float(np.hypot(*(odom_pose[:2] - self.prev_odom[:2])))
+        self.turn_rad += float(abs(wrap_angle(odom_pose[2] - self.prev_odom[2])))
         self.prev_odom = odom_pose
         if np.any(delta != 0):
-            self.motion(self.poses, delta, seed=self.cfg.seed * 1_000_003 + self.steps)
+            self.pending.append(delta)
+        if self.path_m < self.cfg.linear_update and self.turn_rad < self.cfg.angular_update:
+            return StepStats(processed=False)
+        t = self._tick()
+        if self.pending:
+            self.motion(self.poses, np.array(self.pending), seed=self.cfg.seed * 1_000_003 + self.steps)
+        self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
         moved = relative(self.last_odom[None], odom_pose[None])[0]
         t = self._tick("motion", t)
-        if np.hypot(moved[0], moved[1]) < self.cfg.linear_update and abs(moved[2]) < self.cfg.angular_update:
-            return StepStats(processed=False)
         self._set_ranges(ranges_m)
         sampled = self.poses.numpy().astype(np.float64)
         if self.cfg.proposal == "odometry":
@@ -191,14 +202,30 @@ class RBPF:
         self.scorer(self.maps, cand1, self.T_base_laser, self.ranges, self.angles, score1, loglik1)
         wp.copy(st["best"], score1.flatten())
         cand, score, loglik = self._buf(6)
-        rounds = 0
-        while rounds < max_rounds:
+
+        def rounds_block():
             for _ in range(check_every):
                 wp.launch(climb_candidates_kernel, (P, 6), [st["pose"], st["steps"], cand], device=d)
                 self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik, st["active"])
                 wp.launch(climb_update_kernel, P, [cand, score, st["pose"], st["best"], st["steps"], st["halvings"],
                                                    st["active"], int(c.iterations)], device=d)
-                rounds += 1
+
+        if self._graph is None and wp.get_device(d).is_cuda:
+            # the block reads and writes the same arrays every time: captured once, replayed as one launch
+            try:
+                with wp.ScopedCapture(device=d) as capture:
+                    rounds_block()
+                self._graph = capture.graph
+            except Exception as e:  # pragma: no cover - depends on the driver
+                print(f"slam: CUDA graph capture failed ({e}); launching the rounds one by one")
+                self._graph = False
+        rounds = 0
+        while rounds < max_rounds:
+            if self._graph:
+                wp.capture_launch(self._graph)
+            else:
+                rounds_block()
+            rounds += check_every
             if not st["active"].numpy().any():
                 break
         pose = st["pose"].numpy().astype(np.float64)

@@ -28,6 +28,9 @@ def rescore(run: Path) -> dict:
     cfg = OmegaConf.load(run / "config.yaml")
     if not cfg.data.relations_path:
         raise ValueError(f"{run}: data={cfg.data.name} has no relations file")
+    if cfg.data.get("relation_stamps_path"):
+        raise ValueError(f"{run}: data={cfg.data.name} matches its relations through {cfg.data.relation_stamps_path}, "
+                         f"not through the trajectory's stamps: rerun the slam stage to score it")
     metrics = json.loads((run / "metrics.json").read_text())
     stamps, poses = read_tum(run / "trajectory.tum")
     metrics["relations"] = relations_error(stamps, poses, read_relations(resolve(cfg.data.relations_path)))
