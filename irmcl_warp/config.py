@@ -169,6 +169,7 @@ class SlamConfig:
     resample_threshold: float = 0.5
     sigma: float = 0.05  # matcher score exp(-|mu|^2 / sigma)
     kernel_size: int = 1  # search window (2k + 1)^2 cells around each end point
+    line: builtins.str = "dda"  # cells a beam clears: dda (every crossed cell) | bresenham (the released code)
     lstep: float = 0.05  # hill-climbing steps (m, rad), halved `iterations` times
     astep: float = 0.05
     iterations: int = 5
@@ -192,6 +193,46 @@ class SlamConfig:
 
 
 @dataclass
+class GlobLocConfig:
+    """Lidar + camera global localization (Gist retrieval, ORB + PnP, Scan2Map, relocalization trigger)."""
+    scenario: str = "random_starts"  # the output folder's name: globloc-<scenario>
+    methods: List[str] = field(default_factory=lambda: ["lidar_mcl", "camera_only", "paper", "mcl_seeded"])
+    runs: int = 10
+    run_s: float = 60.0
+    kidnap_at_s: float = 0.0  # > 0: carry the robot to another start this far into each run
+    lighting: float = 0.2  # relative exposure / tint change of the query sessions
+    moved_furniture_m: float = 0.3  # furniture moved by up to this between mapping and query
+    lookalike_share: float = 0.2  # posters that copy another one
+    keyframe_every_m: float = 0.5
+    keyframe_every_deg: float = 15.0
+    gist_size: List[int] = field(default_factory=lambda: [120, 160])  # images resized to this (H, W) for the Gist
+    gist_blocks: int = 4
+    gist_orientations: List[int] = field(default_factory=lambda: [8, 8, 4])
+    top_n: int = 20  # keyframes retrieved
+    clusters: int = 3  # k-means of the candidates
+    cluster_space: str = "pose"  # pose (x, y, heading) | index (the paper's: keyframe indices)
+    pnp_per_cluster: int = 2  # keyframes of a cluster tried with ORB + PnP, best retrieved first
+    orb_features: int = 1000
+    ratio: float = 0.8  # Lowe's ratio test
+    min_inliers: int = 12  # PnP accepted with more inliers than this
+    scan2map: str = "paper"  # paper (sum of occupancy at the end points) | likelihood_field
+    camera_every_s: float = 1.0
+    max_speed_mps: float = 1.0  # the trigger: a winner farther than this speed allows since the last frame ...
+    trigger_slack_m: float = 0.5
+    trigger_margin: float = 0.2  # ... and a Scan2Map this much (relative) better than the tracked pose's
+    tracking_std: List[float] = field(default_factory=lambda: [0.3, 0.3, 0.1])
+    seed_share: float = 0.1  # mcl_seeded: share of particles re-drawn around the camera's hypotheses
+    particles: int = 20_000
+    beams: int = 60
+    recovery_alpha_slow: float = 0.01
+    recovery_alpha_fast: float = 0.2
+    map_resolution_m: float = 0.05
+    success_trans_m: float = 0.5  # localized: within this and ...
+    success_rot_deg: float = 15.0  # ... this of the truth, to the end of the run (or of the part before a kidnapping)
+    seed: int = 0
+
+
+@dataclass
 class Config:
     data: DataConfig = field(default_factory=DataConfig)
     sim: SimConfig = field(default_factory=SimConfig)
@@ -202,6 +243,7 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
     mcl: MCLConfig = field(default_factory=MCLConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
+    globloc: GlobLocConfig = field(default_factory=GlobLocConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

@@ -7,7 +7,8 @@ where in it the walls were seen. Occupancy = hits / visits, -1 where never visit
 four arrays: a lookup reads one 16-byte value (on the CPU, the matcher's cost is these cache misses).
 
 * ``SLAM["integrate"]``: one thread per (particle, beam) walks the cells from the laser to the end point
-  (a DDA over the cell grid), adding a visit to each traversed cell and a visit and a hit (with its point)
+  (``line="bresenham"``: the 8-connected integer line between the two cells, as the released code's
+  gridLine; ``line="dda"``: every cell the ray crosses, Amanatides & Woo), adding a visit to each traversed cell and a visit and a hit (with its point)
   to the end cell; beams longer than the usable range mark free space up to it and leave the cell there
   untouched (the released code's registerScan).
 * ``SLAM["score"]``: the matcher's measurement model at candidate poses [P, C] (one thread per
@@ -104,6 +105,51 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
         else:
             iy += step_y
             t_y += dt_y
+    if hit and c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
+        wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, ex, ey))
+
+
+@wp.kernel
+def integrate_bresenham_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
+                               ranges: wp.array(dtype=wp.float32), angles: wp.array(dtype=wp.float32), usable: float,
+                               origin: wp.vec2, res: float, cells: wp.array3d(dtype=wp.vec4)):
+    """As integrate_kernel, over the Bresenham line from the laser's cell to the end cell: one cell per step
+    along the major axis, so a beam grazing a wall does not visit (and clear) the wall's cells."""
+    p, b = wp.tid()
+    r = ranges[b]
+    if not (r == r) or r <= 0.0:
+        return
+    hit = r <= usable
+    r = wp.min(r, usable)
+    lp = laser_pose(poses[p], T_base_laser)
+    a = lp[2] + angles[b]
+    ex = lp[0] + r * wp.cos(a)
+    ey = lp[1] + r * wp.sin(a)
+    c0 = cell_of(lp[0], lp[1], origin, res)
+    c1 = cell_of(ex, ey, origin, res)
+    H = cells.shape[1]
+    W = cells.shape[2]
+    x = c0[0]
+    y = c0[1]
+    dx = wp.abs(c1[0] - x)
+    dy = -wp.abs(c1[1] - y)
+    sx = 1
+    if c1[0] < x:
+        sx = -1
+    sy = 1
+    if c1[1] < y:
+        sy = -1
+    err = dx + dy
+    for _ in range(wp.max(dx, -dy)):  # every cell but the end cell
+        if x >= 0 and y >= 0 and x < W and y < H:
+            wp.atomic_add(cells, p, y, x, wp.vec4(1.0, 0.0, 0.0, 0.0))
+        e2 = 2 * err
+        if e2 >= dy:
+            err += dy
+            x += sx
+        if e2 <= dx:
+            err += dx
+            y += sy
     if hit and c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
         wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, ex, ey))
 
@@ -290,11 +336,15 @@ class ParticleMaps:
 
 
 class Integrator:
-    def __init__(self, usable_range_m: float, device: str = "auto"):
-        self.usable, self.device = float(usable_range_m), pick_device(device)
+    KERNELS = {"bresenham": integrate_bresenham_kernel, "dda": integrate_kernel}
+
+    def __init__(self, usable_range_m: float, line: str = "bresenham", device: str = "auto"):
+        if line not in self.KERNELS:
+            raise ValueError(f"slam.line={line!r}: choose one of {sorted(self.KERNELS)}")
+        self.usable, self.device, self.kernel = float(usable_range_m), pick_device(device), self.KERNELS[line]
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
-        wp.launch(integrate_kernel, (poses.shape[0], ranges.shape[0]),
+        wp.launch(self.kernel, (poses.shape[0], ranges.shape[0]),
                   [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
                    maps.cells], device=self.device)
 

@@ -35,10 +35,11 @@ def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
     return {f: a.astype(np.float64) for f, a in maps.fields(p).items()}
 
 
-def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None):
+def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None,
+                    line="bresenham"):
     maps = ParticleMaps(P, shape, origin, res, device="cpu")
     ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
-    integ = SLAM.build("integrate", usable_range_m=8.0, device="cpu")
+    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, device="cpu")
     angles = wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu")
     for k in scans:
         poses = np.tile(log.ground_truth[k], (P, 1))
@@ -48,19 +49,23 @@ def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), 
               wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"), angles)
         for p in range(P):
             twin.integrate(ref[p], poses[p].astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                           log.info.angles_rad, 8.0, origin, res)
+                           log.info.angles_rad, 8.0, origin, res, line=line)
     return maps, ref
 
 
-def test_integrate_matches_twin(rng):
+@pytest.mark.parametrize("line", ["bresenham", "dda"])
+def test_integrate_matches_twin(rng, line):
     log = _sim(5.0)
-    maps, ref = _integrate_both(log, [0, 7, 14], P=2, jitter=0.2, rng=rng)
+    maps, ref = _integrate_both(log, [0, 7, 14], P=2, jitter=0.2, rng=rng, line=line)
     for p in range(2):
         got = _maps_numpy(maps, p)
         same = (got["visits"] == ref[p]["visits"]).mean()
         assert same > 0.998, f"seed {rng.seed}: {same:.4f} of cells agree"  # float32 poses at cell borders
         assert (got["hits"] == ref[p]["hits"]).mean() > 0.998
         assert got["hits"].sum() > 500 and got["visits"].sum() > 20 * got["hits"].sum()  # walls seen, space crossed
+    if line == "bresenham":  # one cell per step along the major axis: fewer visits than every crossed cell
+        dda, _ = _integrate_both(log, [0, 7, 14], P=2, jitter=0.0, rng=rng, line="dda")
+        assert dda.fields(0)["visits"].sum() > 1.2 * _maps_numpy(_integrate_both(log, [0, 7, 14], P=2)[0], 0)["visits"].sum()
 
 
 def test_score_matches_twin_and_peaks_at_the_true_pose(rng):

@@ -22,7 +22,7 @@ case "$what" in
       for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.proposal=odometry slam.seed=$s"; done
     done > "$jobs"; P=${JOBS:-8} ;;
   killian)
-    for s in $SEEDS; do for n in 30 60; do echo "+exp=gmapping_mit_killian slam.particles=$n slam.seed=$s"; done; done \
+    for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.particles=$n slam.seed=$s"; done; done \
       > "$jobs"; P=${JOBS:-2} ;;
   *) echo "unknown sweep $what"; exit 2 ;;
 esac

@@ -37,8 +37,26 @@ def traversed_cells(x0, y0, x1, y1, origin, res):
     return out + [c1]
 
 
-def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res):
-    """maps: dict of [H, W] arrays (visits, hits, sx, sy) of one particle, updated in place."""
+def bresenham_cells(x0, y0, x1, y1, origin, res):
+    """The 8-connected integer line from the start cell to the end cell (both included), in order."""
+    (x, y), (X, Y) = cell(x0, y0, origin, res), cell(x1, y1, origin, res)
+    dx, dy = abs(X - x), -abs(Y - y)
+    sx, sy = (1 if X >= x else -1), (1 if Y >= y else -1)
+    err, out = dx + dy, []
+    for _ in range(max(dx, -dy)):
+        out.append((x, y))
+        e2 = 2 * err
+        if e2 >= dy:
+            err, x = err + dy, x + sx
+        if e2 <= dx:
+            err, y = err + dx, y + sy
+    return out + [(X, Y)]
+
+
+def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, line="bresenham"):
+    """maps: dict of [H, W] arrays (visits, hits, sx, sy) of one particle, updated in place; ``line``:
+    bresenham (the released code) or dda (every crossed cell)."""
+    walk = bresenham_cells if line == "bresenham" else traversed_cells
     H, W = maps["visits"].shape
     lp = laser_pose(pose, T_base_laser)
     for r, a in zip(ranges, angles):
@@ -46,7 +64,7 @@ def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res):
             continue
         hit, r = r <= usable, min(r, usable)
         ex, ey = lp[0] + r * np.cos(lp[2] + a), lp[1] + r * np.sin(lp[2] + a)
-        cells = traversed_cells(lp[0], lp[1], ex, ey, origin, res)
+        cells = walk(lp[0], lp[1], ex, ey, origin, res)
         if not hit:
             cells = cells[:-1]  # a beam without echo leaves the cell at the usable range untouched
         for k, (ix, iy) in enumerate(cells):
