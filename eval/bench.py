@@ -125,10 +125,11 @@ def main(argv=None):
     t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
     t.add_argument("--tf32", action="store_true")
     t.add_argument("--out", default="outputs/bench")
-    from eval import bench_mcl, bench_slam
+    from eval import bench_globloc, bench_mcl, bench_slam
 
     bench_mcl.add_parser(sub)
     bench_slam.add_parser(sub)
+    bench_globloc.add_parser(sub)
     a = ap.parse_args(argv)
     if a.what == "train":
         run_train_bench(a)
@@ -136,6 +137,8 @@ def main(argv=None):
         bench_mcl.run_mcl_bench(a)
     elif a.what == "slam":
         bench_slam.run_slam_bench(a)
+    elif a.what == "globloc":
+        bench_globloc.run_globloc_bench(a)
 
 
 if __name__ == "__main__":

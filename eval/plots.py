@@ -51,6 +51,44 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
     return save_figure(fig, out)
 
 
+def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
+    """Position error over time of every method on the first run of a kidnap scenario, the kidnapping and
+    the paper pipeline's relocalizations marked."""
+    files = sorted(run_dir.glob("run0-*.npz"))
+    if not files:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    kid = None
+    for f in files:
+        z = np.load(f)
+        method = f.stem.split("-", 1)[1]
+        err = np.hypot(*(z["est"][:, :2] - z["truth"][:, :2]).T)
+        ax.plot(z["stamps"], err, label=method, lw=1.4)
+        kid = int(z["kidnap"])
+        if method == "paper":
+            for r in z["relocs"]:
+                ax.axvline(z["stamps"][int(r)], color="C2", ls=":", lw=1)
+    if kid is not None and kid > 0:
+        ax.axvline(np.load(files[0])["stamps"][kid], color="k", lw=1.5, label="kidnapped")
+    ax.set_yscale("log")
+    ax.set_ylim(0.01, 100)
+    ax.axhline(0.5, color="gray", lw=0.8, ls="--")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("position error (m)")
+    ax.set_title(f"{run_dir.parent.name}/{run_dir.name}: run 0 (dotted: the pipeline's relocalizations)")
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m eval.plots")
     ap.add_argument("--out", default=str(REPO / "docs" / "figures"))
@@ -60,6 +98,10 @@ def main(argv=None) -> None:
     runs = collect_slam(SLAM_ROOTS)
     made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
             if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
+    for root in (REPO / "results" / "globloc", REPO / "outputs"):
+        for d in sorted(Path(root).glob("*/globloc-kidnap*")):
+            if (p := kidnapped_run(d, out / f"globloc_{d.parent.name}_{d.name}.png")) is not None:
+                made.append(p)
     for p in made:
         print(f"-> {p}")
     if not made:

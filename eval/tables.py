@@ -16,6 +16,9 @@ REPO = Path(__file__).resolve().parents[1]
 ROOTS = (REPO / "results" / "nof", REPO / "outputs")
 MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
 SLAM_ROOTS = (REPO / "results" / "slam", REPO / "outputs")
+GLOBLOC_ROOTS = (REPO / "results" / "globloc", REPO / "outputs")
+GLOBLOC_METHODS = {"lidar_mcl": "lidar-only MCL", "camera_only": "camera only", "paper": "paper's pipeline",
+                   "mcl_seeded": "MCL seeded by the camera"}
 CONVERGED_M = 0.15  # a SLAM run "converged" below this mean relations error (the threshold of issue 6's reference)
 # GMapping references (facts cited, scored with the relations metric, mean translational error):
 # * "released C++": issue 6 of this project: the public GMapping source built without ROS, ROS wrapper defaults,
@@ -202,6 +205,31 @@ def slam_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def collect_globloc(roots=GLOBLOC_ROOTS) -> dict:
+    return _collect_runs(roots, "globloc-*")
+
+
+def globloc_table(runs: dict) -> str:
+    """One row per (experiment, scenario, method): success with its Wilson 95 % interval, time and distance
+    until localized, kidnap recovery, false relocalizations per hour, accuracy after convergence."""
+    rows = ["| world | scenario | method | localized | 95 % CI | time / distance to localize | recovered after kidnap "
+            "(time) | kidnap detected | false relocalizations per hour | RMSE after convergence (cm) |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for (exp, _), m in sorted(runs.items()):
+        world = ("repetitive corridor" if m.get("repetitive") else "office") + f" ({exp})"
+        for method, v in m["methods"].items():
+            sm = v["summary"]
+            lo, hi = sm["success_ci95"]
+            ttl = (f"{_f(sm['mean_time_to_localize_s'])} s / {_f(sm['mean_distance_to_localize_m'])} m"
+                   if sm["mean_time_to_localize_s"] is not None else "-")
+            rec = (f"{sm['recovered']}/{sm['runs']} ({_f(sm['mean_recovery_time_s'])} s)" if "recovered" in sm else "")
+            det = f"{sm['detected']}/{sm['runs']}" if "detected" in sm and method == "paper" else ""
+            rmse = _f(None if sm["mean_rmse_after_m"] is None else 100 * sm["mean_rmse_after_m"])
+            rows.append(f"| {world} | {m['scenario']} | {GLOBLOC_METHODS.get(method, method)} | {sm['localized']}/{sm['runs']} "
+                        f"| {lo:.2f}-{hi:.2f} | {ttl} | {rec} | {det} | {sm['false_relocalizations_per_hour']:.1f} | {rmse} |")
+    return "\n".join(rows)
+
+
 def replace_block(text: str, name: str, table: str) -> str:
     begin, end = f"<!-- table:{name} -->", f"<!-- /table:{name} -->"
     pattern = re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
@@ -229,6 +257,11 @@ def main(argv=None):
     if slam:
         tables["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
                           slam_table(slam))
+    gl = collect_globloc()
+    if gl:
+        tables["globloc"] = ("Lidar + camera global localization (simulated worlds, identical sensor streams per "
+                             "method; localized = within 0.5 m and 15 deg to the end of the run or of the part "
+                             "before the kidnapping)", globloc_table(gl))
     if not tables:
         raise SystemExit("no results found under results/ or outputs/ (run python -m eval.synthesis or "
                          "python -m irmcl_warp.localize)")

@@ -77,4 +77,4 @@ ESTIMATE = Registry("estimate")
 SLAM = Registry("slam")
 
 # importing the families registers their entries
-from kernels import estimate, mapping, motion, raycast, render, resample, sim, slam, weighting  # noqa: E402,F401
+from kernels import camera, estimate, mapping, motion, raycast, render, resample, sim, slam, weighting  # noqa: E402,F401,I001

@@ -21,6 +21,72 @@ from irmcl_warp.io.errors import LogFormatError, warn_defects
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
 
 SCAN, ODOM, TF = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
+IMAGE = "sensor_msgs/msg/Image"
+
+
+@dataclass
+class CameraFrames:
+    stamps: np.ndarray  # [F] s
+    rgb: np.ndarray  # [F, H, W, 3] uint8
+    depth: np.ndarray  # [F, H, W] float32 metres (0 = none)
+    depth_encoding: str = "32FC1"  # 32FC1 (metres) | 16UC1 (millimetres)
+
+
+def _encode(img: np.ndarray, enc: str) -> tuple[np.ndarray, int]:
+    if enc == "rgb8":
+        a = np.ascontiguousarray(img, np.uint8)
+    elif enc == "32FC1":
+        a = np.ascontiguousarray(img, "<f4")
+    elif enc == "16UC1":
+        a = np.ascontiguousarray(np.clip(np.round(np.nan_to_num(img) * 1000.0), 0, 65535), "<u2")
+    else:
+        raise ValueError(f"image encoding {enc!r}: write rgb8, 32FC1 or 16UC1")
+    return np.frombuffer(a.tobytes(), np.uint8), a.strides[0]
+
+
+def _decode(path, where, msg) -> np.ndarray:
+    h, w, enc = int(msg.height), int(msg.width), msg.encoding
+    kinds = {"rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3), "32FC1": (np.dtype("<f4"), 1), "16UC1": (np.dtype("<u2"), 1)}
+    if enc not in kinds:
+        raise LogFormatError(path, where, f"image encoding {enc!r}: expected one of {sorted(kinds)}")
+    dt, ch = kinds[enc]
+    need = h * w * ch * np.dtype(dt).itemsize
+    buf = np.asarray(msg.data, np.uint8)
+    if int(msg.step) < w * ch * np.dtype(dt).itemsize or buf.size < int(msg.step) * h:
+        raise LogFormatError(path, where, f"image of {w} x {h} {enc} needs {need} bytes, has {buf.size} (step {msg.step})")
+    rows = buf[: int(msg.step) * h].reshape(h, int(msg.step))[:, : w * ch * np.dtype(dt).itemsize]
+    a = np.frombuffer(rows.tobytes(), dt).reshape(h, w, ch) if ch == 3 else np.frombuffer(rows.tobytes(), dt).reshape(h, w)
+    if enc == "bgr8":
+        a = a[..., ::-1]
+    if enc == "16UC1":
+        return a.astype(np.float32) / 1000.0
+    return a.astype(np.float32) if ch == 1 else a.copy()
+
+
+def read_bag_images(path, rgb_topic: str = "/camera/rgb", depth_topic: str = "/camera/depth") -> CameraFrames:
+    """Camera frames of a bag: RGB and depth sensor_msgs/Image paired by header stamp (frames with both)."""
+    from rosbags.highlevel import AnyReader
+
+    path = Path(path)
+    rgb, depth = {}, {}
+    try:
+        with AnyReader([path]) as reader:
+            conns = [c for c in reader.connections if c.topic in (rgb_topic, depth_topic)]
+            if {c.topic for c in conns} != {rgb_topic, depth_topic}:
+                raise LogFormatError(path, None, f"expected image topics {rgb_topic} and {depth_topic}, found "
+                                     f"{sorted({c.topic for c in reader.connections if c.msgtype == IMAGE})}")
+            for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+                msg = reader.deserialize(raw, conn.msgtype)
+                img = _decode(path, f"message {k} on {conn.topic}", msg)
+                (rgb if conn.topic == rgb_topic else depth)[round(_stamp(msg.header), 6)] = img
+    except LogFormatError:
+        raise
+    except Exception as e:
+        raise LogFormatError(path, None, f"cannot read images: {e}") from e
+    both = sorted(set(rgb) & set(depth))
+    if not both:
+        raise LogFormatError(path, None, f"no frame has both {rgb_topic} and {depth_topic}")
+    return CameraFrames(np.array(both), np.stack([rgb[t] for t in both]), np.stack([depth[t] for t in both]))
 
 
 def _stamp(header) -> float:
@@ -179,11 +245,14 @@ def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report):
 
 
 def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom_topic="/odom",
-              odom_frame="odom", base_frame="base_link", laser_frame="laser") -> Path:
+              odom_frame="odom", base_frame="base_link", laser_frame="laser", images: "CameraFrames | None" = None,
+              rgb_topic="/camera/rgb", depth_topic="/camera/depth", camera_frame="camera") -> Path:
     """Write a LaserLog as a ROS1 bag (``version=1``) or ROS2 bag folder (``version=2``).
 
     No-return beams are written as +inf (REP 117); odometry as nav_msgs/Odometry and /tf; the extrinsic
-    on /tf_static. Reading the result back with :func:`read_bag` gives the same log.
+    on /tf_static. ``images``: camera frames as sensor_msgs/Image, rgb8 on ``rgb_topic`` and depth (16UC1 in
+    millimetres or 32FC1 in metres) on ``depth_topic``. Reading the result back with :func:`read_bag`
+    (and :func:`read_bag_images`) gives the same log (and frames).
     """
     from rosbags.typesys import Stores, get_typestore
 
@@ -235,7 +304,7 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
         writer, ser = Writer(tmp, version=8), ts.serialize_cdr
     try:
         _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic,
-                   odom_frame, base_frame, laser_frame)
+                   odom_frame, base_frame, laser_frame, images, rgb_topic, depth_topic, camera_frame)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
         raise
@@ -246,11 +315,21 @@ def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom
 
 
 def _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic, odom_frame,
-               base_frame, laser_frame):
+               base_frame, laser_frame, images=None, rgb_topic=None, depth_topic=None, camera_frame=None):
     info = log.info
     with writer:
         def conn(topic, msgtype):
             return writer.add_connection(topic, msgtype, typestore=ts)
+
+        if images is not None:
+            c_rgb, c_depth = conn(rgb_topic, IMAGE), conn(depth_topic, IMAGE)
+            for i, stamp in enumerate(images.stamps):
+                ns = int(round(stamp * 1e9))
+                for c, img, enc in ((c_rgb, images.rgb[i], "rgb8"), (c_depth, images.depth[i], images.depth_encoding)):
+                    data, step = _encode(img, enc)
+                    msg = T[IMAGE](header=header(stamp, camera_frame, i), height=img.shape[0], width=img.shape[1],
+                                   encoding=enc, is_bigendian=0, step=step, data=data)
+                    writer.write(c, ns, ser(msg, IMAGE))
 
         c_static, c_scan, c_odom, c_tf = conn("/tf_static", TF), conn(scan_topic, SCAN), conn(odom_topic, ODOM), conn("/tf", TF)
         t0 = float(log.stamps.min())

@@ -30,6 +30,7 @@ class World:
     corridor_y: float = 0.0
     width_m: float = 0.0
     height_m: float = 0.0
+    n_walls: int = -1  # segments[:n_walls] are full-height walls, the rest furniture (-1: all walls)
 
 
 def _box(cx, cy, w, h):
@@ -96,10 +97,11 @@ def office(seed: int, width_m=30.0, height_m=16.0, corridor_width_m=2.5, room_mi
                 segs.append((x, y0, x, y1))
             x += w
         segs += _wall_with_doors(door_y, 0.0, width_m, doors, door_width_m)
+    n_walls = len(segs)
     for room in rooms:
         boxes = _furniture(rng, room, furniture_per_room, door_width_m, template)
         if repetitive and template is None:
             template = [(cx - room.x0, cy - room.y0, w, h) for cx, cy, w, h in boxes]
         for b in boxes:
             segs += _box(*b)
-    return World(np.array(segs, dtype=np.float64), rooms, height_m / 2, width_m, height_m)
+    return World(np.array(segs, dtype=np.float64), rooms, height_m / 2, width_m, height_m, n_walls)

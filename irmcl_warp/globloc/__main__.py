@@ -1,0 +1,17 @@
+"""``python -m irmcl_warp.globloc +exp=globloc_corridor``: see irmcl_warp/globloc/run.py."""
+
+import hydra
+
+from irmcl_warp.config import register
+from irmcl_warp.globloc.run import run_globloc
+
+register()
+
+
+@hydra.main(version_base="1.3", config_path="../../conf", config_name="config")
+def main(cfg) -> None:
+    run_globloc(cfg)
+
+
+if __name__ == "__main__":
+    main()
