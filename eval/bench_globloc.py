@@ -77,15 +77,16 @@ def run_globloc_bench(a) -> dict:
     device_fps = 5 * len(cams) / (time.perf_counter() - t)
     print(f"rendering kept on {device}: {device_fps:.0f} frames/s in batches of {len(cams)} "
           f"(with the copy to host memory: {len(kf) / render_s:.0f})")
+    base = {"exp": a.exp, "device": device, "host": platform.processor() or platform.machine(), "keyframes": len(db),
+            "image": f"{camera.size_hw[1]}x{camera.size_hw[0]}", "render_fps": len(kf) / render_s,
+            "render_fps_on_device": device_fps, "database_build_s": db_s}
     if a.render_only:
         one = rgb[:1]
         describe(one, gist)
         t = time.perf_counter()
         for _ in range(20):
             describe(one, gist)
-        row = {"exp": a.exp, "device": device, "keyframes": len(db), "image": f"{camera.size_hw[1]}x{camera.size_hw[0]}",
-               "render_fps": len(kf) / render_s, "render_fps_on_device": device_fps, "database_build_s": db_s,
-               "gist_ms": 1e3 * (time.perf_counter() - t) / 20}
+        row = {**base, "gist_ms": 1e3 * (time.perf_counter() - t) / 20}
         print(f"rendering on {device}: {row['render_fps']:.0f} frames/s ({row['image']}, batches of {a.render_batch}); "
               f"Gist of one query {row['gist_ms']:.1f} ms; database of {len(db)} built in {db_s:.1f} s")
         out = Path(a.out) / f"globloc-render-{a.exp}-{device.split(':')[0]}.json"
@@ -109,10 +110,7 @@ def run_globloc_bench(a) -> dict:
     t = time.perf_counter()
     s2m(poses, (s.laser_x_m, 0.0, 0.0), st.ranges[0], laser_angles(cfg))
     s2m_ms = 1e3 * (time.perf_counter() - t) / len(poses)
-    row = {"exp": a.exp, "device": device, "host": platform.processor() or platform.machine(), "keyframes": len(db),
-           "image": f"{camera.size_hw[1]}x{camera.size_hw[0]}", "render_fps": len(kf) / render_s,
-           "render_fps_on_device": device_fps,
-           "database_build_s": db_s, "decision_ms": decision_ms, "gist_ms": per["gist"],
+    row = {**base, "decision_ms": decision_ms, "gist_ms": per["gist"],
            "retrieval_ms": per["retrieval"], "pnp_ms_per_keyframe": 1e3 * hyp.timing["pnp"] / max(pnp_tries, 1),
            "scan2map_ms_per_candidate": s2m_ms, "frames": frames, "accepted_candidates_per_frame": candidates / frames}
     print(f"lidar + camera relocalization on {device}, {a.exp}, {len(db)} keyframes, images {row['image']}")

@@ -54,6 +54,14 @@ def cell_of(x: float, y: float, origin: wp.vec2, res: float) -> wp.vec2i:
     return wp.vec2i(int(wp.floor((x - origin[0]) / res)), int(wp.floor((y - origin[1]) / res)))
 
 
+@wp.func
+def beam_segment(pose: wp.vec3, T_base_laser: wp.vec3, r: float, angle: float) -> wp.vec4:
+    """(laser x, laser y, end x, end y) of a beam of range r at ``angle`` in the laser frame."""
+    lp = laser_pose(pose, T_base_laser)
+    a = lp[2] + angle
+    return wp.vec4(lp[0], lp[1], lp[0] + r * wp.cos(a), lp[1] + r * wp.sin(a))
+
+
 @wp.kernel
 def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
                      angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
@@ -63,18 +71,16 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
     if not (r == r) or r <= 0.0:
         return
     hit = r <= usable
-    r = wp.min(r, usable)
-    lp = laser_pose(poses[p], T_base_laser)
-    a = lp[2] + angles[b]
-    ex = lp[0] + r * wp.cos(a)
-    ey = lp[1] + r * wp.sin(a)
-    c0 = cell_of(lp[0], lp[1], origin, res)
+    seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
+    ex = seg[2]
+    ey = seg[3]
+    c0 = cell_of(seg[0], seg[1], origin, res)
     c1 = cell_of(ex, ey, origin, res)
     H = cells.shape[1]
     W = cells.shape[2]
     # DDA from the laser's cell to the end cell (Amanatides & Woo), the end cell excluded
-    dx = ex - lp[0]
-    dy = ey - lp[1]
+    dx = ex - seg[0]
+    dy = ey - seg[1]
     ix = c0[0]
     iy = c0[1]
     step_x = 1
@@ -91,8 +97,8 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
         inv_dy = 1.0 / wp.abs(dy)
     bx = origin[0] + float(ix + wp.max(step_x, 0)) * res
     by = origin[1] + float(iy + wp.max(step_y, 0)) * res
-    t_x = wp.abs(bx - lp[0]) * inv_dx
-    t_y = wp.abs(by - lp[1]) * inv_dy
+    t_x = wp.abs(bx - seg[0]) * inv_dx
+    t_y = wp.abs(by - seg[1]) * inv_dy
     dt_x = res * inv_dx
     dt_y = res * inv_dy
     n = wp.abs(c1[0] - c0[0]) + wp.abs(c1[1] - c0[1])
@@ -120,12 +126,10 @@ def integrate_bresenham_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.
     if not (r == r) or r <= 0.0:
         return
     hit = r <= usable
-    r = wp.min(r, usable)
-    lp = laser_pose(poses[p], T_base_laser)
-    a = lp[2] + angles[b]
-    ex = lp[0] + r * wp.cos(a)
-    ey = lp[1] + r * wp.sin(a)
-    c0 = cell_of(lp[0], lp[1], origin, res)
+    seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
+    ex = seg[2]
+    ey = seg[3]
+    c0 = cell_of(seg[0], seg[1], origin, res)
     c1 = cell_of(ex, ey, origin, res)
     H = cells.shape[1]
     W = cells.shape[2]
