@@ -62,25 +62,19 @@ def beam_segment(pose: wp.vec3, T_base_laser: wp.vec3, r: float, angle: float) -
     return wp.vec4(lp[0], lp[1], lp[0] + r * wp.cos(a), lp[1] + r * wp.sin(a))
 
 
-@wp.kernel
-def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-                     angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-                     cells: wp.array3d(dtype=wp.vec4)):
-    p, b = wp.tid()
-    r = ranges[b]
-    if not (r == r) or r <= 0.0:
-        return
-    hit = r <= usable
-    seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
-    ex = seg[2]
-    ey = seg[3]
-    c0 = cell_of(seg[0], seg[1], origin, res)
-    c1 = cell_of(ex, ey, origin, res)
-    H = cells.shape[1]
-    W = cells.shape[2]
-    # DDA from the laser's cell to the end cell (Amanatides & Woo), the end cell excluded
-    dx = ex - seg[0]
-    dy = ey - seg[1]
+@wp.func
+def visit(cells: wp.array3d(dtype=wp.vec4), p: int, x: int, y: int):
+    if x >= 0 and y >= 0 and x < cells.shape[2] and y < cells.shape[1]:
+        wp.atomic_add(cells, p, y, x, wp.vec4(1.0, 0.0, 0.0, 0.0))
+
+
+@wp.func
+def clear_dda(cells: wp.array3d(dtype=wp.vec4), p: int, seg: wp.vec4, c0: wp.vec2i, c1: wp.vec2i, origin: wp.vec2,
+              res: float):
+    """Visit every cell the beam crosses from the laser's cell to the end cell, the end cell excluded
+    (Amanatides & Woo)."""
+    dx = seg[2] - seg[0]
+    dy = seg[3] - seg[1]
     ix = c0[0]
     iy = c0[1]
     step_x = 1
@@ -95,44 +89,22 @@ def integrate_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, rang
     inv_dy = 1.0e30
     if wp.abs(dy) > 1.0e-9:
         inv_dy = 1.0 / wp.abs(dy)
-    bx = origin[0] + float(ix + wp.max(step_x, 0)) * res
-    by = origin[1] + float(iy + wp.max(step_y, 0)) * res
-    t_x = wp.abs(bx - seg[0]) * inv_dx
-    t_y = wp.abs(by - seg[1]) * inv_dy
-    dt_x = res * inv_dx
-    dt_y = res * inv_dy
-    n = wp.abs(c1[0] - c0[0]) + wp.abs(c1[1] - c0[1])
-    for _ in range(n):
-        if ix >= 0 and iy >= 0 and ix < W and iy < H:
-            wp.atomic_add(cells, p, iy, ix, wp.vec4(1.0, 0.0, 0.0, 0.0))
+    t_x = wp.abs(origin[0] + float(ix + wp.max(step_x, 0)) * res - seg[0]) * inv_dx
+    t_y = wp.abs(origin[1] + float(iy + wp.max(step_y, 0)) * res - seg[1]) * inv_dy
+    for _ in range(wp.abs(c1[0] - c0[0]) + wp.abs(c1[1] - c0[1])):
+        visit(cells, p, ix, iy)
         if t_x < t_y:
             ix += step_x
-            t_x += dt_x
+            t_x += res * inv_dx
         else:
             iy += step_y
-            t_y += dt_y
-    if hit and c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
-        wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, ex, ey))
+            t_y += res * inv_dy
 
 
-@wp.kernel
-def integrate_bresenham_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-                               ranges: wp.array(dtype=wp.float32), angles: wp.array(dtype=wp.float32), usable: float,
-                               origin: wp.vec2, res: float, cells: wp.array3d(dtype=wp.vec4)):
-    """As integrate_kernel, over the Bresenham line from the laser's cell to the end cell: one cell per step
-    along the major axis, so a beam grazing a wall does not visit (and clear) the wall's cells."""
-    p, b = wp.tid()
-    r = ranges[b]
-    if not (r == r) or r <= 0.0:
-        return
-    hit = r <= usable
-    seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
-    ex = seg[2]
-    ey = seg[3]
-    c0 = cell_of(seg[0], seg[1], origin, res)
-    c1 = cell_of(ex, ey, origin, res)
-    H = cells.shape[1]
-    W = cells.shape[2]
+@wp.func
+def clear_bresenham(cells: wp.array3d(dtype=wp.vec4), p: int, c0: wp.vec2i, c1: wp.vec2i):
+    """Visit the cells of the 8-connected integer line from the laser's cell to the end cell, the end cell
+    excluded (one cell per step along the major axis, as the released code's gridLine)."""
     x = c0[0]
     y = c0[1]
     dx = wp.abs(c1[0] - x)
@@ -144,9 +116,8 @@ def integrate_bresenham_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.
     if c1[1] < y:
         sy = -1
     err = dx + dy
-    for _ in range(wp.max(dx, -dy)):  # every cell but the end cell
-        if x >= 0 and y >= 0 and x < W and y < H:
-            wp.atomic_add(cells, p, y, x, wp.vec4(1.0, 0.0, 0.0, 0.0))
+    for _ in range(wp.max(dx, -dy)):
+        visit(cells, p, x, y)
         e2 = 2 * err
         if e2 >= dy:
             err += dy
@@ -154,8 +125,28 @@ def integrate_bresenham_kernel(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.
         if e2 <= dx:
             err += dx
             y += sy
-    if hit and c1[0] >= 0 and c1[1] >= 0 and c1[0] < W and c1[1] < H:
-        wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, ex, ey))
+
+
+def make_integrate_kernel(line: str):
+    @wp.kernel(module="unique")
+    def integrate(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+                  angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
+                  cells: wp.array3d(dtype=wp.vec4)):
+        p, b = wp.tid()
+        r = ranges[b]
+        if not (r == r) or r <= 0.0:
+            return
+        seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
+        c0 = cell_of(seg[0], seg[1], origin, res)
+        c1 = cell_of(seg[2], seg[3], origin, res)
+        if wp.static(line == "bresenham"):
+            clear_bresenham(cells, p, c0, c1)
+        else:
+            clear_dda(cells, p, seg, c0, c1, origin, res)
+        if r <= usable and c1[0] >= 0 and c1[1] >= 0 and c1[0] < cells.shape[2] and c1[1] < cells.shape[1]:
+            wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, seg[2], seg[3]))
+
+    return integrate
 
 
 def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: float, null_likelihood: float,
@@ -340,12 +331,13 @@ class ParticleMaps:
 
 
 class Integrator:
-    KERNELS = {"bresenham": integrate_bresenham_kernel, "dda": integrate_kernel}
+    LINES = ("bresenham", "dda")
 
     def __init__(self, usable_range_m: float, line: str = "bresenham", device: str = "auto"):
-        if line not in self.KERNELS:
-            raise ValueError(f"slam.line={line!r}: choose one of {sorted(self.KERNELS)}")
-        self.usable, self.device, self.kernel = float(usable_range_m), pick_device(device), self.KERNELS[line]
+        if line not in self.LINES:
+            raise ValueError(f"slam.line={line!r}: choose one of {list(self.LINES)}")
+        self.usable, self.device = float(usable_range_m), pick_device(device)
+        self.kernel = make_integrate_kernel(line)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
         wp.launch(self.kernel, (poses.shape[0], ranges.shape[0]),
