@@ -98,10 +98,13 @@ def main(argv=None) -> None:
     runs = collect_slam(SLAM_ROOTS)
     made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
             if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
+    kidnaps = {}  # (experiment, scenario) -> folder; outputs/ wins over results/
     for root in (REPO / "results" / "globloc", REPO / "outputs"):
         for d in sorted(Path(root).glob("*/globloc-kidnap*")):
-            if (p := kidnapped_run(d, out / f"globloc_{d.parent.name}_{d.name}.png")) is not None:
-                made.append(p)
+            kidnaps[(d.parent.name, d.name)] = d
+    for (exp, name), d in sorted(kidnaps.items()):
+        if (p := kidnapped_run(d, out / f"globloc_{exp}_{name}.png")) is not None:
+            made.append(p)
     for p in made:
         print(f"-> {p}")
     if not made:
