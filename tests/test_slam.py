@@ -237,3 +237,22 @@ def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     monkeypatch.setattr(loc, "load_stream", jumping)
     m = json.loads((run_slam(cfg) / "metrics.json").read_text())
     assert m["odometry_jumps"] == 1 and m["processed_scans"] > 5
+
+
+def test_g2o_keyframes_give_true_stamps_by_their_ranges(rng):
+    """MIT Killian: the bag's stamps are synthetic; the g2o keyframes carry the true ones and the same
+    ranges (printed to 2 decimals, 50 m = no echo)."""
+    from irmcl_warp.io.groundtruth import G2oGraph, g2o_scan_stamps
+
+    ranges = np.round(rng.uniform(0.5, 40.0, (30, 12)), 2)
+    ranges[4, 3] = np.nan  # no echo in the bag ...
+    keys = [4, 9, 17]
+    g2o = [ranges[k].copy() for k in keys]
+    g2o[0][3] = 50.0  # ... is the maximum range in the g2o file
+    g2o[1] = g2o[1] + 0.001  # below the printed precision
+    graph = G2oGraph(np.arange(3), np.zeros((3, 3)), np.zeros((0, 5)), np.array([100.5, 200.25, 300.125]), g2o, 50.0)
+    stamps = g2o_scan_stamps(graph, ranges)
+    assert np.flatnonzero(np.isfinite(stamps)).tolist() == keys
+    assert stamps[keys].tolist() == [100.5, 200.25, 300.125]
+    g2o[2] = g2o[2] + 0.02  # another scan: no match
+    assert np.isfinite(g2o_scan_stamps(graph, ranges)).sum() == 2
