@@ -14,11 +14,11 @@ def test_every_registry_entry_has_a_reference_twin():
 
     assert RAYCAST.names() == ["dda", "distance_field"]
     assert MAPPING.names() == ["logodds"]
-    assert SIM.names() == ["rasterize", "segment_lidar"]
+    assert SIM.names() == ["camera", "rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
     assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch"]
     assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
     assert ESTIMATE.names() == ["best_cluster", "top_share"]
     assert SLAM.names() == ["integrate", "motion", "score"]
-    for twin in ("raycast", "mapping", "sim", "render", "weighting", "motion", "resample", "estimate", "slam"):
+    for twin in ("raycast", "mapping", "sim", "camera", "render", "weighting", "motion", "resample", "estimate", "slam"):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()
