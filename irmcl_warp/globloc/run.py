@@ -182,7 +182,7 @@ def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, r
         pf = make_filter(cfg, grid, origin, device)
         pf.rng = np.random.default_rng(int(rng.integers(1 << 30)))
         pf.init_uniform()
-    pose, last_cam_t, pending = None, None, None
+    pose, last_cam_t, pending, agreed = None, None, None, 0
     for i in range(len(st.truth)):
         u = odometry_step(st.odom[i - 1], st.odom[i]) if i > 0 else np.zeros(3)
         step = relative(st.odom[i - 1][None], st.odom[i][None])[0] if i > 0 else np.zeros(3)
@@ -206,13 +206,17 @@ def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, r
                     here = pf_scan2map(cfg, pose, st.ranges[i], grid, origin)
                     far = np.hypot(*(win[0][:2] - pose[:2])) > reach
                     if far and win[2] > here + g.trigger_margin * max(here, 1e-6):
-                        # a new winner out of reach: relocalize once the next frame's winner agrees with it
+                        # a new winner out of reach: relocalize once the winners of the next
+                        # ``trigger_confirm_frames`` frames agree with it (moved by the odometry in between)
                         if pending is not None and np.hypot(*(win[0][:2] - pending[:2])) < g.trigger_slack_m:
+                            agreed += 1
+                            pending = np.asarray(win[0], np.float64)
+                        else:
+                            pending, agreed = np.asarray(win[0], np.float64), 0
+                        if agreed >= g.trigger_confirm_frames:
                             pf.init_gaussian(win[0], g.tracking_std)
                             relocs.append(i)
                             pending = None
-                        else:
-                            pending = np.asarray(win[0], np.float64)
                     else:
                         pending = None
             elif method == "mcl_seeded" and h:
