@@ -217,15 +217,19 @@ def globloc_table(runs: dict) -> str:
             "|---|---|---|---|---|---|---|---|---|---|"]
     for (exp, _), m in sorted(runs.items()):
         world = ("repetitive corridor" if m.get("repetitive") else "office") + f" ({exp})"
+        confirm = m.get("settings", {}).get("trigger_confirm_frames", 1)
         for method, v in m["methods"].items():
             sm = v["summary"]
             lo, hi = sm["success_ci95"]
+            label = GLOBLOC_METHODS.get(method, method)
+            if method == "paper" and confirm != 1:
+                label += f" ({confirm} confirming frames)"
             ttl = (f"{_f(sm['mean_time_to_localize_s'])} s / {_f(sm['mean_distance_to_localize_m'])} m"
                    if sm["mean_time_to_localize_s"] is not None else "-")
             rec = (f"{sm['recovered']}/{sm['runs']} ({_f(sm['mean_recovery_time_s'])} s)" if "recovered" in sm else "")
             det = f"{sm['detected']}/{sm['runs']}" if "detected" in sm and method == "paper" else ""
             rmse = _f(None if sm["mean_rmse_after_m"] is None else 100 * sm["mean_rmse_after_m"])
-            rows.append(f"| {world} | {m['scenario']} | {GLOBLOC_METHODS.get(method, method)} | {sm['localized']}/{sm['runs']} "
+            rows.append(f"| {world} | {m['scenario']} | {label} | {sm['localized']}/{sm['runs']} "
                         f"| {lo:.2f}-{hi:.2f} | {ttl} | {rec} | {det} | {sm['false_relocalizations_per_hour']:.1f} | {rmse} |")
     return "\n".join(rows)
 
