@@ -52,10 +52,13 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
 
 
 def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
-    """Position error over time of every method on the first run of a kidnap scenario, the kidnapping and
-    the paper pipeline's relocalizations marked."""
-    files = sorted(run_dir.glob("run0-*.npz"))
-    if len(files) < 2:  # a figure compares methods (ablation runs of one method are left out)
+    """Position error over time of every method on the first run of a kidnap scenario (``first_run`` of its
+    metrics.json), the kidnapping and the paper pipeline's relocalizations marked."""
+    import json
+
+    first = json.loads((run_dir / "metrics.json").read_text()).get("first_run", {})
+    methods = [m for m in first if isinstance(first[m], dict)]
+    if len(methods) < 2:  # a figure compares methods (ablation runs of one method are left out)
         return None
     import matplotlib
 
@@ -63,19 +66,16 @@ def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    t = np.asarray(first["stamps_s"])
     fig, ax = plt.subplots(figsize=(8, 3.6))
-    kid = None
-    for f in files:
-        z = np.load(f)
-        method = f.stem.split("-", 1)[1]
-        err = np.hypot(*(z["est"][:, :2] - z["truth"][:, :2]).T)
-        ax.plot(z["stamps"], err, label=method, lw=1.4)
-        kid = int(z["kidnap"])
+    for method in sorted(methods):
+        err = np.array([np.nan if e is None else e for e in first[method]["error_m"]])
+        ax.plot(t, err, label=method, lw=1.4)
         if method == "paper":
-            for r in z["relocs"]:
-                ax.axvline(z["stamps"][int(r)], color="C2", ls=":", lw=1)
-    if kid is not None and kid > 0:
-        ax.axvline(np.load(files[0])["stamps"][kid], color="k", lw=1.5, label="kidnapped")
+            for r in first[method]["relocalized_at"]:
+                ax.axvline(t[r], color="C2", ls=":", lw=1)
+    if first["kidnap_index"] > 0:
+        ax.axvline(t[first["kidnap_index"]], color="k", lw=1.5, label="kidnapped")
     ax.set_yscale("log")
     ax.set_ylim(0.01, 100)
     ax.axhline(0.5, color="gray", lw=0.8, ls="--")
@@ -84,9 +84,7 @@ def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
     ax.set_title(f"{run_dir.parent.name}/{run_dir.name}: run 0 (dotted: the pipeline's relocalizations)")
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def main(argv=None) -> None:

@@ -174,6 +174,7 @@ def make_filter(cfg, grid, origin, device):
 def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, rng) -> tuple[np.ndarray, list]:
     """Estimates [N, 3] (NaN before a method has any) and the scan indices where it relocalized."""
     g = cfg.globloc
+    scorer = Scan2Map(grid, origin, g.map_resolution_m, g.scan2map)  # once: its likelihood field is an EDT
     est = np.full((len(st.truth), 3), np.nan)
     relocs = []
     cam_at = {int(i): j for j, i in enumerate(st.cam_idx)}
@@ -203,7 +204,7 @@ def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, r
                     relocs.append(i)
                 elif pose is not None:
                     reach = g.max_speed_mps * (st.stamps[i] - last_cam_t) + g.trigger_slack_m
-                    here = pf_scan2map(cfg, pose, st.ranges[i], grid, origin)
+                    here = pf_scan2map(cfg, pose, st.ranges[i], scorer)
                     far = np.hypot(*(win[0][:2] - pose[:2])) > reach
                     if far and win[2] > here + g.trigger_margin * max(here, 1e-6):
                         # a new winner out of reach: relocalize once the winners of the next
@@ -229,18 +230,17 @@ def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, r
     return est, relocs
 
 
-def pf_scan2map(cfg, pose, ranges, grid, origin, scorer=None) -> float:
+def pf_scan2map(cfg, pose, ranges, scorer: Scan2Map) -> float:
     """Scan2Map of the tracked pose: the best over a small grid around it (``trigger_search_m`` /
     ``trigger_search_rad``, 3 x 3 x 3 poses). The paper's score counts end points landing in occupied cells,
     so a tracked pose a few centimetres off scores far below a PnP pose on a look-alike bay; the search takes
     that tracking error out of the comparison."""
     g = cfg.globloc
-    s = scorer or Scan2Map(grid, origin, g.map_resolution_m, g.scan2map)
     d = np.array([-1.0, 0.0, 1.0])
     offs = np.stack(np.meshgrid(d * g.trigger_search_m, d * g.trigger_search_m, d * g.trigger_search_rad,
                                 indexing="ij"), -1).reshape(-1, 3)
     poses = np.asarray(pose, np.float64)[None] + offs
-    return float(s(poses, (cfg.sim.laser_x_m, 0.0, 0.0), ranges, laser_angles(cfg)).max())
+    return float(scorer(poses, (cfg.sim.laser_x_m, 0.0, 0.0), ranges, laser_angles(cfg)).max())
 
 
 def seed_particles(pf, poses, share: float, std, rng) -> None:
@@ -342,6 +342,7 @@ def run_globloc(cfg) -> Path:
     scan2map = Scan2Map(grid, origin, g.map_resolution_m, g.scan2map)
     hyp = Hypotheses(cfg, db, camera, scan2map)
     rows = {m: [] for m in g.methods}
+    first_run = {}  # run 0's position error over time per method, for eval.plots
     try:
         from tqdm import tqdm
 
@@ -356,8 +357,11 @@ def run_globloc(cfg) -> Path:
             write_tum(out / f"run{k}-{m}.tum", st.stamps, np.nan_to_num(est, nan=0.0))
             rows[m].append(score_run(est, st, relocs, g))
             if k == 0:
-                np.savez_compressed(out / f"run0-{m}.npz", est=est, truth=st.truth, relocs=np.array(relocs),
-                                    kidnap=st.kidnap_idx, stamps=st.stamps)
+                err = np.hypot(*(est[:, :2] - st.truth[:, :2]).T)
+                first_run[m] = {"error_m": [None if not np.isfinite(e) else round(float(e), 4) for e in err],
+                                "relocalized_at": [int(r) for r in relocs]}
+                first_run["stamps_s"] = [round(float(t), 3) for t in st.stamps]
+                first_run["kidnap_index"] = int(st.kidnap_idx)
     hours = g.runs * g.run_s / 3600.0
     frames = max(hyp.timing["frames"], 1)
     metrics = {"scenario": g.scenario, "device": device, "keyframes": len(db), "runs": g.runs, "run_s": g.run_s,
@@ -365,6 +369,7 @@ def run_globloc(cfg) -> Path:
                "repetitive": bool(s.repetitive),
                "methods": {m: {"summary": summarise(rows[m], hours), "runs": rows[m]} for m in g.methods},
                "ms_per_camera_frame": {k: 1e3 * v / frames for k, v in hyp.timing.items() if k != "frames"},
+               "first_run": first_run,
                "settings": OmegaConf.to_container(g)}
     write_json(out / "metrics.json", metrics)
     write_manifest(out, cfg, [], device, started)
