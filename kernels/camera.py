@@ -177,7 +177,8 @@ class SegmentCamera:
 
     @property
     def K(self) -> np.ndarray:
-        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+        """OpenCV intrinsics: OpenCV puts pixel i's centre at coordinate i, the kernel casts through i + 0.5."""
+        return np.array([[self.fx, 0, self.cx - 0.5], [0, self.fy, self.cy - 0.5], [0, 0, 1.0]])
 
     def render(self, cam_poses, exposure=1.0, tint=(1.0, 1.0, 1.0), noise_std: float = 0.0, seed: int = 0,
                on_device: bool = False):

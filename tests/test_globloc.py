@@ -11,7 +11,7 @@ from irmcl_warp.config import register
 from irmcl_warp.geometry import compose
 from irmcl_warp.globloc.database import KeyframeDB, cluster_candidates, describe, kmeans
 from irmcl_warp.globloc.gist import Gist
-from irmcl_warp.globloc.pnp import OrbPnP
+from irmcl_warp.globloc.pnp import OrbPnP, depth_at
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.reference import camera as twin
 from irmcl_warp.sim.camera import Camera, Session, appearance
@@ -55,15 +55,33 @@ def test_camera_kernel_matches_twin(rng):
 
 
 def test_pnp_recovers_a_known_pose(rng):
+    """Three random poses near a keyframe. Rendering aliasing moves ORB corners by about a pixel, so one pose
+    has a tail (400 seeds: median 1.6 cm, 99th percentile 5.4 cm, worst 6.9 cm); the bound on each pose is
+    loose and the bound on the median is tight."""
     world = _world()
     cam = Camera(world.segments, appearance(world, lookalike_share=0.0), device="cpu")
+    pnp = OrbPnP(cam.K, 1.0, cam.T_base_cam)
     key = np.array([4.0, 5.0, 0.0])  # in the corridor, looking along it
-    truth = key + np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.2, 0.2), rng.uniform(-0.1, 0.1)])
-    rgb, depth = cam.render(np.stack([key, truth]), Session(noise_std=0.01, seed=int(rng.integers(1000))))
-    r = OrbPnP(cam.K, 1.0, cam.T_base_cam).solve(rgb[1], rgb[0], depth[0], key)
-    assert r.pose is not None and r.inliers > 12, f"seed {rng.seed}: {r}"
-    assert np.hypot(*(r.pose[:2] - truth[:2])) < 0.05 and abs(r.pose[2] - truth[2]) < np.radians(1.0), \
-        f"seed {rng.seed}: {r.pose} vs {truth}"
+    errors = []
+    for _ in range(3):
+        truth = key + np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.2, 0.2), rng.uniform(-0.1, 0.1)])
+        rgb, depth = cam.render(np.stack([key, truth]), Session(noise_std=0.01, seed=int(rng.integers(1000))))
+        r = pnp.solve(rgb[1], rgb[0], depth[0], key)
+        assert r.pose is not None and r.inliers > 12, f"seed {rng.seed}: {r}"
+        errors.append(np.hypot(*(r.pose[:2] - truth[:2])))
+        assert errors[-1] < 0.1 and abs(r.pose[2] - truth[2]) < np.radians(1.5), f"seed {rng.seed}: {r.pose} vs {truth}"
+    assert np.median(errors) < 0.05, f"seed {rng.seed}: {errors}"
+
+
+def test_pnp_drops_features_on_depth_edges():
+    """A corner on a silhouette reads the depth of whichever side its pixel rounds to; such points are dropped."""
+    depth = np.full((20, 20), 2.0, np.float32)
+    depth[:, 10:] = 6.0  # a near wall on the left, a far one on the right
+    z, ok = depth_at(depth, np.array([[3.0, 5.0], [9.6, 5.0], [10.2, 5.0], [16.0, 5.0], [5.0, 19.4]]), 1.1)
+    assert ok.tolist() == [True, False, False, True, True]
+    assert z[[0, 3]].tolist() == [2.0, 6.0]
+    depth[3, 3] = 0.0  # no return
+    assert not depth_at(depth, np.array([[4.0, 4.0]]), 1.1)[1][0]
 
 
 def _db(n=6, hw=(24, 32)):

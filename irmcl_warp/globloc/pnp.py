@@ -30,6 +30,23 @@ def camera_to_world(cam_pose, cam_height: float) -> tuple[np.ndarray, np.ndarray
     return R, np.array([x, y, cam_height])
 
 
+def depth_at(depth: np.ndarray, uv: np.ndarray, edge_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Depth at pixels uv [N, 2] (OpenCV coordinates) and whether it can be trusted: finite, positive, and
+    not on a depth edge. ORB's corners sit on silhouettes, where the nearest pixel may belong to the wall
+    behind; such a point passes RANSAC (it lies on the right ray) but pulls the translation along the ray,
+    so a point whose 3x3 neighbourhood spans more than ``edge_ratio`` (max / min depth) is dropped."""
+    H, W = depth.shape
+    px = np.clip(np.round(uv).astype(int), 0, [W - 1, H - 1])
+    z = depth[px[:, 1], px[:, 0]]
+    lo, hi = np.full(len(z), np.inf), np.zeros(len(z))
+    for dv in (-1, 0, 1):
+        for du in (-1, 0, 1):
+            n = depth[np.clip(px[:, 1] + dv, 0, H - 1), np.clip(px[:, 0] + du, 0, W - 1)]
+            lo, hi = np.minimum(lo, n), np.maximum(hi, n)
+    ok = np.isfinite(z) & (z > 0.05) & (lo > 0.05) & (hi <= edge_ratio * lo)
+    return z, ok
+
+
 def backproject(uv: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Camera-frame points [N, 3] of pixels uv [N, 2] with z-depths [N]."""
     z = np.asarray(depth, np.float64)
@@ -38,7 +55,7 @@ def backproject(uv: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 class OrbPnP:
     def __init__(self, K: np.ndarray, cam_height_m: float, T_base_cam, n_features: int = 1000, ratio: float = 0.8,
-                 min_inliers: int = 12, reproj_px: float = 3.0):
+                 min_inliers: int = 12, reproj_px: float = 3.0, edge_ratio: float = 1.1, refine_px: float = 1.5):
         import cv2
 
         self.cv2, self.K = cv2, np.asarray(K, np.float64)
@@ -46,6 +63,7 @@ class OrbPnP:
         self.orb = cv2.ORB_create(nfeatures=n_features)
         self.matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
         self.ratio, self.min_inliers, self.reproj = float(ratio), int(min_inliers), float(reproj_px)
+        self.edge_ratio, self.refine_px = float(edge_ratio), float(refine_px)
 
     def features(self, rgb: np.ndarray):
         gray = self.cv2.cvtColor(np.ascontiguousarray(rgb, np.uint8), self.cv2.COLOR_RGB2GRAY)
@@ -66,22 +84,26 @@ class OrbPnP:
         qi = np.array([m.queryIdx for m in good])
         ki = np.array([m.trainIdx for m in good])
         kuv = k_uv[ki]
-        px = np.clip(np.round(kuv).astype(int), 0, [keyframe_depth.shape[1] - 1, keyframe_depth.shape[0] - 1])
-        z = keyframe_depth[px[:, 1], px[:, 0]]
-        ok = np.isfinite(z) & (z > 0.05)
+        z, ok = depth_at(keyframe_depth, kuv, self.edge_ratio)
         if ok.sum() < max(self.min_inliers, 6):
             return PnPResult(None, 0, len(good))
         R, t = camera_to_world(compose(np.asarray(keyframe_robot_pose, np.float64), self.T_base_cam), self.cam_height)
-        X = backproject(kuv[ok], z[ok], self.K) @ R.T + t
+        X = backproject(kuv[ok], z[ok], self.K) @ R.T + t  # float64
         found, rvec, tvec, inl = self.cv2.solvePnPRansac(X.astype(np.float64), q_uv[qi[ok]].astype(np.float64), self.K,
                                                          None, reprojectionError=self.reproj, iterationsCount=200,
                                                          flags=self.cv2.SOLVEPNP_EPNP)
         n_in = 0 if inl is None else len(inl)
         if not found or n_in <= self.min_inliers:
             return PnPResult(None, n_in, len(good))
-        i = inl.reshape(-1)  # Levenberg-Marquardt on the inliers (EPnP's minimal-set pose is coarse)
-        rvec, tvec = self.cv2.solvePnPRefineLM(X[i].astype(np.float64), q_uv[qi[ok]][i].astype(np.float64), self.K,
-                                               None, rvec, tvec)
+        uv = q_uv[qi[ok]].astype(np.float64)
+        i = inl.reshape(-1)  # Levenberg-Marquardt on the inliers (EPnP's minimal-set pose is coarse), then again
+        for _ in range(2):  # on the points within a tighter bound of the refined pose
+            rvec, tvec = self.cv2.solvePnPRefineLM(X[i], uv[i], self.K, None, rvec, tvec)
+            proj, _ = self.cv2.projectPoints(X, rvec, tvec, self.K, None)
+            tight = np.flatnonzero(np.linalg.norm(proj.reshape(-1, 2) - uv, axis=1) < self.refine_px)
+            if len(tight) <= self.min_inliers:
+                break
+            i = tight
         Rwc, _ = self.cv2.Rodrigues(rvec)  # world -> camera
         centre = -Rwc.T @ tvec.reshape(3)
         fwd = Rwc.T @ np.array([0.0, 0.0, 1.0])
