@@ -12,6 +12,8 @@ import json
 import re
 from pathlib import Path
 
+from irmcl_warp.config import GlobLocConfig
+
 REPO = Path(__file__).resolve().parents[1]
 ROOTS = (REPO / "results" / "nof", REPO / "outputs")
 MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
@@ -217,13 +219,13 @@ def globloc_table(runs: dict) -> str:
             "|---|---|---|---|---|---|---|---|---|---|"]
     for (exp, _), m in sorted(runs.items()):
         world = ("repetitive corridor" if m.get("repetitive") else "office") + f" ({exp})"
-        confirm = m.get("settings", {}).get("trigger_confirm_frames", 1)
+        confirm = m.get("settings", {}).get("trigger_confirm_frames", 1)  # runs before the setting existed: 1
         for method, v in m["methods"].items():
             sm = v["summary"]
             lo, hi = sm["success_ci95"]
             label = GLOBLOC_METHODS.get(method, method)
-            if method == "paper" and confirm != 1:
-                label += f" ({confirm} confirming frames)"
+            if method == "paper" and confirm != GlobLocConfig.trigger_confirm_frames:
+                label += f" ({confirm} confirming frame{'s' if confirm != 1 else ''})"
             ttl = (f"{_f(sm['mean_time_to_localize_s'])} s / {_f(sm['mean_distance_to_localize_m'])} m"
                    if sm["mean_time_to_localize_s"] is not None else "-")
             rec = (f"{sm['recovered']}/{sm['runs']} ({_f(sm['mean_recovery_time_s'])} s)" if "recovered" in sm else "")

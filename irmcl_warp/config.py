@@ -222,7 +222,7 @@ class GlobLocConfig:
     trigger_margin: float = 0.2  # ... and a Scan2Map this much (relative) better than the tracked pose's
     trigger_search_m: float = 0.05  # the tracked pose's Scan2Map: the best within +-this (3 x 3 x 3 poses) ...
     trigger_search_rad: float = 0.02  # ... and +-this
-    trigger_confirm_frames: int = 1  # ... confirmed by this many following frames' winners
+    trigger_confirm_frames: int = 2  # ... confirmed by this many following frames' winners (1: the paper's)
     tracking_std: List[float] = field(default_factory=lambda: [0.3, 0.3, 0.1])
     seed_share: float = 0.1  # mcl_seeded: share of particles re-drawn around the camera's hypotheses
     particles: int = 20_000
