@@ -25,6 +25,7 @@ class DataConfig:
     relations_path: Optional[str] = None  # Kümmerle et al. 2009 relations
     relation_stamps_path: Optional[str] = None  # g2o file whose laser stamps stand in for synthetic log stamps
     splits_path: Optional[str] = None  # benchmark split ids (stamps)
+    train_poses_path: Optional[str] = None  # poses the NOF trains on instead of the ground truth (the pipeline's SLAM)
     scan_topic: Optional[str] = None  # bags: auto when the bag has exactly one LaserScan topic
     odom_topic: Optional[str] = None
     base_frame: Optional[str] = None
@@ -41,6 +42,7 @@ class DataConfig:
 @dataclass
 class SimConfig:
     seed: int = 0
+    path_seed: Optional[int] = None  # another path (and noise) through the same world; None = seed
     width_m: float = 30.0
     height_m: float = 16.0
     corridor_width_m: float = 2.5
@@ -236,6 +238,17 @@ class GlobLocConfig:
 
 
 @dataclass
+class LocalizeConfig:
+    """The pipeline's second log, localized globally in the map and NOF made from the first (data.*)."""
+    path: Optional[str] = None  # None: the simulator's second session (sim.path_seed below), or data.path again
+    format: Optional[str] = None  # None = data.format
+    ground_truth_path: Optional[str] = None  # poses to score against (same frame as data.ground_truth_path)
+    sim_path_seed: int = 1  # data=sim: the second session drives this path through the same world
+    start_s: float = 0.0  # localize from this far into the log ...
+    run_s: Optional[float] = None  # ... for this long (None: to its end)
+
+
+@dataclass
 class Config:
     data: DataConfig = field(default_factory=DataConfig)
     sim: SimConfig = field(default_factory=SimConfig)
@@ -247,6 +260,7 @@ class Config:
     mcl: MCLConfig = field(default_factory=MCLConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
     globloc: GlobLocConfig = field(default_factory=GlobLocConfig)
+    localize: LocalizeConfig = field(default_factory=LocalizeConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

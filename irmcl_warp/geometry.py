@@ -64,3 +64,20 @@ def interpolate_poses(stamps_src, poses_src, stamps_query):
         out[:, k] = np.interp(stamps_query, stamps_src, col)
     out[:, 2] = wrap_angle(out[:, 2])
     return out
+
+
+def align_rigid(est, ref):
+    """T_ref_est [3]: the rigid 2D motion that best maps the positions of ``est`` [N, 3] onto ``ref`` [N, 3]
+    in the least-squares sense (Horn / Umeyama without scale, as evo's --align), over rows where both are
+    finite; ``compose(T_ref_est, est)`` then lies on ``ref``."""
+    est, ref = np.asarray(est, np.float64), np.asarray(ref, np.float64)
+    ok = np.all(np.isfinite(est), 1) & np.all(np.isfinite(ref), 1)
+    if ok.sum() < 2:
+        raise ValueError(f"rigid alignment needs two poses known in both trajectories, got {int(ok.sum())}")
+    a, b = est[ok, :2], ref[ok, :2]
+    ca, cb = a.mean(0), b.mean(0)
+    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
+    D = np.diag([1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    t = cb - R @ ca
+    return np.array([t[0], t[1], np.arctan2(R[1, 0], R[0, 0])])

@@ -1,5 +1,12 @@
 """Stage outputs: ``outputs/<exp>/<stage>/`` with config.yaml, manifest.json and artifacts, written
-atomically (temporary file + rename), so an interrupted run never leaves a half-written file."""
+atomically (temporary file + rename), so an interrupted run never leaves a half-written file.
+
+manifest.json is written last and is the mark of a finished stage: it holds the digest of the resolved
+config, of every input file and of every file the stage wrote. ``stage_complete`` checks all three, so a
+folder from an interrupted run, a file edited or truncated since, or a changed setting reads as not done
+(the pipeline and ``eval.reproduce`` then run the stage again). The code version (git sha) is recorded but
+not compared: a code change alone does not redo a finished stage.
+"""
 
 from __future__ import annotations
 
@@ -55,8 +62,21 @@ def stage_dir(cfg, stage: str, root="outputs") -> Path:
     return out
 
 
+def config_digest(cfg) -> str:
+    from omegaconf import OmegaConf
+
+    return hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()
+
+
+def output_digests(out: Path) -> dict[str, str]:
+    """sha256 of every file under ``out`` except manifest.json and temporary files, by relative path."""
+    return {str(p.relative_to(out)): file_digest(p) for p in sorted(Path(out).rglob("*"))
+            if p.is_file() and p.name != "manifest.json" and not p.name.endswith(".tmp")}
+
+
 def write_manifest(out: Path, cfg, inputs: list[Path], device: str, started: float) -> Path:
-    """config.yaml (resolved) and manifest.json (git sha, versions, device, input hashes, wall time)."""
+    """config.yaml (resolved) and manifest.json (git sha, versions, device, digests of the config, the
+    inputs and the outputs, wall time); call it last, once every artifact is written."""
     from omegaconf import OmegaConf
     import numpy
     import warp
@@ -65,6 +85,39 @@ def write_manifest(out: Path, cfg, inputs: list[Path], device: str, started: flo
     manifest = {
         "git_sha": _git_sha(), "python": platform.python_version(), "numpy": numpy.__version__,
         "warp": warp.config.version, "device": device, "wall_time_s": time.time() - started,
+        "config_sha256": config_digest(cfg),
         "inputs": {str(p): file_digest(p) for p in inputs if Path(p).is_file()},
+        "outputs": output_digests(out),
     }
     return write_json(out / "manifest.json", manifest)
+
+
+def stage_complete(out, cfg=None, inputs=None) -> tuple[bool, str]:
+    """(finished, why not): ``out`` holds a manifest whose output digests match the files, every JSON file
+    parses, and (when given) the config and the input files are those it was made from."""
+    out = Path(out)
+    path = out / "manifest.json"
+    if not path.is_file():
+        return False, f"{path} missing: the stage never finished there"
+    try:
+        manifest = json.loads(path.read_text())
+        outputs = manifest["outputs"]
+    except (ValueError, KeyError, TypeError):
+        return False, f"{path} is malformed or from before output digests were recorded"
+    for rel, digest in outputs.items():
+        f = out / rel
+        if not f.is_file():
+            return False, f"{f} listed in the manifest but missing"
+        if file_digest(f) != digest:
+            return False, f"{f} differs from what the stage wrote (edited, truncated or half-rewritten)"
+        if f.suffix == ".json":
+            try:
+                json.loads(f.read_text())
+            except ValueError as e:
+                return False, f"{f} is not valid JSON ({e})"
+    if cfg is not None and manifest.get("config_sha256") != config_digest(cfg):
+        return False, f"{out}: made with other settings (config.yaml there shows which)"
+    for p in inputs or []:
+        if Path(p).is_file() and manifest["inputs"].get(str(p)) != file_digest(p):
+            return False, f"{out}: input {p} changed since"
+    return True, ""

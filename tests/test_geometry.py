@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from irmcl_warp.geometry import compose, interpolate_poses, inverse, relative, transform_points, wrap_angle
 
@@ -20,3 +21,16 @@ def test_interpolation_takes_the_short_way_across_pi():
     out = interpolate_poses([0.0, 1.0], np.array([[0, 0, np.pi - 0.1], [2, 0, -np.pi + 0.1]]), [0.5])
     assert abs(abs(out[0, 2]) - np.pi) < 1e-9 and out[0, 0] == 1.0
     assert np.all(np.abs(wrap_angle(np.array([3 * np.pi, -3 * np.pi]))) <= np.pi)
+
+
+def test_rigid_alignment_recovers_a_random_motion(rng):
+    from irmcl_warp.geometry import align_rigid
+
+    est = np.column_stack([rng.uniform(-20, 20, (50, 2)), rng.uniform(-np.pi, np.pi, 50)])
+    T = np.array([rng.uniform(-10, 10), rng.uniform(-10, 10), rng.uniform(-np.pi, np.pi)])
+    ref = compose(T, est)
+    ref[::7] = np.nan  # rows unknown in one trajectory are ignored
+    got = align_rigid(est, ref)
+    assert np.allclose(got[:2], T[:2], atol=1e-9) and abs(wrap_angle(got[2] - T[2])) < 1e-9, f"seed {rng.seed}"
+    with pytest.raises(ValueError, match="two poses"):
+        align_rigid(est[:1], ref[:1])

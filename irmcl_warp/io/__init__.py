@@ -13,12 +13,12 @@ import numpy as np
 
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
-from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits
+from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
 __all__ = ["LogDefectWarning", "LogFormatError", "data_root", "load_log", "read_bag", "read_carmen",
-           "read_g2o", "read_ground_truth", "read_matched_csv", "read_relations", "read_splits", "resolve",
+           "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
            "write_bag"]
 
 
@@ -38,9 +38,11 @@ def resolve(path: str) -> Path:
 
 
 def read_ground_truth(path) -> tuple[np.ndarray, np.ndarray]:
-    """(stamps, T_map_base poses) from a matched CSV or a GMapping-corrected CARMEN log."""
+    """(stamps, T_map_base poses) from a matched CSV, a TUM trajectory (.tum) or a GMapping-corrected CARMEN log."""
     path = Path(path)
-    return read_matched_csv(path) if path.suffix == ".csv" else read_carmen_poses(path)
+    if path.suffix == ".csv":
+        return read_matched_csv(path)
+    return read_tum(path) if path.suffix == ".tum" else read_carmen_poses(path)
 
 
 def attach_ground_truth(log: LaserLog, stamps, poses) -> int:

@@ -54,6 +54,29 @@ class Relations:
         return len(self.t1)
 
 
+def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
+    """A TUM trajectory (evo's format: ``stamp x y z qx qy qz qw`` per line, '#' comments) -> (stamps[N],
+    poses[N, 3]); the yaw is taken from the quaternion, which must be a rotation about z."""
+    path = Path(path)
+    rows = []
+    with open_text(path) as f:
+        for n_line, line in enumerate(f, start=1):
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            tok = line.split()
+            if len(tok) != 8:
+                raise LogFormatError(path, f"line {n_line}", f"expected 8 values (stamp x y z qx qy qz qw), found {len(tok)}")
+            t, x, y, _, qx, qy, qz, qw = _floats(path, n_line, tok, "TUM pose")
+            if abs(qx) > 1e-3 or abs(qy) > 1e-3:
+                raise LogFormatError(path, f"line {n_line}", f"a 2D pose needs a rotation about z, found q = ({qx}, {qy}, {qz}, {qw})")
+            rows.append((t, x, y, 2.0 * np.arctan2(qz, qw)))
+    if not rows:
+        raise LogFormatError(path, None, "no poses (empty file or comments only)")
+    a = np.array(rows)
+    return a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi])
+
+
 def read_relations(path) -> Relations:
     """``t1 t2 x y z roll pitch yaw`` per line."""
     path = Path(path)

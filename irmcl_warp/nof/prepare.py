@@ -20,7 +20,8 @@ from irmcl_warp.outputs import stage_dir
 
 def input_files(cfg) -> list[Path]:
     d = cfg.data
-    return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path) if p]
+    return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path,
+                                 d.get("train_poses_path")) if p]
 
 
 def far_m(cfg, range_max_m: float | None = None) -> float:
@@ -41,7 +42,7 @@ def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
     data = {k: v for k, v in OmegaConf.to_container(cfg.data).items() if v is not None}  # a new optional field
     key = settings_key(data, OmegaConf.to_container(cfg.sim), *settings)  # keeps the caches made before it
     try:
-        files = [] if cfg.data.format == "sim" else input_files(cfg)
+        files = input_files(cfg) if cfg.data.format != "sim" else [resolve(p) for p in [cfg.data.get("train_poses_path")] if p]
         return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
     except FileNotFoundError as e:
         return key, e
@@ -60,6 +61,11 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
         print(f"{no_raw}; using the beams cached in {path}")
     if sets is None:
         log = load_log(cfg)
+        if cfg.data.get("train_poses_path"):  # train on these poses (the pipeline's SLAM), not the ground truth
+            from irmcl_warp.io import attach_ground_truth, read_ground_truth
+
+            n = attach_ground_truth(log, *read_ground_truth(resolve(cfg.data.train_poses_path)))
+            print(f"{cfg.data.name}: {n} of {len(log)} scans posed by {cfg.data.train_poses_path}")
         beams = beams_from_log(log, cfg.render.near_m, far_m(cfg, log.info.range_max_m), name=cfg.data.name)
         if cfg.data.splits_path:
             source = str(resolve(cfg.data.splits_path))

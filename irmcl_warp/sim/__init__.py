@@ -17,7 +17,8 @@ from kernels import SIM
 
 def simulate(cfg, device: str = "auto") -> tuple[LaserLog, World]:
     """``cfg``: the ``sim`` config node (see irmcl_warp/config.py, SimConfig)."""
-    rng = np.random.default_rng(cfg.seed)
+    path_seed = cfg.seed if cfg.get("path_seed") is None else int(cfg.path_seed)  # the world stays that of seed
+    rng = np.random.default_rng(path_seed)
     world = office(cfg.seed, cfg.width_m, cfg.height_m, cfg.corridor_width_m, cfg.room_min_width_m,
                    cfg.room_max_width_m, cfg.door_width_m, cfg.furniture_per_room, cfg.repetitive)
     T_world_base = follow(waypoints(world, rng, cfg.visit_prob), cfg.speed_mps, cfg.turn_rate_rps, cfg.rate_hz,
@@ -27,8 +28,8 @@ def simulate(cfg, device: str = "auto") -> tuple[LaserLog, World]:
     T_base_laser = np.array([cfg.laser_x_m, 0.0, 0.0])
     lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=info.angles_rad, max_range_m=cfg.max_range_m,
                       noise_std_m=cfg.range_noise_std_m, dropout_prob=cfg.dropout_prob, device=device)
-    ranges = lidar.scan(compose(T_world_base, T_base_laser), seed=cfg.seed)
+    ranges = lidar.scan(compose(T_world_base, T_base_laser), seed=path_seed)
     odom = noisy_odometry(T_world_base, list(cfg.odom_alphas), rng)
     stamps = cfg.start_stamp_s + np.arange(len(T_world_base)) / cfg.rate_hz
-    log = LaserLog(stamps, ranges, odom, info, T_base_laser, T_world_base, f"sim:office(seed={cfg.seed})")
+    log = LaserLog(stamps, ranges, odom, info, T_base_laser, T_world_base, f"sim:office(seed={cfg.seed}, path {path_seed})")
     return log, world

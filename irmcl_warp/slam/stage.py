@@ -21,7 +21,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from eval.metrics import relations_error
-from irmcl_warp.geometry import wrap_angle
+from irmcl_warp.geometry import align_rigid, compose, wrap_angle
 from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.mapping.grid import OccupancyGrid
 from irmcl_warp.mapping.mapio import atomic_write_bytes, save_map
@@ -60,15 +60,9 @@ def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
     """RMSE of positions after the rigid 2D alignment (Horn / Umeyama without scale) of est onto gt, and the
     mean absolute yaw error after it; over poses where both are finite."""
     ok = np.all(np.isfinite(est), 1) & np.all(np.isfinite(gt), 1)
-    a, b = est[ok, :2], gt[ok, :2]
-    ca, cb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
-    D = np.diag([1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    moved = (a - ca) @ R.T + cb
-    yaw = np.arctan2(R[1, 0], R[0, 0])
-    e_yaw = np.degrees(np.abs(wrap_angle(est[ok, 2] + yaw - gt[ok, 2])))
-    return {"poses": int(ok.sum()), "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved - b) ** 2, 1)))),
+    moved = compose(align_rigid(est, gt), est[ok])
+    e_yaw = np.degrees(np.abs(wrap_angle(moved[:, 2] - gt[ok, 2])))
+    return {"poses": int(ok.sum()), "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved[:, :2] - gt[ok, :2]) ** 2, 1)))),
             "yaw_mae_deg": float(e_yaw.mean())}
 
 

@@ -1,0 +1,186 @@
+"""``python -m irmcl_warp.pipeline [data=bag data.path=run.bag] [localize.path=other.bag]``: from a raw log
+to a localized robot, every artifact made by a command.
+
+1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam-<tag>/ (map, trajectory.tum)
+2. poses     the SLAM poses of the processed scans -> outputs/<exp>/pipeline/slam_poses.tum
+3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train-<preset>/nof.pt
+4. nog       the NOF baked into a neural occupancy grid over the SLAM map (cached by checkpoint digest)
+5. localize  global MCL with the NOG over the second log (``localize.*``; the simulator's second session,
+             or the mapping log again) -> outputs/<exp>/pipeline/localization.tum
+6. report    outputs/<exp>/pipeline/report.md: the map, trajectories, error plot, timing per stage
+
+A stage whose folder is complete for the same settings and inputs (``outputs.stage_complete``) is skipped;
+an interrupted or edited one is redone. Where the logs have ground truth, the SLAM map frame is tied to
+the ground truth's by a rigid alignment of the SLAM trajectory of the *mapping* log (evo's --align); the
+localization of the second log is scored through that transform, never aligned to its own truth.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import OmegaConf
+
+from eval.metrics import localization_metrics
+from irmcl_warp.config import register
+from irmcl_warp.geometry import align_rigid, compose, inverse
+from irmcl_warp.io import load_log
+from irmcl_warp.localize import run_one, write_tum
+from irmcl_warp.mapping.grid import laser_bounds
+from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.nof.prepare import far_m, recorded_inputs
+from irmcl_warp.nog import NOG, bake_nog
+from irmcl_warp.outputs import stage_complete, stage_dir, write_json, write_manifest
+from kernels import WEIGHTING, pick_device
+
+
+def with_overrides(cfg, **dotted):
+    """A copy of ``cfg`` with ``{"a.b": value}`` set (struct mode kept: an unknown key is an error)."""
+    new = cfg.copy()
+    for key, value in dotted.items():
+        OmegaConf.update(new, key, value, merge=False)
+    return new
+
+
+def run_stage(name: str, out: Path | None, cfg, inputs, run, timing: dict) -> Path:
+    """Run ``run()`` unless ``out`` already holds a complete stage for ``cfg`` and ``inputs``."""
+    t0 = time.time()
+    done, why = stage_complete(out, cfg, inputs) if out is not None else (False, "")
+    if done:
+        print(f"[{name}] up to date: {out}")
+        timing[name] = {"s": 0.0, "skipped": True}
+        return out
+    if out is not None and (out / "manifest.json").exists():
+        print(f"[{name}] redoing: {why}")
+    out = run()
+    timing[name] = {"s": time.time() - t0, "skipped": False}
+    return out
+
+
+def processed_poses(slam_dir: Path, log) -> tuple[np.ndarray, np.ndarray]:
+    """(scan indices, SLAM poses) of the scans the filter processed (neff.csv; scan 0 starts it)."""
+    from irmcl_warp.io import read_tum
+
+    rows = np.loadtxt(slam_dir / "neff.csv", delimiter=",", skiprows=1, ndmin=2)
+    scans = np.concatenate([[0], rows[:, 0].astype(int)]) if len(rows) else np.array([0])
+    stamps, poses = read_tum(slam_dir / "trajectory.tum")
+    if len(stamps) != len(log):
+        raise ValueError(f"{slam_dir / 'trajectory.tum'}: {len(stamps)} poses for a log of {len(log)} scans")
+    return scans, poses[scans]
+
+
+def second_log(cfg):
+    """The log to localize in and a description: localize.path, the simulator's second session, or the
+    mapping log itself."""
+    lc = cfg.localize
+    if lc.path is not None:
+        c = with_overrides(cfg, **{"data.path": lc.path, "data.format": lc.format or cfg.data.format,
+                                   "data.ground_truth_path": lc.ground_truth_path, "data.relations_path": None,
+                                   "data.splits_path": None, "data.train_poses_path": None})
+        return load_log(c), f"{lc.path}"
+    if cfg.data.format == "sim":
+        c = with_overrides(cfg, **{"sim.path_seed": lc.sim_path_seed, "data.train_poses_path": None})
+        return load_log(c), f"the simulator's second session (path seed {lc.sim_path_seed}, same world)"
+    return load_log(with_overrides(cfg, **{"data.train_poses_path": None})), \
+        f"{cfg.data.path} again (no localize.path: the scans the map was built from)"
+
+
+def localize(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(scan indices, estimates [n, 3], final particles) of global MCL over ``log`` in the SLAM map frame."""
+    from irmcl_warp.mcl import ParticleFilter
+
+    m = OmegaConf.merge(cfg.mcl, {"far_m": far_m(cfg)})
+    t = log.stamps - log.stamps[0]
+    end = np.inf if cfg.localize.run_s is None else cfg.localize.start_s + cfg.localize.run_s
+    idx = np.flatnonzero((t >= cfg.localize.start_s) & (t <= end))
+    if len(idx) < 2:
+        raise ValueError(f"localize.start_s={cfg.localize.start_s}, run_s={cfg.localize.run_s}: "
+                         f"{len(idx)} scans of a {t[-1]:.0f} s log in the window")
+    free = slam_map.known & (slam_map.probability < 0.35)
+    res = slam_map.resolution_m
+    view = NOG(np.where(free, 0.0, 1.0).astype(np.float32),
+               (slam_map.origin_xy[0] + res / 2, slam_map.origin_xy[1] + res / 2), res)
+    weighting = WEIGHTING.build("nog_raymarch", nog=nog, t_min=m.t_min, empty_below=m.empty_below,
+                                num_particles=m.num_particles, num_beams=min(m.num_beams, log.info.num_beams),
+                                num_samples=m.num_samples, near_m=m.near_m, far_m=m.far_m, sigma_m=m.sigma_m,
+                                device=device)
+    pf = ParticleFilter(view, m, log.T_base_laser, log.info.angles_rad, device, weighting=weighting)
+    pf.rng = np.random.default_rng(m.seed)
+    pf.init_uniform()
+    est = run_one(pf, log, idx, m)
+    return idx, est, pf.particles.numpy()
+
+
+def run_pipeline(cfg) -> Path:
+    from irmcl_warp.pipeline_report import write_report
+    from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
+    from irmcl_warp.train import run_train, train_dir
+
+    started, device, timing = time.time(), pick_device(cfg.device), {}
+    cfg = with_overrides(cfg, **{"data.train_poses_path": None})
+    out = stage_dir(cfg, "pipeline")
+    done, why = stage_complete(out, cfg, recorded_inputs(cfg))
+    if done:
+        print(f"pipeline up to date: {out / 'report.md'}")
+        return out
+    # 1. SLAM over the mapping log
+    slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam)), cfg, recorded_inputs(cfg),
+                         lambda: run_slam(cfg), timing)
+    from irmcl_warp.localize import load_stream
+
+    log = load_stream(cfg)
+    # 2. the processed scans' SLAM poses: the NOF's training poses
+    scans, poses = processed_poses(slam_dir, log)
+    write_tum(out / "slam_poses.tum", log.stamps[scans], poses)
+    # 3. the NOF, trained on those (interleaved train / val / test over the processed scans)
+    cfg_train = with_overrides(cfg, **{"data.train_poses_path": str((out / "slam_poses.tum").resolve()),
+                                       "data.splits_path": None})
+    train_out = run_stage("train", train_dir(cfg_train), cfg_train, recorded_inputs(cfg_train),
+                          lambda: run_train(cfg_train), timing)
+    # 4. the NOG over the SLAM map's extent of the scans
+    t0 = time.time()
+    far = far_m(cfg, log.info.range_max_m)
+    T_map_laser = compose(poses, log.T_base_laser)
+    nog = bake_nog(train_out / "nof.pt", laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
+                   cfg.mcl.map_resolution_m, cache_dir=stage_dir(cfg, "nog"),
+                   device="cuda" if device.startswith("cuda") else "cpu")
+    timing["nog"] = {"s": time.time() - t0, "skipped": False}
+    # 5. global localization of the second log
+    t0 = time.time()
+    log2, what = second_log(cfg)
+    slam_map = load_map(slam_dir / "map.npz")
+    idx, est, particles = localize(cfg, log2, nog, slam_map, device)
+    timing["localize"] = {"s": time.time() - t0, "skipped": False, "scans": int(len(idx))}
+    write_tum(out / "localization.tum", log2.stamps[idx], est)
+    metrics = {"mapping_log": cfg.data.path or cfg.data.name, "localized_log": what, "device": device,
+               "processed_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing}
+    gt_map, T_gt_map = None, None
+    if log.ground_truth is not None and log2.ground_truth is not None:
+        T_gt_map = align_rigid(poses, log.ground_truth[scans])  # from the mapping log only
+        gt_map = compose(inverse(T_gt_map), log2.ground_truth[idx])  # the second log's truth in the map frame
+        metrics["T_groundtruth_map"] = T_gt_map.tolist()
+        metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
+    write_report(out, cfg, metrics, slam_dir, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
+    write_json(out / "metrics.json", metrics)
+    write_manifest(out, cfg, recorded_inputs(cfg), device, started)
+    loc = metrics.get("localization")
+    print(f"pipeline: map from {len(scans)} processed scans, {len(idx)} scans localized"
+          + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {loc['location_rmse_cm']:.1f} cm"
+             if loc and loc["converged"] else "; did not converge" if loc else "; no ground truth to score")
+          + f" -> {out / 'report.md'}")
+    return out
+
+
+register()
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="pipeline")
+def main(cfg) -> None:
+    run_pipeline(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""The pipeline's report: outputs/<exp>/pipeline/report.md with two figures (map + trajectories, error over
+time), the timing of every stage and the metrics of each, read from the stages' own metrics.json files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.outputs import save_figure
+from irmcl_warp.mapping.mapio import atomic_write_bytes
+
+
+def _fmt(v, unit="", digits=2):
+    return "-" if v is None else f"{v:.{digits}f}{unit}"
+
+
+def plot_map(path: Path, slam_map, slam_poses, est, gt_map, particles) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    H, W = slam_map.shape
+    r = slam_map.resolution_m
+    x0, y0 = slam_map.origin_xy
+    image = np.where(slam_map.known, slam_map.probability, 0.5)
+    fig, ax = plt.subplots(figsize=(10, 10 * H / max(W, 1) + 1))
+    ax.imshow(1 - image, cmap="gray", vmin=0, vmax=1, origin="lower", extent=(x0, x0 + W * r, y0, y0 + H * r))
+    ax.plot(slam_poses[:, 0], slam_poses[:, 1], "-", color="tab:orange", lw=0.8, label="SLAM (mapping log)")
+    keep = np.random.default_rng(0).permutation(len(particles))[:3000]
+    ax.plot(particles[keep, 0], particles[keep, 1], ".", color="tab:blue", ms=1, alpha=0.4, label="particles (end)")
+    if gt_map is not None:
+        ok = np.all(np.isfinite(gt_map), 1)
+        ax.plot(gt_map[ok, 0], gt_map[ok, 1], "-", color="tab:green", lw=1.2, label="ground truth (localized log)")
+    ax.plot(est[:, 0], est[:, 1], ".", color="tab:red", ms=2, label="MCL estimate")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, SLAM map frame)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best", fontsize=8, markerscale=3)
+    save_figure(fig, path)
+
+
+def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = np.all(np.isfinite(gt_map), 1)
+    t = np.asarray(stamps) - stamps[0]
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    ax.semilogy(t[ok], np.maximum(np.hypot(*(est[ok, :2] - gt_map[ok, :2]).T), 1e-3), "-", color="tab:red", lw=1)
+    if converged_s is not None:
+        ax.axvline(converged_s, color="tab:green", ls="--", lw=1, label=f"converged ({converged_s:.1f} s)")
+    ax.axhline(0.3, color="gray", lw=0.8, label="0.3 m")
+    ax.set_xlabel("time since start (s)")
+    ax.set_ylabel("position error (m)")
+    ax.legend(fontsize=8)
+    save_figure(fig, path)
+
+
+def write_report(out: Path, cfg, metrics: dict, slam_dir: Path, slam_map, slam_poses, stamps, est, gt_map,
+                 particles) -> Path:
+    plot_map(out / "map.png", slam_map, slam_poses, est, gt_map, particles)
+    loc = metrics.get("localization")
+    if gt_map is not None:
+        plot_error(out / "error.png", stamps, est, gt_map, loc["time_to_converge_s"])
+    slam = json.loads((slam_dir / "metrics.json").read_text())
+    lines = [f"# Pipeline report: {cfg.exp}", "",
+             f"- mapping log: `{metrics['mapping_log']}`; localized: {metrics['localized_log']}",
+             f"- device: {metrics['device']}; GMapping with {cfg.slam.particles} particles, NOF preset "
+             f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})", "",
+             "## Stages", "", "| stage | time (s) | output |", "|---|---|---|"]
+    where = {"slam": slam_dir, "train": f"train-{cfg.train.name}/", "nog": "nog/", "localize": "localization.tum"}
+    for name, t in metrics["timing"].items():
+        took = "skipped (up to date)" if t["skipped"] else f"{t['s']:.1f}"
+        lines.append(f"| {name} | {took} | `{where.get(name, '')}` |")
+    traj = slam.get("trajectory")
+    lines += ["", "## SLAM", "", f"{slam['processed_scans']} of {slam['scans']} scans processed, "
+              f"{slam['resamplings']} resamplings."]
+    if traj:
+        lines.append(f"Trajectory error against the mapping log's ground truth after a rigid alignment: "
+                     f"{traj['ate_rmse_m']:.3f} m RMSE (odometry {slam['trajectory_odometry']['ate_rmse_m']:.3f} m).")
+    if isinstance(slam.get("relations"), dict):
+        lines.append(f"Relations metric: {slam['relations']['trans_abs_mean_m']:.3f} m.")
+    lines += ["", "## Localization (global, from a uniform start)", ""]
+    if loc is None:
+        lines.append("The localized log has no ground truth: the estimate is in map.png, not scored.")
+    else:
+        lines += [f"- converged: {'after ' + _fmt(loc['time_to_converge_s'], ' s', 1) if loc['converged'] else 'no'}",
+                  f"- location RMSE after convergence: {_fmt(loc['location_rmse_cm'], ' cm', 1)}, yaw RMSE "
+                  f"{_fmt(loc['yaw_rmse_deg'], ' deg')}",
+                  f"- success (IR-MCL: converged within 60 s, RMSE < 0.3 m): {loc['success']}",
+                  "- scored in the SLAM map frame: the ground truth is moved there by the rigid alignment of the "
+                  f"mapping log's SLAM trajectory to its ground truth ({np.round(metrics['T_groundtruth_map'], 3).tolist()})",
+                  "", "![position error](error.png)"]
+    lines += ["", "![map, trajectories and final particles](map.png)", ""]
+    path = out / "report.md"
+    atomic_write_bytes(path, "\n".join(lines).encode())
+    return path
