@@ -21,7 +21,7 @@ from irmcl_warp.config import register
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
-from irmcl_warp.outputs import save_figure, stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import save_figure, stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.train import train_dir
 from kernels import RAYCAST, pick_device
 
@@ -76,6 +76,9 @@ def run_synthesis(cfg) -> Path:
     started = time.time()
     device = pick_device(cfg.device)
     out = stage_dir(cfg, f"synthesis-{cfg.train.name}")
+    inputs = recorded_inputs(cfg) + [train_dir(cfg) / "nof.pt"]
+    if up_to_date(out, cfg, inputs):
+        return out
     sets = prepare_beams(cfg)
     train, test, far = sets["train"], sets["test"], far_m(cfg)
     preds, methods = {}, {}
@@ -100,7 +103,7 @@ def run_synthesis(cfg) -> Path:
               "far_m": far, "device": device, "methods": methods}
     write_json(out / "metrics.json", result)
     plot_scan(out / "scan.png", test, preds, k=len(test) // 2)
-    write_manifest(out, cfg, recorded_inputs(cfg), device, started)
+    write_manifest(out, cfg, inputs, device, started)
     print(f"{cfg.data.name}, {test.name} ({len(test)} scans): " + "; ".join(
         f"{n}: MAE {m['mae_m']:.3f} m, acc {m['accuracy_pct']:.1f} %" for n, m in methods.items()))
     return out

@@ -35,7 +35,7 @@ from irmcl_warp.mcl import ParticleFilter
 from irmcl_warp.nof.prepare import cache_key, far_m, prepare_beams, recorded_inputs
 from irmcl_warp.nog import NOG, bake_nog
 from irmcl_warp.types import LaserInfo, LaserLog
-from irmcl_warp.outputs import save_figure, stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import save_figure, stage_dir, up_to_date, write_json, write_manifest
 from kernels import WEIGHTING, pick_device
 from kernels.motion import odometry_step
 
@@ -186,10 +186,22 @@ def run_one(pf: ParticleFilter, log: LaserLog, idx: np.ndarray, m) -> np.ndarray
     return est
 
 
+def nof_inputs(cfg) -> list[Path]:
+    """The trained field a NOF-weighted run reads (its digest decides whether the run is up to date)."""
+    if cfg.mcl.weighting not in ("nog_raymarch", "nof_direct"):
+        return []
+    from irmcl_warp.train import train_dir
+
+    return [train_dir(cfg) / "nof.pt"]
+
+
 def run_localize(cfg) -> Path:
     started, device = time.time(), pick_device(cfg.device)
     m = OmegaConf.merge(cfg.mcl, {"far_m": far_m(cfg)})  # the filter's valid-beam bound = the sensor's far
     out = stage_dir(cfg, run_tag(m))
+    inputs = recorded_inputs(cfg) + nof_inputs(cfg)
+    if up_to_date(out, cfg, inputs):
+        return out
     log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
@@ -239,7 +251,7 @@ def run_localize(cfg) -> Path:
     summary = summarise(runs, m, device)
     write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs,
                                       "settings": OmegaConf.to_container(m)})
-    write_manifest(out, cfg, recorded_inputs(cfg), device, started)
+    write_manifest(out, cfg, inputs, device, started)
     print(f"{cfg.data.name}, {m.weighting} ({m.mode}): success {summary['successes']}/{len(runs)} -> {out}")
     return out
 

@@ -121,3 +121,14 @@ def stage_complete(out, cfg=None, inputs=None) -> tuple[bool, str]:
         if Path(p).is_file() and manifest["inputs"].get(str(p)) != file_digest(p):
             return False, f"{out}: input {p} changed since"
     return True, ""
+
+
+def up_to_date(out, cfg, inputs=None) -> bool:
+    """True (and says so) when ``out`` is a finished stage of these settings and inputs: the stage then
+    returns at once. An unfinished or damaged one is reported and redone."""
+    done, why = stage_complete(out, cfg, inputs)
+    if done:
+        print(f"{out}: up to date (same settings and inputs; remove the folder to run it again)")
+    elif (Path(out) / "manifest.json").exists():
+        print(f"{out}: redoing, {why}")
+    return done

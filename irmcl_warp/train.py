@@ -23,7 +23,7 @@ from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
 from irmcl_warp.nof.render import make_renderer, render_scans
 from irmcl_warp.nof.trainer import Trainer
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import stage_dir, up_to_date, write_json, write_manifest
 from kernels import pick_device
 
 
@@ -68,6 +68,8 @@ def run_train(cfg) -> Path:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
     out = train_dir(cfg)
+    if up_to_date(out, cfg, recorded_inputs(cfg)):
+        return out
     sets = prepare_beams(cfg)
     near, far = cfg.render.near_m, far_m(cfg)
     meta, key = run_settings(cfg, sets["train"].name, far)

@@ -36,7 +36,7 @@ from irmcl_warp.globloc.pnp import OrbPnP
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.localize import write_tum
 from irmcl_warp.nog import NOG
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import office
@@ -324,6 +324,8 @@ def run_globloc(cfg) -> Path:
     if bad:
         raise ValueError(f"globloc.methods: unknown {bad}; choose from {list(METHODS)}")
     out = stage_dir(cfg, f"globloc-{g.scenario}")
+    if up_to_date(out, cfg):
+        return out
     rng = np.random.default_rng(g.seed)
     world = world_of(cfg)
     look = appearance(world, s.seed, g.lookalike_share)

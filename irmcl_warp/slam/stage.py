@@ -26,7 +26,7 @@ from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.mapping.grid import OccupancyGrid
 from irmcl_warp.mapping.mapio import atomic_write_bytes, save_map
 from irmcl_warp.nof.prepare import far_m, recorded_inputs
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
 from kernels import pick_device
 
@@ -98,13 +98,15 @@ def run_slam(cfg) -> Path:
 
     started, device = time.time(), pick_device(cfg.device)
     s = cfg.slam
+    out = stage_dir(cfg, run_tag(s))
+    if up_to_date(out, cfg, recorded_inputs(cfg)):
+        return out
     log = load_stream(cfg)
     jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
     if jumps:  # documented handling: kept as the motion model's input, counted in metrics.json
         print(f"{cfg.data.name}: {jumps} odometry steps jump (over {cfg.data.max_step_m} m or {cfg.data.max_speed_mps} "
               f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
               f"map there; the derived logs of ../shared/data repair known jumps")
-    out = stage_dir(cfg, run_tag(s))
     rbpf = start_filter(cfg, log, device)
     neff_rows, t0 = [], time.perf_counter()
     try:

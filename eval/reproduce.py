@@ -1,0 +1,187 @@
+"""``python -m eval.reproduce``: run every paper experiment that has no finished output, then regenerate every
+table and figure (``eval.tables --write``, ``eval.plots``).
+
+Each experiment below is a Hydra sweep of one stage. A job counts as done when its output folder is a
+finished stage of the same settings (``outputs.stage_complete``: manifest digests, config, inputs) or when
+a GPU run of it is kept in ``results/`` (pass ``--rerun-kept`` to run those too). A half-written or edited
+folder is not done: it is run again. The remaining jobs of a sweep go to Hydra in one multirun through
+the launcher you pick:
+
+  --launcher basic    one job after the other (Hydra's default)
+  --launcher joblib   local processes, ``--jobs N`` at a time (hydra-joblib-launcher)
+  --launcher slurm    a SLURM cluster (hydra-submitit-launcher, ``pip install -e .[cluster]``; set the
+                      partition etc. in conf/hydra/launcher/slurm.yaml or with ``--hydra-arg``)
+
+  python -m eval.reproduce --list                 every job and whether it is done, kept or missing
+  python -m eval.reproduce --only slam globloc    these groups only
+  python -m eval.reproduce --tables-only          only the tables and figures
+
+Groups marked GPU are sized for the paper (100k particles, the authors' training recipe): on a CPU they
+take days. The commands of every kept figure are in docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+
+from irmcl_warp.config import register
+from irmcl_warp.outputs import stage_complete
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class Sweep:
+    group: str  # results/<group>/ holds the kept runs of this group
+    module: str
+    fixed: list[str]
+    axes: dict[str, list] = field(default_factory=dict)  # swept overrides: their Cartesian product
+    gpu: bool = False
+
+    def jobs(self) -> list[list[str]]:
+        keys = list(self.axes)
+        return [self.fixed + [f"{k}={v}" for k, v in zip(keys, values)]
+                for values in itertools.product(*(self.axes[k] for k in keys))]
+
+
+def folder(module: str, cfg) -> str:
+    """The output folder of a job, relative to outputs/ (and to results/<group>/)."""
+    if module == "irmcl_warp.train":
+        return f"{cfg.exp}/train-{cfg.train.name}"
+    if module == "eval.synthesis":
+        return f"{cfg.exp}/synthesis-{cfg.train.name}"
+    if module == "irmcl_warp.localize":
+        from irmcl_warp.localize import run_tag
+
+        return f"{cfg.exp}/{run_tag(cfg.mcl)}"
+    if module == "irmcl_warp.slam":
+        from irmcl_warp.slam.stage import run_tag
+
+        return f"{cfg.exp}/{run_tag(cfg.slam)}"
+    if module == "irmcl_warp.globloc":
+        return f"{cfg.exp}/globloc-{cfg.globloc.scenario}"
+    if module == "irmcl_warp.pipeline":
+        return f"{cfg.exp}/pipeline"
+    raise ValueError(f"no output folder rule for {module}")
+
+
+SEEDS = list(range(10))
+NOF = [("fr079", "paper"), ("intel", "paper"), ("mit_csail", "fast"), ("fr079", "fast"), ("fr079", "fast128"),
+       ("fr079", "cpu"), ("fr079_block", "fast")]
+MCL_EXPS = [("sim_office", "quick"), ("fr079", "paper"), ("intel", "paper"), ("mit_csail", "fast")]
+WEIGHTINGS = ["nog_raymarch", "likelihood_field", "beam_model"]
+GLOBLOC = ["globloc_corridor", "globloc_corridor_kidnap", "globloc_corridor_8m", "globloc_corridor_8m_kidnap"]
+SWEEPS = (
+    # IR-MCL Table I: scan synthesis of the NOF against occupancy grids
+    [Sweep("nof", "irmcl_warp.train", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
+    + [Sweep("nof", "eval.synthesis", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
+    # IR-MCL Tables II-III: global localization (100k particles) and pose tracking (10k), 5 and 10 cm maps
+    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", f"mcl.mode={mode}", f"mcl.num_particles={n}"],
+             {"mcl.weighting": WEIGHTINGS, "mcl.map_resolution_m": [0.05, 0.1]}, gpu=True)
+       for e, p in MCL_EXPS for mode, n in (("global", 100000), ("tracking", 10000))]
+    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "mcl.mode=tracking", "mcl.num_particles=10000",
+                                            "mcl.kidnap_at_s=30", "mcl.recovery_alpha_slow=0.01",
+                                            "mcl.recovery_alpha_fast=0.2"],
+             {"mcl.weighting": WEIGHTINGS[:2]}, gpu=True) for e, p in MCL_EXPS[:2]]
+    # GMapping: relations error of both proposals, 30 particles, 10 seeds; particles vs success on intel
+    + [Sweep("slam", "irmcl_warp.slam", [f"+exp={e}"], {"slam.proposal": ["paper", "gmapping_code"], "slam.seed": SEEDS},
+             gpu=True) for e in ("gmapping_intel", "gmapping_fr079", "gmapping_mit_csail")]
+    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_intel"] + extra, {"slam.particles": n, "slam.seed": SEEDS},
+             gpu=True)
+       for extra, n in (([], [5, 10, 15, 60]), (["slam.resample=always"], [5, 10, 15, 30, 60]),
+                        (["slam.proposal=odometry"], [5, 10, 15, 30, 60]))]
+    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian"], {"slam.particles": [30, 60],
+                                                                       "slam.seed": SEEDS[:5]}, gpu=True)]
+    # lidar + camera global localization: the four corridor scenarios, and the paper's one-frame trigger
+    + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}"]) for e in GLOBLOC]
+    + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}", "globloc.trigger_confirm_frames=1", "globloc.methods=[paper]",
+                                               f"globloc.scenario={'kidnap' if 'kidnap' in e else 'random_starts'}_confirm1"])
+       for e in GLOBLOC]
+    # the end-to-end pipeline on the simulator
+    + [Sweep("pipeline", "irmcl_warp.pipeline", [])]
+)
+
+
+def compose_job(module: str, overrides: list[str]):
+    """The config a job runs with (call inside ``initialize_config_dir``, as ``main`` does)."""
+    return compose("pipeline" if module == "irmcl_warp.pipeline" else "config", overrides=overrides)
+
+
+def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, rerun_kept: bool) -> tuple[str, str]:
+    """("done" | "kept" | "missing", folder or reason)."""
+    cfg = compose_job(sweep.module, overrides)
+    rel = folder(sweep.module, cfg)
+    done, why = stage_complete(outputs / rel, cfg)
+    if done:
+        return "done", str(outputs / rel)
+    kept = results / sweep.group / rel / "metrics.json"
+    if kept.is_file() and not rerun_kept:
+        return "kept", str(kept.parent)
+    return "missing", why
+
+
+def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, jobs: int, extra: list[str]) -> list[list[str]]:
+    """One Hydra multirun per set of missing jobs that differ only in their last override (seeds, mostly)."""
+    groups: dict[tuple, list[str]] = {}
+    for ov in missing:
+        key, last = (tuple(ov[:-1]), ov[-1]) if len(ov) > len(sweep.fixed) else (tuple(ov), None)
+        groups.setdefault(key, [])
+        if last is not None:
+            groups[key].append(last)
+    cmds = []
+    for key, lasts in groups.items():
+        swept = [f"{lasts[0].split('=')[0]}={','.join(x.split('=', 1)[1] for x in lasts)}"] if lasts else []
+        launch = [] if launcher == "basic" else [f"hydra/launcher={launcher}"]
+        if launcher == "joblib":
+            launch.append(f"hydra.launcher.n_jobs={jobs}")
+        cmds.append([sys.executable, "-m", sweep.module, "-m", *key, *swept, *launch, *extra])
+    return cmds
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--only", nargs="+", help="groups to run: nof mcl slam globloc pipeline")
+    ap.add_argument("--list", action="store_true", help="show every job and its state; run nothing")
+    ap.add_argument("--tables-only", action="store_true", help="only regenerate tables and figures")
+    ap.add_argument("--launcher", default="joblib", choices=["basic", "joblib", "slurm"])
+    ap.add_argument("--jobs", type=int, default=2, help="parallel local jobs (joblib)")
+    ap.add_argument("--rerun-kept", action="store_true", help="also run jobs whose GPU results are kept in results/")
+    ap.add_argument("--hydra-arg", action="append", default=[], help="extra override for every job, e.g. device=cpu")
+    ap.add_argument("--outputs", default=str(REPO / "outputs"))
+    ap.add_argument("--results", default=str(REPO / "results"))
+    a = ap.parse_args(argv)
+    outputs, results = Path(a.outputs), Path(a.results)
+    failed = 0
+    register()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        sweeps = [(s, [(ov, *job_state(s, ov, outputs, results, a.rerun_kept)) for ov in s.jobs()])
+                  for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)]
+    for sweep, states in sweeps:
+        missing = [ov for ov, state, _ in states if state == "missing"]
+        counts = {s: sum(1 for _, st, _ in states if st == s) for s in ("done", "kept", "missing")}
+        print(f"[{sweep.group}] {sweep.module} {' '.join(sweep.fixed)}: {counts['done']} done, {counts['kept']} kept "
+              f"(results/), {counts['missing']} to run" + ("  [sized for a GPU]" if sweep.gpu and missing else ""))
+        if a.list:
+            for ov, state, where in states:
+                print(f"    {state:8s} {' '.join(ov[len(sweep.fixed):]) or '-':50s} {where}")
+            continue
+        for cmd in multirun_commands(sweep, missing, a.launcher, a.jobs, a.hydra_arg):
+            print("  $ " + " ".join(cmd[1:]), flush=True)
+            failed += subprocess.run(cmd, cwd=REPO).returncode != 0
+    if not a.list:
+        failed += subprocess.run([sys.executable, "-m", "eval.tables", "--write"], cwd=REPO).returncode != 0
+        failed += subprocess.run([sys.executable, "-m", "eval.plots"], cwd=REPO).returncode != 0
+    if failed:
+        print(f"{failed} command(s) failed: see their output above", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,79 @@
+"""The reproduction runner and the stages it drives: a finished stage is skipped, a damaged one is redone,
+jobs are told apart as done / kept / missing, and the missing ones go to Hydra's launchers."""
+
+import json
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from eval.reproduce import SWEEPS, Sweep, folder, job_state, multirun_commands
+from irmcl_warp.config import register
+from irmcl_warp.outputs import stage_complete, write_json, write_manifest
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+SMALL_SIM = ["sim.duration_s=20", "sim.width_m=14", "sim.height_m=10", "device=cpu"]
+
+
+def _compose(*overrides, name="config", hydra=False):
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose(name, overrides=list(overrides), return_hydra_config=hydra)
+
+
+def test_a_finished_stage_is_skipped_and_a_damaged_one_redone(tmp_path, monkeypatch, capsys):
+    from irmcl_warp.slam.stage import run_slam
+
+    monkeypatch.chdir(tmp_path)  # outputs/ lands in the temporary folder
+    cfg = _compose("+exp=gmapping_sim", "slam.particles=3", *SMALL_SIM)
+    out = run_slam(cfg)
+    traj = out / "trajectory.tum"
+    first, stamp = traj.read_text(), traj.stat().st_mtime_ns
+    assert stage_complete(out, cfg)[0]
+    assert run_slam(cfg) == out and "up to date" in capsys.readouterr().out
+    assert traj.stat().st_mtime_ns == stamp  # not rewritten
+    traj.write_text(first[: len(first) // 2])  # as an interrupted copy or a crash mid-write would leave it
+    run_slam(cfg)
+    assert "redoing" in capsys.readouterr().out
+    assert traj.read_text() == first and stage_complete(out, cfg)[0]  # the same run, whole again
+
+
+def test_runner_tells_done_kept_and_missing_apart(tmp_path):
+    sweep = Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_sim"], {"slam.seed": [0, 1, 2, 3]})
+    outputs, results = tmp_path / "outputs", tmp_path / "results"
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfgs = [compose("config", overrides=ov) for ov in sweep.jobs()]
+        rel = [folder(sweep.module, c) for c in cfgs]
+        assert rel[2] == "gmapping_sim/slam-paper-selective-30p-seed2"
+        for k in (0, 3):  # finished runs; seed 3's is then damaged
+            (outputs / rel[k]).mkdir(parents=True)
+            write_json(outputs / rel[k] / "metrics.json", {"seed": k})
+            write_manifest(outputs / rel[k], cfgs[k], [], "cpu", 0.0)
+        (outputs / rel[3] / "metrics.json").write_text('{"seed": ')
+        (results / "slam" / rel[1]).mkdir(parents=True)  # a GPU run kept in the repository
+        (results / "slam" / rel[1] / "metrics.json").write_text(json.dumps({"seed": 1}))
+        states = [job_state(sweep, ov, outputs, results, rerun_kept=False)[0] for ov in sweep.jobs()]
+        assert states == ["done", "kept", "missing", "missing"]
+        assert job_state(sweep, sweep.jobs()[1], outputs, results, rerun_kept=True)[0] == "missing"
+    missing = [ov for ov, s in zip(sweep.jobs(), states) if s == "missing"]
+    (cmd,) = multirun_commands(sweep, missing, "joblib", 3, ["device=cpu"])
+    assert cmd[2:] == ["irmcl_warp.slam", "-m", "+exp=gmapping_sim", "slam.seed=2,3", "hydra/launcher=joblib",
+                       "hydra.launcher.n_jobs=3", "device=cpu"]
+
+
+@pytest.mark.parametrize("launcher,target", [("joblib", "JoblibLauncher"), ("slurm", "SlurmLauncher")])
+def test_launcher_configs_compose(launcher, target):
+    cfg = _compose(f"hydra/launcher={launcher}", hydra=True)
+    assert cfg.hydra.launcher._target_.endswith(target)
+
+
+def test_every_sweep_composes_and_names_a_distinct_folder():
+    seen = {}
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        for sweep in SWEEPS:
+            for ov in sweep.jobs()[:1] + sweep.jobs()[-1:]:
+                name = "pipeline" if sweep.module == "irmcl_warp.pipeline" else "config"
+                where = (sweep.module, folder(sweep.module, compose(name, overrides=ov)))
+                assert seen.setdefault(where, ov) == ov, f"{ov} and {seen[where]} would share {where}"
