@@ -35,6 +35,7 @@ class DataConfig:
     beam_policy: str = "error"  # error | reject | resample scans whose beam count differs
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
+    repair_reversing: bool = False  # bags: drive backwards the odometry steps whose velocity is negative (fr079)
     usable_range_m: Optional[float] = None  # NOF rendering far bound; None = floor(range_max_m) (IR-MCL code)
     split: str = "interleaved"  # interleaved (train/val/test) | block (train_block/val_block/test_block)
 

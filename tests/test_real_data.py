@@ -45,6 +45,19 @@ def test_fr079_bag_odometry_contradicts_its_velocity(data_dir):
     np.testing.assert_allclose(read_bag_extrinsic(data_dir / "kuemmerle2009/bags/fr079.bag"), [0.04, 0, 0], atol=1e-6)
 
 
+def test_fr079_bag_repaired_on_reading_equals_the_derived_log(data_dir):
+    """data.repair_reversing rebuilds, from the bag's own velocities, the odometry of derived/fr079.revfix."""
+    from irmcl_warp.geometry import relative
+    from irmcl_warp.types import match_stamps
+
+    bag = quiet(read_bag, data_dir / "kuemmerle2009/bags/fr079.bag", repair_reversing=True)
+    ref = quiet(read_carmen, data_dir / "kuemmerle2009/derived/fr079.revfix.clf.gz")
+    idx = match_stamps(bag.stamps, ref.stamps)
+    assert (idx >= 0).all() and bag.defects.counts["odometry_steps_reversed"] > 300
+    got, want = bag.odom[idx], ref.odom
+    np.testing.assert_allclose(relative(got[:-1], got[1:]), relative(want[:-1], want[1:]), atol=1e-5)  # the log prints 6 decimals
+
+
 def test_relations_of_fr079_against_corrected_poses_and_odometry(data_dir):
     stamps, poses = read_matched_csv(data_dir / "corrected/matched/fr079.gmapping_corrected_keyframes.csv")
     assert len(stamps) == 4791

@@ -70,7 +70,7 @@ def load_log(cfg) -> LaserLog:
     elif d.format == "bag":
         log = read_bag(path, scan_topic=d.scan_topic, odom_topic=d.odom_topic, base_frame=d.base_frame,
                        odom_frame=d.odom_frame, beam_policy=d.beam_policy, max_speed_mps=d.max_speed_mps,
-                       max_step_m=d.max_step_m)
+                       max_step_m=d.max_step_m, repair_reversing=d.repair_reversing)
     else:
         raise ValueError(f"data.format={d.format!r}: expected sim, carmen or bag")
     if d.laser_frame_path:

@@ -42,6 +42,25 @@ def count_velocity_contradictions(poses, forward_velocity_mps, min_speed_mps=0.0
     return int(np.sum((np.abs(v) > min_speed_mps) & (np.abs(along) > min_step_m) & (np.sign(along) != np.sign(v))))
 
 
+def repair_reversing(poses, forward_velocity_mps) -> tuple[np.ndarray, int, float]:
+    """(poses, steps repaired, metres repaired): every odometry step whose two messages report a negative
+    mean forward velocity but which advances along the heading is driven backwards instead (its
+    translation, in the frame of the step's first pose, negated; its rotation kept), and the chain is
+    re-integrated. fr079's bag needs it: its odometry never reverses (../shared/data/README.md)."""
+    from irmcl_warp.geometry import compose, relative
+
+    p = np.asarray(poses, dtype=np.float64)
+    v = np.asarray(forward_velocity_mps, dtype=np.float64)
+    steps = relative(p[:-1], p[1:])
+    flip = (0.5 * (v[:-1] + v[1:]) < 0) & (steps[:, 0] > 0)
+    steps[flip, :2] *= -1.0
+    out = np.empty_like(p)
+    out[0] = p[0]
+    for i, step in enumerate(steps):
+        out[i + 1] = compose(out[i], step)
+    return out, int(flip.sum()), float(np.hypot(steps[flip, 0], steps[flip, 1]).sum())
+
+
 def scan_defects(report: DefectReport, stamps_recording_order, odom_poses, *, max_speed_mps=3.0,
                  max_step_m=2.0, what="scans") -> DefectReport:
     """The checks every reader runs on its scans and their odometry."""

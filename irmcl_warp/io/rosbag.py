@@ -16,7 +16,8 @@ import numpy as np
 
 from irmcl_warp.geometry import interpolate_poses
 from irmcl_warp.io.beams import BeamPolicy, harmonise_beams
-from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
+from irmcl_warp.io.defects import (count_stamps_backwards, count_velocity_contradictions, repair_reversing,
+                                   scan_defects)
 from irmcl_warp.io.errors import LogFormatError, warn_defects
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
 
@@ -179,7 +180,9 @@ def _recording_order(stamps, seqs):
 
 def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = None, base_frame: str | None = None,
              odom_frame: str | None = None, beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0,
-             max_step_m: float = 2.0) -> LaserLog:
+             max_step_m: float = 2.0, repair_reversing: bool = False) -> LaserLog:
+    """``repair_reversing``: drive backwards the odometry steps whose messages report a negative forward
+    velocity (io.defects.repair_reversing); the repair is counted in the log's defects."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such bag")
@@ -207,7 +210,7 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     stamps = np.array([r[0] for r in scans])
     laser_frame = first[7].lstrip("/")
     T_base_laser, base = _extrinsic(s.tf_static, laser_frame, base_frame, report)
-    odom = _odometry_at(path, s, stamps, base, odom_frame, report)
+    odom = _odometry_at(path, s, stamps, base, odom_frame, report, repair_reversing)
     scan_defects(report, stamps, odom, max_speed_mps=max_speed_mps, max_step_m=max_step_m)
     warn_defects(path, report)
     return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
@@ -221,7 +224,7 @@ def _extrinsic(tf_static, laser_frame, base_frame, report):
     return np.zeros(3), base_frame or "base_link"
 
 
-def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report):
+def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report, repair: bool = False):
     if s.odom:
         od = np.array([r for r in s.odom])
         rec = _recording_order(od[:, 0], od[:, 1])
@@ -231,6 +234,9 @@ def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report):
         report.add("odometry_contradicts_velocity", count_velocity_contradictions(od[:, 2:5], od[:, 5]),
                    "odometry steps moving against the message's own forward velocity")
         src_t, src_p = od[:, 0], od[:, 2:5]
+        if repair:
+            src_p, n, metres = repair_reversing(src_p, od[:, 5])
+            report.add("odometry_steps_reversed", n, f"odometry steps driven backwards by the repair ({metres:.1f} m)")
     else:
         rows = [r for r in s.tf if r[2] == base and (odom_frame is None or r[1] == odom_frame)]
         if not rows:
