@@ -37,9 +37,13 @@ from irmcl_warp.outputs import stage_complete
 REPO = Path(__file__).resolve().parents[1]
 
 
+KEPT = {"irmcl_warp.train": "nof", "eval.synthesis": "nof", "irmcl_warp.localize": "mcl", "irmcl_warp.slam": "slam",
+        "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # results/<this>/<exp>/<folder>
+
+
 @dataclass
 class Sweep:
-    group: str  # results/<group>/ holds the kept runs of this group
+    group: str  # what --only selects
     module: str
     fixed: list[str]
     axes: dict[str, list] = field(default_factory=dict)  # swept overrides: their Cartesian product
@@ -53,10 +57,12 @@ class Sweep:
 
 def folder(module: str, cfg) -> str:
     """The output folder of a job, relative to outputs/ (and to results/<group>/)."""
+    from irmcl_warp.train import run_name
+
     if module == "irmcl_warp.train":
-        return f"{cfg.exp}/train-{cfg.train.name}"
+        return f"{cfg.exp}/train-{run_name(cfg)}"
     if module == "eval.synthesis":
-        return f"{cfg.exp}/synthesis-{cfg.train.name}"
+        return f"{cfg.exp}/synthesis-{run_name(cfg)}"
     if module == "irmcl_warp.localize":
         from irmcl_warp.localize import run_tag
 
@@ -77,6 +83,10 @@ NOF = [("fr079", "paper"), ("intel", "paper"), ("mit_csail", "fast"), ("fr079", 
        ("fr079", "cpu"), ("fr079_block", "fast")]
 MCL_EXPS = [("sim_office", "quick"), ("fr079", "paper"), ("intel", "paper"), ("mit_csail", "fast")]
 WEIGHTINGS = ["nog_raymarch", "likelihood_field", "beam_model"]
+ABLATIONS = {  # the first value is IR-MCL's (the base run); 1000 beams = every beam of the scan
+    "mcl.map_resolution_m": [0.05, 0.025, 0.1], "mcl.num_beams": [32, 16, 64, 1000], "mcl.t_min": [0.001, 0.0],
+    "mcl.empty_below": [0.0, 0.01], "mcl.weighting": ["nog_raymarch", "likelihood_field", "beam_model"],
+    "mcl.resample": ["low_variance", "multinomial"]}
 GLOBLOC = ["globloc_corridor", "globloc_corridor_kidnap", "globloc_corridor_8m", "globloc_corridor_8m_kidnap"]
 SWEEPS = (
     # IR-MCL Table I: scan synthesis of the NOF against occupancy grids
@@ -104,8 +114,16 @@ SWEEPS = (
     + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}", "globloc.trigger_confirm_frames=1", "globloc.methods=[paper]",
                                                f"globloc.scenario={'kidnap' if 'kidnap' in e else 'random_starts'}_confirm1"])
        for e in GLOBLOC]
-    # the end-to-end pipeline on the simulator
-    + [Sweep("pipeline", "irmcl_warp.pipeline", [])]
+    # ablations, one setting at a time around IR-MCL's global localization (100k particles, NOG 5 cm, 32 beams)
+    + [Sweep("ablation", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "mcl.mode=global",
+                                                 "mcl.num_particles=100000"], {key: values}, gpu=True)
+       for e, p in MCL_EXPS[1:] for key, values in ABLATIONS.items()]
+    + [Sweep("ablation", module, ["+exp=fr079", "train=fast"], {"render": ["warp", "torch_ref"]}, gpu=True)
+       for module in ("irmcl_warp.train", "eval.synthesis")]
+    # the end-to-end pipeline on the simulator and on the fr079 bag
+    + [Sweep("pipeline", "irmcl_warp.pipeline", []),
+       Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "mcl.num_particles=100000",
+                                                 "mcl.num_samples=256", "localize.run_s=null"], gpu=True)]
 )
 
 
@@ -121,7 +139,7 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
     done, why = stage_complete(outputs / rel, cfg)
     if done:
         return "done", str(outputs / rel)
-    kept = results / sweep.group / rel / "metrics.json"
+    kept = results / KEPT[sweep.module] / rel / "metrics.json"
     if kept.is_file() and not rerun_kept:
         return "kept", str(kept.parent)
     return "missing", why
@@ -148,7 +166,9 @@ def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, job
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="+", help="groups to run: nof mcl slam globloc pipeline")
+    ap.add_argument("--match", help="only the sweeps whose fixed overrides contain this, e.g. +exp=fr079")
     ap.add_argument("--list", action="store_true", help="show every job and its state; run nothing")
+    ap.add_argument("--no-tables", action="store_true", help="run the experiments, leave tables and figures")
     ap.add_argument("--tables-only", action="store_true", help="only regenerate tables and figures")
     ap.add_argument("--launcher", default="joblib", choices=["basic", "joblib", "slurm"])
     ap.add_argument("--jobs", type=int, default=2, help="parallel local jobs (joblib)")
@@ -160,10 +180,12 @@ def main(argv=None) -> int:
     outputs, results = Path(a.outputs), Path(a.results)
     failed = 0
     register()
-    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
-        sweeps = [(s, [(ov, *job_state(s, ov, outputs, results, a.rerun_kept)) for ov in s.jobs()])
-                  for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)]
-    for sweep, states in sweeps:
+    config_dir = initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3")
+    config_dir.__enter__()  # composing only: the jobs run in their own processes
+    # a job shared by several sweeps (the ablations' base run) is found done by the later ones
+    for sweep in [s for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)
+                  and (not a.match or any(a.match in f for f in s.fixed))]:
+        states = [(ov, *job_state(sweep, ov, outputs, results, a.rerun_kept)) for ov in sweep.jobs()]
         missing = [ov for ov, state, _ in states if state == "missing"]
         counts = {s: sum(1 for _, st, _ in states if st == s) for s in ("done", "kept", "missing")}
         print(f"[{sweep.group}] {sweep.module} {' '.join(sweep.fixed)}: {counts['done']} done, {counts['kept']} kept "
@@ -175,7 +197,8 @@ def main(argv=None) -> int:
         for cmd in multirun_commands(sweep, missing, a.launcher, a.jobs, a.hydra_arg):
             print("  $ " + " ".join(cmd[1:]), flush=True)
             failed += subprocess.run(cmd, cwd=REPO).returncode != 0
-    if not a.list:
+    config_dir.__exit__(None, None, None)
+    if not a.list and not a.no_tables:
         failed += subprocess.run([sys.executable, "-m", "eval.tables", "--write"], cwd=REPO).returncode != 0
         failed += subprocess.run([sys.executable, "-m", "eval.plots"], cwd=REPO).returncode != 0
     if failed:

@@ -22,7 +22,7 @@ from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.prepare import far_m, prepare_beams, recorded_inputs
 from irmcl_warp.outputs import save_figure, stage_dir, up_to_date, write_json, write_manifest
-from irmcl_warp.train import train_dir
+from irmcl_warp.train import run_name, train_dir
 from kernels import RAYCAST, pick_device
 
 GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 and 10 cm
@@ -75,7 +75,7 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
 def run_synthesis(cfg) -> Path:
     started = time.time()
     device = pick_device(cfg.device)
-    out = stage_dir(cfg, f"synthesis-{cfg.train.name}")
+    out = stage_dir(cfg, f"synthesis-{run_name(cfg)}")
     inputs = recorded_inputs(cfg) + [train_dir(cfg) / "nof.pt"]
     if up_to_date(out, cfg, inputs):
         return out

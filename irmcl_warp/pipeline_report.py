@@ -63,6 +63,8 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
 
 def write_report(out: Path, cfg, metrics: dict, slam_dir: Path, slam_map, slam_poses, stamps, est, gt_map,
                  particles) -> Path:
+    from irmcl_warp.train import run_name
+
     plot_map(out / "map.png", slam_map, slam_poses, est, gt_map, particles)
     loc = metrics.get("localization")
     if gt_map is not None:
@@ -73,7 +75,7 @@ def write_report(out: Path, cfg, metrics: dict, slam_dir: Path, slam_map, slam_p
              f"- device: {metrics['device']}; GMapping with {cfg.slam.particles} particles, NOF preset "
              f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})", "",
              "## Stages", "", "| stage | time (s) | output |", "|---|---|---|"]
-    where = {"slam": slam_dir, "train": f"train-{cfg.train.name}/", "nog": "nog/", "localize": "localization.tum"}
+    where = {"slam": slam_dir, "train": f"train-{run_name(cfg)}/", "nog": "nog/", "localize": "localization.tum"}
     for name, t in metrics["timing"].items():
         took = "skipped (up to date)" if t["skipped"] else f"{t['s']:.1f}"
         lines.append(f"| {name} | {took} | `{where.get(name, '')}` |")

@@ -32,9 +32,14 @@ def torch_device(cfg) -> torch.device:
     return torch.device(pick_device(cfg.device))
 
 
+def run_name(cfg) -> str:
+    """The preset, plus the renderer when it is not the default (``fast-torch_ref``): folder names."""
+    return cfg.train.name + ("" if cfg.render.name == "warp" else f"-{cfg.render.name}")
+
+
 def train_dir(cfg) -> Path:
     """``outputs/<exp>/train-<preset>/``: one folder per recipe, so presets never overwrite each other."""
-    return stage_dir(cfg, f"train-{cfg.train.name}")
+    return stage_dir(cfg, f"train-{run_name(cfg)}")
 
 
 def run_settings(cfg, train_split: str, far: float) -> tuple[dict, str]:

@@ -18,6 +18,9 @@ from irmcl_warp.nof.beams import (SPLITS, BeamSet, beams_from_log, interleaved_s
 from irmcl_warp.outputs import stage_dir
 
 
+LATER_DATA_FIELDS = {"repair_reversing": False}
+
+
 def input_files(cfg) -> list[Path]:
     d = cfg.data
     return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path,
@@ -39,8 +42,11 @@ def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
     """(key, missing-input error): the data settings (+ ``settings``), then "-" and the inputs' size and
     mtime. Without the raw files (a GPU box sent only the caches) the key stops after the settings part
     and the error says which file is missing; a cache is then accepted by that prefix."""
-    data = {k: v for k, v in OmegaConf.to_container(cfg.data).items() if v is not None}  # a new optional field
-    key = settings_key(data, OmegaConf.to_container(cfg.sim), *settings)  # keeps the caches made before it
+    # fields added later are left out at their defaults, so the caches made before them stay valid
+    data = {k: v for k, v in OmegaConf.to_container(cfg.data).items()
+            if v is not None and not (k in LATER_DATA_FIELDS and v == LATER_DATA_FIELDS[k])}
+    sim = {k: v for k, v in OmegaConf.to_container(cfg.sim).items() if not (k == "path_seed" and v is None)}
+    key = settings_key(data, sim, *settings)
     try:
         files = input_files(cfg) if cfg.data.format != "sim" else [resolve(p) for p in [cfg.data.get("train_poses_path")] if p]
         return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
