@@ -122,7 +122,7 @@ SWEEPS = (
        for module in ("irmcl_warp.train", "eval.synthesis")]
     # the end-to-end pipeline on the simulator and on the fr079 bag
     + [Sweep("pipeline", "irmcl_warp.pipeline", []),
-       Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "mcl.num_particles=100000",
+       Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "slam.particles=30", "mcl.num_particles=100000",
                                                  "mcl.num_samples=256", "localize.run_s=null"], gpu=True)]
 )
 

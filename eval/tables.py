@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from irmcl_warp.config import GlobLocConfig
+from irmcl_warp.mapping.mapio import atomic_write_bytes
 
 REPO = Path(__file__).resolve().parents[1]
 ROOTS = (REPO / "results" / "nof", REPO / "outputs")
@@ -80,6 +81,7 @@ def synthesis_table(runs: dict) -> str:
                 seen_grids.add((syn["dataset"], syn["split"], name))
                 how = "-"
             else:
+                name = f"NOF ({preset})"  # the folder's name: preset, and the renderer when not Warp
                 how = (f"{train['train_time_s']:.0f} s, {train['epochs_done']} ep, {train.get('gpu') or train['device']}"
                        if train else "?")
             rows.append((syn["dataset"], syn["split"], name, m, how))
@@ -160,11 +162,14 @@ ABLATION_NAMES = {"weighting": "likelihood", "map_resolution_m": "NOG / grid res
 
 def ablation_table(runs: dict) -> str:
     """IR-MCL's global localization (100k particles, NOG 5 cm, 32 beams, early termination, low-variance
-    resampling) and every run that changes one of those settings, per dataset."""
+    resampling) and every run that changes one of those settings, per dataset. Time: the median over the
+    starts of the filter's wall time per scan (the first start of a process also compiles kernels)."""
+    import numpy as np
+
     rows = []
     for (exp, tag), m in runs.items():
         st = m.get("settings", {})
-        if any(k not in st for k in ABLATION_BASE) or "ms_per_scan_mean" not in m["summary"]:
+        if any(k not in st for k in ABLATION_BASE) or "ms_per_scan" not in m["runs"][0]:
             continue  # runs from before the settings or the timing were recorded
         diff = [k for k, v in ABLATION_BASE.items() if st[k] != v]
         if len(diff) > 1 or (diff and diff[0] not in ABLATION_NAMES):
@@ -176,7 +181,7 @@ def ablation_table(runs: dict) -> str:
         rows.append(((DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99, bool(diff), what,
                       str(value)), f"| {m['dataset']} | {what} | {METHODS.get(value, value)} | {s['successes']}/{s['starts']} | "
                      f"{_f(s['time_to_converge_s_mean'])} | {_f(s['location_rmse_cm_mean'])} / "
-                     f"{_f(s['yaw_rmse_deg_mean'], '{:.2f}')} | {_f(s['ms_per_scan_mean'], '{:.2f}')} | "
+                     f"{_f(s['yaw_rmse_deg_mean'], '{:.2f}')} | {_f(float(np.median([r['ms_per_scan'] for r in m['runs']])), '{:.2f}')} | "
                      f"{'H100' if str(s['device']).startswith('cuda') else s['device']} |"))
     head = ["| dataset | ablation | setting | success | converged after (s) | RMSE (cm / deg) | ms per scan | device |",
             "|---|---|---|---|---|---|---|---|"]
@@ -244,6 +249,24 @@ def collect_pipeline(roots=(REPO / "results" / "pipeline", REPO / "outputs")) ->
     return _collect_runs(roots, "pipeline")
 
 
+def pipeline_table(runs: dict) -> str:
+    """One row per pipeline run: SLAM, NOF and global localization of the second log, time per stage."""
+    lines = ["| run | device | SLAM: processed scans, ATE (odometry) | NOF: validation MAE | localized scans | "
+             "converged after | RMSE (cm / deg) | time: slam / train / nog / localize (s) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (exp, _), m in sorted(runs.items()):
+        sl, nof, lo, t = m.get("slam", {}), m.get("nof", {}), m.get("localization"), m["timing"]
+        took = " / ".join("skipped" if t.get(k, {}).get("skipped") else _f(t.get(k, {}).get("s"), "{:.0f}")
+                          for k in ("slam", "train", "nog", "localize"))
+        conv = (f"{lo['time_to_converge_s']:.1f} s" if lo["converged"] else "no") if lo else "no ground truth"
+        rmse = f"{_f(lo['location_rmse_cm'])} / {_f(lo['yaw_rmse_deg'], '{:.2f}')}" if lo else "-"
+        dev = "H100" if str(m["device"]).startswith("cuda") else "2-core CPU" if m["device"] == "cpu" else m["device"]
+        lines.append(f"| {exp} | {dev} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
+                     f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
+                     f"{m['localized_scans']} | {conv} | {rmse} | {took} |")
+    return "\n".join(lines)
+
+
 def collect_globloc(roots=GLOBLOC_ROOTS) -> dict:
     return _collect_runs(roots, "globloc-*")
 
@@ -295,13 +318,17 @@ def main(argv=None):
         tables["mcl"] = ("Localization (10 seeded starts per cell, 60 s each; means over the successful starts)",
                          localization_table(loc))
         tables["ablation"] = ("Ablations of IR-MCL's global localization, one setting at a time (10 starts of "
-                              "60 s; ms per scan: the whole filter step, averaged over the runs)", ablation_table(loc))
+                              "60 s; ms per scan: the whole filter step, median over the starts)", ablation_table(loc))
         tables["kidnap"] = ("Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)",
                             kidnap_table(loc))
     slam = collect_slam()
     if slam:
         tables["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
                           slam_table(slam))
+    pipe = collect_pipeline()
+    if pipe:
+        tables["pipeline"] = ("The pipeline, raw log to localized robot (global localization from a uniform "
+                              "start over the second log)", pipeline_table(pipe))
     gl = collect_globloc()
     if gl:
         tables["globloc"] = ("Lidar + camera global localization (simulated worlds, identical sensor streams per "
@@ -316,13 +343,13 @@ def main(argv=None):
         from eval.claims import claims, reproduction_markdown
 
         doc = REPO / "docs" / "REPRODUCTION.md"
-        doc.write_text(reproduction_markdown(claims(runs, loc, slam, gl, collect_pipeline())))
+        atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe)).encode())
         print(f"-> {doc}")
         readme = REPO / "README.md"
         text = readme.read_text()
         for name, (_, table) in tables.items():
             text = replace_block(text, name, table)
-        readme.write_text(text)
+        atomic_write_bytes(readme, text.encode())
         print(f"-> {readme}")
 
 

@@ -114,6 +114,19 @@ def localize(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.
     return idx, est, pf.particles.numpy()
 
 
+def stage_summary(out: Path) -> dict:
+    """The figures of a stage's metrics.json that the report and the README table show."""
+    import json
+
+    m = json.loads((out / "metrics.json").read_text())
+    if "processed_scans" in m:  # slam
+        traj, odo = m.get("trajectory") or {}, m.get("trajectory_odometry") or {}
+        return {"run": out.name, "processed_scans": m["processed_scans"], "ate_rmse_m": traj.get("ate_rmse_m"),
+                "odometry_ate_rmse_m": odo.get("ate_rmse_m"), "wall_time_s": m["wall_time_s"]}
+    return {"run": out.name, "val_mae_m": m["val"]["mae_m"], "train_time_s": m["train_time_s"],
+            "epochs": m["epochs_done"]}
+
+
 def run_pipeline(cfg) -> Path:
     from irmcl_warp.pipeline_report import write_report
     from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
@@ -156,7 +169,8 @@ def run_pipeline(cfg) -> Path:
     timing["localize"] = {"s": time.time() - t0, "skipped": False, "scans": int(len(idx))}
     write_tum(out / "localization.tum", log2.stamps[idx], est)
     metrics = {"mapping_log": cfg.data.path or cfg.data.name, "localized_log": what, "device": device,
-               "processed_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing}
+               "processed_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing,
+               "slam": stage_summary(slam_dir), "nof": stage_summary(train_out)}
     gt_map, T_gt_map = None, None
     if log.ground_truth is not None and log2.ground_truth is not None:
         T_gt_map = align_rigid(poses, log.ground_truth[scans])  # from the mapping log only

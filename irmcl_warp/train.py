@@ -51,7 +51,13 @@ def run_settings(cfg, train_split: str, far: float) -> tuple[dict, str]:
             "train_split": train_split, "train_preset": cfg.train.name}
     recipe = {k: v for k, v in OmegaConf.to_container(cfg.train).items()
               if k not in ("max_time_s", "checkpoint_every_s", "val_scans")}
-    return meta, settings_key(meta, recipe, OmegaConf.to_container(cfg.data))
+    data = OmegaConf.to_container(cfg.data)
+    if data.get("train_poses_path"):  # the poses file is rewritten in place (the pipeline's SLAM): its content counts
+        from irmcl_warp.io import resolve
+        from irmcl_warp.outputs import file_digest
+
+        data["train_poses_sha256"] = file_digest(resolve(data["train_poses_path"]))
+    return meta, settings_key(meta, recipe, data)
 
 
 def make_validator(beams, cfg, near_m, far_m, device):

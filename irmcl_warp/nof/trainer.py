@@ -67,6 +67,9 @@ class Trainer:
         if s.get("key") != self.key:
             print(f"{path}: made with other settings; starting afresh")
             return False
+        if s["best"] is not None and not (self.out / "nof.pt").is_file():
+            print(f"{path}: its best checkpoint nof.pt is gone; starting afresh")
+            return False
         self.model.load_state_dict(s["model"])
         self.opt.load_state_dict(s["opt"])
         self.sched.load_state_dict(s["sched"])
