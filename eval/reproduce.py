@@ -32,7 +32,7 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 
 from irmcl_warp.config import register
-from irmcl_warp.outputs import stage_complete
+from irmcl_warp.outputs import SECTIONS, stage_complete
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -136,7 +136,7 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
     """("done" | "kept" | "missing", folder or reason)."""
     cfg = compose_job(sweep.module, overrides)
     rel = folder(sweep.module, cfg)
-    done, why = stage_complete(outputs / rel, cfg)
+    done, why = stage_complete(outputs / rel, cfg, sections=SECTIONS.get(sweep.module.rsplit(".", 1)[-1]))
     if done:
         return "done", str(outputs / rel)
     kept = results / KEPT[sweep.module] / rel / "metrics.json"

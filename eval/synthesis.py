@@ -77,7 +77,7 @@ def run_synthesis(cfg) -> Path:
     device = pick_device(cfg.device)
     out = stage_dir(cfg, f"synthesis-{run_name(cfg)}")
     inputs = recorded_inputs(cfg) + [train_dir(cfg) / "nof.pt"]
-    if up_to_date(out, cfg, inputs):
+    if up_to_date(out, cfg, inputs, "synthesis"):
         return out
     sets = prepare_beams(cfg)
     train, test, far = sets["train"], sets["test"], far_m(cfg)

@@ -245,6 +245,7 @@ class LocalizeConfig:
     format: Optional[str] = None  # None = data.format
     ground_truth_path: Optional[str] = None  # poses to score against (same frame as data.ground_truth_path)
     sim_path_seed: int = 1  # data=sim: the second session drives this path through the same world
+    train_every_scan: bool = True  # train the NOF on every scan (SLAM pose + odometry since), not only the processed
     start_s: float = 0.0  # localize from this far into the log ...
     run_s: Optional[float] = None  # ... for this long (None: to its end)
 

@@ -62,10 +62,23 @@ def stage_dir(cfg, stage: str, root="outputs") -> Path:
     return out
 
 
-def config_digest(cfg) -> str:
+# the config sections each stage reads: a change elsewhere (say mcl.* for a SLAM run) leaves it finished
+SECTIONS = {
+    "slam": ("data", "sim", "slam", "device"),
+    "train": ("data", "sim", "model", "render", "train", "device"),
+    "synthesis": ("data", "sim", "model", "render", "train", "mapping", "raycast", "device"),
+    "localize": ("data", "sim", "model", "render", "train", "mapping", "raycast", "mcl", "device"),
+    "globloc": ("data", "sim", "globloc", "device"),
+}
+
+
+def config_digest(cfg, sections=None) -> str:
+    """sha256 of the resolved config, or of the named top-level sections of it only."""
     from omegaconf import OmegaConf
 
-    return hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()
+    node = cfg if sections is None else {k: OmegaConf.to_container(cfg, resolve=True).get(k) for k in sections}
+    text = OmegaConf.to_yaml(cfg, resolve=True) if sections is None else json.dumps(node, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def output_digests(out: Path) -> dict[str, str]:
@@ -86,15 +99,17 @@ def write_manifest(out: Path, cfg, inputs: list[Path], device: str, started: flo
         "git_sha": _git_sha(), "python": platform.python_version(), "numpy": numpy.__version__,
         "warp": warp.config.version, "device": device, "wall_time_s": time.time() - started,
         "config_sha256": config_digest(cfg),
+        "config_sections_sha256": {k: config_digest(cfg, [k]) for k in cfg},
         "inputs": {str(p): file_digest(p) for p in inputs if Path(p).is_file()},
         "outputs": output_digests(out),
     }
     return write_json(out / "manifest.json", manifest)
 
 
-def stage_complete(out, cfg=None, inputs=None) -> tuple[bool, str]:
+def stage_complete(out, cfg=None, inputs=None, sections=None) -> tuple[bool, str]:
     """(finished, why not): ``out`` holds a manifest whose output digests match the files, every JSON file
-    parses, and (when given) the config and the input files are those it was made from."""
+    parses, and (when given) the config (all of it, or the ``sections`` the stage reads) and the input
+    files are those it was made from."""
     out = Path(out)
     path = out / "manifest.json"
     if not path.is_file():
@@ -115,18 +130,23 @@ def stage_complete(out, cfg=None, inputs=None) -> tuple[bool, str]:
                 json.loads(f.read_text())
             except ValueError as e:
                 return False, f"{f} is not valid JSON ({e})"
-    if cfg is not None and manifest.get("config_sha256") != config_digest(cfg):
-        return False, f"{out}: made with other settings (config.yaml there shows which)"
+    if cfg is not None:
+        stored = manifest.get("config_sections_sha256", {}) if sections else {"all": manifest.get("config_sha256")}
+        now = {k: config_digest(cfg, [k]) for k in sections} if sections else {"all": config_digest(cfg)}
+        changed = [k for k in now if stored.get(k) != now[k]]
+        if changed:
+            return False, f"{out}: made with other settings ({', '.join(changed)}; config.yaml there shows them)"
     for p in inputs or []:
         if Path(p).is_file() and manifest["inputs"].get(str(p)) != file_digest(p):
             return False, f"{out}: input {p} changed since"
     return True, ""
 
 
-def up_to_date(out, cfg, inputs=None) -> bool:
-    """True (and says so) when ``out`` is a finished stage of these settings and inputs: the stage then
-    returns at once. An unfinished or damaged one is reported and redone."""
-    done, why = stage_complete(out, cfg, inputs)
+def up_to_date(out, cfg, inputs=None, stage=None) -> bool:
+    """True (and says so) when ``out`` is a finished ``stage`` (a key of SECTIONS; None: the whole config)
+    of these settings and inputs: the stage then returns at once. An unfinished or damaged one is reported
+    and redone."""
+    done, why = stage_complete(out, cfg, inputs, SECTIONS.get(stage))
     if done:
         print(f"{out}: up to date (same settings and inputs; remove the folder to run it again)")
     elif (Path(out) / "manifest.json").exists():

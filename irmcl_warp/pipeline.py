@@ -33,7 +33,7 @@ from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.nof.prepare import far_m, recorded_inputs
 from irmcl_warp.nog import NOG, bake_nog
-from irmcl_warp.outputs import stage_complete, stage_dir, write_json, write_manifest
+from irmcl_warp.outputs import SECTIONS, file_digest, stage_complete, stage_dir, write_json, write_manifest
 from kernels import WEIGHTING, pick_device
 
 
@@ -45,23 +45,24 @@ def with_overrides(cfg, **dotted):
     return new
 
 
-def run_stage(name: str, out: Path | None, cfg, inputs, run, timing: dict) -> Path:
-    """Run ``run()`` unless ``out`` already holds a complete stage for ``cfg`` and ``inputs``."""
+def run_stage(name: str, out: Path, cfg, inputs, run, timing: dict) -> Path:
+    """Run ``run()`` unless ``out`` already holds a complete stage ``name`` for ``cfg`` and ``inputs``."""
     t0 = time.time()
-    done, why = stage_complete(out, cfg, inputs) if out is not None else (False, "")
+    done, why = stage_complete(out, cfg, inputs, SECTIONS[name])
     if done:
         print(f"[{name}] up to date: {out}")
         timing[name] = {"s": 0.0, "skipped": True}
         return out
-    if out is not None and (out / "manifest.json").exists():
+    if (out / "manifest.json").exists():
         print(f"[{name}] redoing: {why}")
     out = run()
     timing[name] = {"s": time.time() - t0, "skipped": False}
     return out
 
 
-def processed_poses(slam_dir: Path, log) -> tuple[np.ndarray, np.ndarray]:
-    """(scan indices, SLAM poses) of the scans the filter processed (neff.csv; scan 0 starts it)."""
+def slam_poses(slam_dir: Path, log, every_scan: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(scan indices, SLAM poses): of the scans the filter processed (neff.csv; scan 0 starts it), or of
+    every scan (each one's pose: the last processed scan's corrected pose + the odometry since)."""
     from irmcl_warp.io import read_tum
 
     rows = np.loadtxt(slam_dir / "neff.csv", delimiter=",", skiprows=1, ndmin=2)
@@ -69,6 +70,7 @@ def processed_poses(slam_dir: Path, log) -> tuple[np.ndarray, np.ndarray]:
     stamps, poses = read_tum(slam_dir / "trajectory.tum")
     if len(stamps) != len(log):
         raise ValueError(f"{slam_dir / 'trajectory.tum'}: {len(stamps)} poses for a log of {len(log)} scans")
+    scans = np.arange(len(log)) if every_scan else scans
     return scans, poses[scans]
 
 
@@ -135,10 +137,6 @@ def run_pipeline(cfg) -> Path:
     started, device, timing = time.time(), pick_device(cfg.device), {}
     cfg = with_overrides(cfg, **{"data.train_poses_path": None})
     out = stage_dir(cfg, "pipeline")
-    done, why = stage_complete(out, cfg, recorded_inputs(cfg))
-    if done:
-        print(f"pipeline up to date: {out / 'report.md'}")
-        return out
     # 1. SLAM over the mapping log
     slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam)), cfg, recorded_inputs(cfg),
                          lambda: run_slam(cfg), timing)
@@ -146,13 +144,23 @@ def run_pipeline(cfg) -> Path:
 
     log = load_stream(cfg)
     # 2. the processed scans' SLAM poses: the NOF's training poses
-    scans, poses = processed_poses(slam_dir, log)
-    write_tum(out / "slam_poses.tum", log.stamps[scans], poses)
+    scans, poses = slam_poses(slam_dir, log, cfg.localize.train_every_scan)
+    tmp = out / "slam_poses.tum.new"
+    write_tum(tmp, log.stamps[scans], poses)
+    if (out / "slam_poses.tum").is_file() and file_digest(tmp) == file_digest(out / "slam_poses.tum"):
+        tmp.unlink()  # unchanged: keep the file (and the caches keyed on its mtime)
+    else:
+        tmp.replace(out / "slam_poses.tum")
     # 3. the NOF, trained on those (interleaved train / val / test over the processed scans)
     cfg_train = with_overrides(cfg, **{"data.train_poses_path": str((out / "slam_poses.tum").resolve()),
                                        "data.splits_path": None})
     train_out = run_stage("train", train_dir(cfg_train), cfg_train, recorded_inputs(cfg_train),
                           lambda: run_train(cfg_train), timing)
+    # what the localization depends on beyond the settings: the log, the SLAM map and the NOF
+    inputs = recorded_inputs(cfg) + [slam_dir / "map.npz", train_out / "nof.pt"]
+    if stage_complete(out, cfg, inputs)[0]:
+        print(f"pipeline up to date: {out / 'report.md'}")
+        return out
     # 4. the NOG over the SLAM map's extent of the scans
     t0 = time.time()
     far = far_m(cfg, log.info.range_max_m)
@@ -169,7 +177,7 @@ def run_pipeline(cfg) -> Path:
     timing["localize"] = {"s": time.time() - t0, "skipped": False, "scans": int(len(idx))}
     write_tum(out / "localization.tum", log2.stamps[idx], est)
     metrics = {"mapping_log": cfg.data.path or cfg.data.name, "localized_log": what, "device": device,
-               "processed_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing,
+               "training_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing,
                "slam": stage_summary(slam_dir), "nof": stage_summary(train_out)}
     gt_map, T_gt_map = None, None
     if log.ground_truth is not None and log2.ground_truth is not None:
@@ -179,9 +187,9 @@ def run_pipeline(cfg) -> Path:
         metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
     write_report(out, cfg, metrics, slam_dir, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
     write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, recorded_inputs(cfg), device, started)
+    write_manifest(out, cfg, inputs, device, started)
     loc = metrics.get("localization")
-    print(f"pipeline: map from {len(scans)} processed scans, {len(idx)} scans localized"
+    print(f"pipeline: NOF trained on {len(scans)} SLAM-posed scans, {len(idx)} scans localized"
           + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {loc['location_rmse_cm']:.1f} cm"
              if loc and loc["converged"] else "; did not converge" if loc else "; no ground truth to score")
           + f" -> {out / 'report.md'}")

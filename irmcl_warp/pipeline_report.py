@@ -48,16 +48,10 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ok = np.all(np.isfinite(gt_map), 1)
-    t = np.asarray(stamps) - stamps[0]
+    from irmcl_warp.localize import plot_error_axis
+
     fig, ax = plt.subplots(figsize=(8, 3.5))
-    ax.semilogy(t[ok], np.maximum(np.hypot(*(est[ok, :2] - gt_map[ok, :2]).T), 1e-3), "-", color="tab:red", lw=1)
-    if converged_s is not None:
-        ax.axvline(converged_s, color="tab:green", ls="--", lw=1, label=f"converged ({converged_s:.1f} s)")
-    ax.axhline(0.3, color="gray", lw=0.8, label="0.3 m")
-    ax.set_xlabel("time since start (s)")
-    ax.set_ylabel("position error (m)")
-    ax.legend(fontsize=8)
+    plot_error_axis(ax, stamps, est, gt_map, converged_s)
     save_figure(fig, path)
 
 

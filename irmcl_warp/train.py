@@ -79,7 +79,7 @@ def run_train(cfg) -> Path:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
     out = train_dir(cfg)
-    if up_to_date(out, cfg, recorded_inputs(cfg)):
+    if up_to_date(out, cfg, recorded_inputs(cfg), "train"):
         return out
     sets = prepare_beams(cfg)
     near, far = cfg.render.near_m, far_m(cfg)

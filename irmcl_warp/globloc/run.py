@@ -324,7 +324,7 @@ def run_globloc(cfg) -> Path:
     if bad:
         raise ValueError(f"globloc.methods: unknown {bad}; choose from {list(METHODS)}")
     out = stage_dir(cfg, f"globloc-{g.scenario}")
-    if up_to_date(out, cfg):
+    if up_to_date(out, cfg, stage="globloc"):
         return out
     rng = np.random.default_rng(g.seed)
     world = world_of(cfg)

@@ -92,7 +92,7 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
 def recorded_inputs(cfg) -> list[Path]:
     """Input files to hash into a manifest: none for the simulator or where only the cache was sent."""
     if cfg.data.format == "sim":
-        return []
+        return [resolve(p) for p in [cfg.data.get("train_poses_path")] if p]
     try:
         return input_files(cfg)
     except FileNotFoundError:

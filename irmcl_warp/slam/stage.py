@@ -99,7 +99,7 @@ def run_slam(cfg) -> Path:
     started, device = time.time(), pick_device(cfg.device)
     s = cfg.slam
     out = stage_dir(cfg, run_tag(s))
-    if up_to_date(out, cfg, recorded_inputs(cfg)):
+    if up_to_date(out, cfg, recorded_inputs(cfg), "slam"):
         return out
     log = load_stream(cfg)
     jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
