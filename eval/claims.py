@@ -98,7 +98,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
         rows.append(("Pipeline", f"raw log to a localized robot ({exp})", "-",
                      (f"converged after {lo['time_to_converge_s']:.1f} s, {lo['location_rmse_cm']:.1f} cm RMSE"
                       if lo and lo["converged"] else "did not converge" if lo else "no ground truth")
-                     + f" ({m['device']})", f"python -m irmcl_warp.pipeline{'' if exp == 'pipeline-sim_office' else ' +exp=pipeline_fr079'}"))
+                     + f" ({m['device']})", f"python -m irmcl_warp.pipeline{'' if exp == 'pipeline_sim_office' else ' +exp=pipeline_fr079 train=fast slam.particles=30 ...'}"))
     return rows
 
 

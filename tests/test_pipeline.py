@@ -45,7 +45,7 @@ def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):
     run_pipeline(cfg)
     assert "pipeline up to date" in capsys.readouterr().out
     (out / "manifest.json").unlink()
-    (tmp_path / "outputs" / "pipeline-sim_office" / "train-quick" / "nof.pt").unlink()
+    (tmp_path / "outputs" / "pipeline_sim_office" / "train-quick" / "nof.pt").unlink()
     run_pipeline(cfg)
     said = capsys.readouterr().out
     assert "[slam] up to date" in said and "[train] redoing" in said

@@ -68,17 +68,20 @@ def test_launcher_configs_compose(launcher, target):
     assert cfg.hydra.launcher._target_.endswith(target)
 
 
-def test_every_sweep_composes_and_names_a_distinct_folder():
+def test_every_sweep_composes_and_names_a_distinct_folder(rng):
     """Two jobs may share a folder only when they are the same run (the ablations' base run is also a cell
-    of the localization table); different settings in one folder would overwrite each other."""
+    of the localization table); different settings in one folder would overwrite each other. Every
+    ablation job (their folder names encode the settings) and a fresh random sample of the others."""
     from irmcl_warp.outputs import config_digest
 
+    jobs = [(s, ov) for s in SWEEPS for ov in s.jobs()]
+    others = [j for j in jobs if j[0].group != "ablation"]
+    pick = [j for j in jobs if j[0].group == "ablation"] + [others[i] for i in rng.choice(len(others), 40, replace=False)]
     seen = {}
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        for sweep in SWEEPS:
-            for ov in sweep.jobs():
-                cfg = compose("pipeline" if sweep.module == "irmcl_warp.pipeline" else "config", overrides=ov)
-                where = (sweep.module, folder(sweep.module, cfg))
-                digest, first = seen.setdefault(where, (config_digest(cfg), ov))
-                assert digest == config_digest(cfg), f"{ov} and {first} would share {where}"
+        for sweep, ov in pick:
+            cfg = compose("pipeline" if sweep.module == "irmcl_warp.pipeline" else "config", overrides=ov)
+            where = (sweep.module, folder(sweep.module, cfg))
+            digest, first = seen.setdefault(where, (config_digest(cfg), ov))
+            assert digest == config_digest(cfg), f"seed {rng.seed}: {ov} and {first} would share {where}"
