@@ -84,7 +84,9 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
     rows.append(("GMapping", "the odometry proposal fails where the scan-based one succeeds",
                  "fails on intel (Grisetti et al. 2007)", _slam(slam, "intel", "odometry", particles=60) or "not run",
                  "python -m irmcl_warp.slam +exp=gmapping_intel slam.proposal=odometry slam.particles=60"))
-    for exp, what in (("globloc_corridor", "from random starts"), ("globloc_corridor_kidnap", "after a kidnapping")):
+    for exp, what in (("globloc_corridor", "from random starts"), ("globloc_corridor_kidnap", "after a kidnapping"),
+                      ("globloc_corridor_8m", "from random starts, 8 m lidar"),
+                      ("globloc_corridor_8m_kidnap", "after a kidnapping, 8 m lidar")):
         key = "recovered" if "kidnap" in exp else "localized"
         pa, li = _globloc(gl, exp, "paper", key), _globloc(gl, exp, "lidar_mcl", key)
         rows.append(("Lidar + camera", f"camera-aided localization succeeds {what} where lidar-only MCL fails "
