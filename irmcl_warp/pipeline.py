@@ -2,7 +2,7 @@
 to a localized robot, every artifact made by a command.
 
 1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam-<tag>/ (map, trajectory.tum)
-2. poses     the SLAM poses of the processed scans -> outputs/<exp>/pipeline/slam_poses.tum
+2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/pipeline/slam_poses.tum
 3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train-<preset>/nof.pt
 4. nog       the NOF baked into a neural occupancy grid over the SLAM map (cached by checkpoint digest)
 5. localize  global MCL with the NOG over the second log (``localize.*``; the simulator's second session,
@@ -143,7 +143,7 @@ def run_pipeline(cfg) -> Path:
     from irmcl_warp.localize import load_stream
 
     log = load_stream(cfg)
-    # 2. the processed scans' SLAM poses: the NOF's training poses
+    # 2. the SLAM poses: the NOF's training poses
     scans, poses = slam_poses(slam_dir, log, cfg.localize.train_every_scan)
     tmp = out / "slam_poses.tum.new"
     write_tum(tmp, log.stamps[scans], poses)
@@ -151,7 +151,7 @@ def run_pipeline(cfg) -> Path:
         tmp.unlink()  # unchanged: keep the file (and the caches keyed on its mtime)
     else:
         tmp.replace(out / "slam_poses.tum")
-    # 3. the NOF, trained on those (interleaved train / val / test over the processed scans)
+    # 3. the NOF, trained on those (interleaved train / val / test over the posed scans)
     cfg_train = with_overrides(cfg, **{"data.train_poses_path": str((out / "slam_poses.tum").resolve()),
                                        "data.splits_path": None})
     train_out = run_stage("train", train_dir(cfg_train), cfg_train, recorded_inputs(cfg_train),
