@@ -40,6 +40,17 @@ from kernels import WEIGHTING, pick_device
 from kernels.motion import odometry_step
 
 
+NOF_WEIGHTINGS = ("nog_raymarch", "nof_direct")  # the observation models that read the trained field
+
+
+def free_space_view(grid) -> NOG:
+    """The grid's known free cells (p_occ < 0.35) as 0, the rest 1, in a NOG whose nodes sit at the cell
+    centres: the particle filter spreads its uniform start over the zeros."""
+    res = grid.resolution_m
+    centre = (grid.origin_xy[0] + res / 2, grid.origin_xy[1] + res / 2)
+    return NOG(np.where(grid.known & (grid.probability < 0.35), 0.0, 1.0).astype(np.float32), centre, res)
+
+
 def build_maps(cfg, device):
     """(free-space view for initialisation as a NOG, weighting object, occupancy image for plots: p_occ,
     0.5 where unknown) from the training split."""
@@ -51,14 +62,11 @@ def build_maps(cfg, device):
     # likelihood field, whose distance map counts occupied cells only (as AMCL's)
     unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
     occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
-    centre = (grid.origin_xy[0] + res / 2, grid.origin_xy[1] + res / 2)
-    free_view = NOG(np.where(grid.known & (grid.probability < 0.35), 0.0, 1.0).astype(np.float32), centre, res)
+    free_view = free_space_view(grid)
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     n_beams = min(m.num_beams, len(train.angles_rad))
-    if m.weighting in ("nog_raymarch", "nof_direct"):
-        from irmcl_warp.train import train_dir
-
-        ckpt = train_dir(cfg) / "nof.pt"
+    if m.weighting in NOF_WEIGHTINGS:
+        (ckpt,) = nof_inputs(cfg)
         if not ckpt.is_file():
             raise FileNotFoundError(f"{ckpt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
         shared = dict(num_particles=m.num_particles, num_beams=n_beams, num_samples=m.num_samples, near_m=m.near_m,
@@ -205,7 +213,7 @@ def run_one(pf: ParticleFilter, log: LaserLog, idx: np.ndarray, m) -> np.ndarray
 
 def nof_inputs(cfg) -> list[Path]:
     """The trained field a NOF-weighted run reads (its digest decides whether the run is up to date)."""
-    if cfg.mcl.weighting not in ("nog_raymarch", "nof_direct"):
+    if cfg.mcl.weighting not in NOF_WEIGHTINGS:
         return []
     from irmcl_warp.train import train_dir
 

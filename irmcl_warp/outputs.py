@@ -72,13 +72,21 @@ SECTIONS = {
 }
 
 
-def config_digest(cfg, sections=None) -> str:
-    """sha256 of the resolved config, or of the named top-level sections of it only."""
+def config_digest(cfg) -> str:
+    """sha256 of the resolved config."""
     from omegaconf import OmegaConf
 
-    node = cfg if sections is None else {k: OmegaConf.to_container(cfg, resolve=True).get(k) for k in sections}
-    text = OmegaConf.to_yaml(cfg, resolve=True) if sections is None else json.dumps(node, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return hashlib.sha256(OmegaConf.to_yaml(cfg, resolve=True).encode()).hexdigest()
+
+
+def section_digests(cfg, sections=None) -> dict[str, str]:
+    """{top-level key: sha256 of that section alone} for ``sections`` (default: every key), from one
+    resolution of the config."""
+    from omegaconf import OmegaConf
+
+    c = OmegaConf.to_container(cfg, resolve=True)
+    return {k: hashlib.sha256(json.dumps({k: c.get(k)}, sort_keys=True, default=str).encode()).hexdigest()
+            for k in (c if sections is None else sections)}
 
 
 def output_digests(out: Path) -> dict[str, str]:
@@ -99,7 +107,7 @@ def write_manifest(out: Path, cfg, inputs: list[Path], device: str, started: flo
         "git_sha": _git_sha(), "python": platform.python_version(), "numpy": numpy.__version__,
         "warp": warp.config.version, "device": device, "wall_time_s": time.time() - started,
         "config_sha256": config_digest(cfg),
-        "config_sections_sha256": {k: config_digest(cfg, [k]) for k in cfg},
+        "config_sections_sha256": section_digests(cfg),
         "inputs": {str(p): file_digest(p) for p in inputs if Path(p).is_file()},
         "outputs": output_digests(out),
     }
@@ -132,7 +140,7 @@ def stage_complete(out, cfg=None, inputs=None, sections=None) -> tuple[bool, str
                 return False, f"{f} is not valid JSON ({e})"
     if cfg is not None:
         stored = manifest.get("config_sections_sha256", {}) if sections else {"all": manifest.get("config_sha256")}
-        now = {k: config_digest(cfg, [k]) for k in sections} if sections else {"all": config_digest(cfg)}
+        now = section_digests(cfg, sections) if sections else {"all": config_digest(cfg)}
         changed = [k for k in now if stored.get(k) != now[k]]
         if changed:
             return False, f"{out}: made with other settings ({', '.join(changed)}; config.yaml there shows them)"

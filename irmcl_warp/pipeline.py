@@ -28,7 +28,7 @@ from eval.metrics import localization_metrics
 from irmcl_warp.config import register
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import load_log
-from irmcl_warp.localize import run_one, write_tum
+from irmcl_warp.localize import free_space_view, load_stream, run_one, write_tum
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.nof.prepare import far_m, recorded_inputs
@@ -65,29 +65,29 @@ def slam_poses(slam_dir: Path, log, every_scan: bool) -> tuple[np.ndarray, np.nd
     every scan (each one's pose: the last processed scan's corrected pose + the odometry since)."""
     from irmcl_warp.io import read_tum
 
-    rows = np.loadtxt(slam_dir / "neff.csv", delimiter=",", skiprows=1, ndmin=2)
-    scans = np.concatenate([[0], rows[:, 0].astype(int)]) if len(rows) else np.array([0])
     stamps, poses = read_tum(slam_dir / "trajectory.tum")
     if len(stamps) != len(log):
         raise ValueError(f"{slam_dir / 'trajectory.tum'}: {len(stamps)} poses for a log of {len(log)} scans")
-    scans = np.arange(len(log)) if every_scan else scans
+    if every_scan:
+        return np.arange(len(log)), poses
+    rows = np.loadtxt(slam_dir / "neff.csv", delimiter=",", skiprows=1, ndmin=2)
+    scans = np.concatenate([[0], rows[:, 0].astype(int)]) if len(rows) else np.array([0])
     return scans, poses[scans]
 
 
 def second_log(cfg):
     """The log to localize in and a description: localize.path, the simulator's second session, or the
-    mapping log itself."""
+    mapping log itself (``cfg`` without training poses, as run_pipeline holds it)."""
     lc = cfg.localize
     if lc.path is not None:
         c = with_overrides(cfg, **{"data.path": lc.path, "data.format": lc.format or cfg.data.format,
                                    "data.ground_truth_path": lc.ground_truth_path, "data.relations_path": None,
-                                   "data.splits_path": None, "data.train_poses_path": None})
+                                   "data.splits_path": None})
         return load_log(c), f"{lc.path}"
     if cfg.data.format == "sim":
-        c = with_overrides(cfg, **{"sim.path_seed": lc.sim_path_seed, "data.train_poses_path": None})
+        c = with_overrides(cfg, **{"sim.path_seed": lc.sim_path_seed})
         return load_log(c), f"the simulator's second session (path seed {lc.sim_path_seed}, same world)"
-    return load_log(with_overrides(cfg, **{"data.train_poses_path": None})), \
-        f"{cfg.data.path} again (no localize.path: the scans the map was built from)"
+    return load_log(cfg), f"{cfg.data.path} again (no localize.path: the scans the map was built from)"
 
 
 def localize(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -101,10 +101,7 @@ def localize(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.
     if len(idx) < 2:
         raise ValueError(f"localize.start_s={cfg.localize.start_s}, run_s={cfg.localize.run_s}: "
                          f"{len(idx)} scans of a {t[-1]:.0f} s log in the window")
-    free = slam_map.known & (slam_map.probability < 0.35)
-    res = slam_map.resolution_m
-    view = NOG(np.where(free, 0.0, 1.0).astype(np.float32),
-               (slam_map.origin_xy[0] + res / 2, slam_map.origin_xy[1] + res / 2), res)
+    view = free_space_view(slam_map)
     weighting = WEIGHTING.build("nog_raymarch", nog=nog, t_min=m.t_min, empty_below=m.empty_below,
                                 num_particles=m.num_particles, num_beams=min(m.num_beams, log.info.num_beams),
                                 num_samples=m.num_samples, near_m=m.near_m, far_m=m.far_m, sigma_m=m.sigma_m,
@@ -123,8 +120,11 @@ def stage_summary(out: Path) -> dict:
     m = json.loads((out / "metrics.json").read_text())
     if "processed_scans" in m:  # slam
         traj, odo = m.get("trajectory") or {}, m.get("trajectory_odometry") or {}
-        return {"run": out.name, "processed_scans": m["processed_scans"], "ate_rmse_m": traj.get("ate_rmse_m"),
-                "odometry_ate_rmse_m": odo.get("ate_rmse_m"), "wall_time_s": m["wall_time_s"]}
+        rel = m.get("relations")
+        return {"run": out.name, "scans": m["scans"], "processed_scans": m["processed_scans"],
+                "resamplings": m["resamplings"], "ate_rmse_m": traj.get("ate_rmse_m"),
+                "odometry_ate_rmse_m": odo.get("ate_rmse_m"), "wall_time_s": m["wall_time_s"],
+                "relations_m": rel["trans_abs_mean_m"] if isinstance(rel, dict) else None}
     return {"run": out.name, "val_mae_m": m["val"]["mae_m"], "train_time_s": m["train_time_s"],
             "epochs": m["epochs_done"]}
 
@@ -140,8 +140,6 @@ def run_pipeline(cfg) -> Path:
     # 1. SLAM over the mapping log
     slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam)), cfg, recorded_inputs(cfg),
                          lambda: run_slam(cfg), timing)
-    from irmcl_warp.localize import load_stream
-
     log = load_stream(cfg)
     # 2. the SLAM poses: the NOF's training poses
     scans, poses = slam_poses(slam_dir, log, cfg.localize.train_every_scan)
@@ -185,7 +183,7 @@ def run_pipeline(cfg) -> Path:
         gt_map = compose(inverse(T_gt_map), log2.ground_truth[idx])  # the second log's truth in the map frame
         metrics["T_groundtruth_map"] = T_gt_map.tolist()
         metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
-    write_report(out, cfg, metrics, slam_dir, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
+    write_report(out, cfg, metrics, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
     write_json(out / "metrics.json", metrics)
     write_manifest(out, cfg, inputs, device, started)
     loc = metrics.get("localization")

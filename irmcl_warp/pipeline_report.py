@@ -3,7 +3,6 @@ time), the timing of every stage and the metrics of each, read from the stages' 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -55,32 +54,30 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
     save_figure(fig, path)
 
 
-def write_report(out: Path, cfg, metrics: dict, slam_dir: Path, slam_map, slam_poses, stamps, est, gt_map,
-                 particles) -> Path:
-    from irmcl_warp.train import run_name
-
+def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, est, gt_map, particles) -> Path:
+    """``metrics``: the pipeline's, with the SLAM and NOF stages' figures (pipeline.stage_summary)."""
     plot_map(out / "map.png", slam_map, slam_poses, est, gt_map, particles)
     loc = metrics.get("localization")
     if gt_map is not None:
         plot_error(out / "error.png", stamps, est, gt_map, loc["time_to_converge_s"])
-    slam = json.loads((slam_dir / "metrics.json").read_text())
+    slam = metrics["slam"]
     lines = [f"# Pipeline report: {cfg.exp}", "",
              f"- mapping log: `{metrics['mapping_log']}`; localized: {metrics['localized_log']}",
              f"- device: {metrics['device']}; GMapping with {cfg.slam.particles} particles, NOF preset "
              f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})", "",
              "## Stages", "", "| stage | time (s) | output |", "|---|---|---|"]
-    where = {"slam": slam_dir, "train": f"train-{run_name(cfg)}/", "nog": "nog/", "localize": "localization.tum"}
+    where = {"slam": f"{slam['run']}/", "train": f"{metrics['nof']['run']}/", "nog": "nog/",
+             "localize": "localization.tum"}
     for name, t in metrics["timing"].items():
         took = "skipped (up to date)" if t["skipped"] else f"{t['s']:.1f}"
         lines.append(f"| {name} | {took} | `{where.get(name, '')}` |")
-    traj = slam.get("trajectory")
     lines += ["", "## SLAM", "", f"{slam['processed_scans']} of {slam['scans']} scans processed, "
               f"{slam['resamplings']} resamplings."]
-    if traj:
+    if slam["ate_rmse_m"] is not None:
         lines.append(f"Trajectory error against the mapping log's ground truth after a rigid alignment: "
-                     f"{traj['ate_rmse_m']:.3f} m RMSE (odometry {slam['trajectory_odometry']['ate_rmse_m']:.3f} m).")
-    if isinstance(slam.get("relations"), dict):
-        lines.append(f"Relations metric: {slam['relations']['trans_abs_mean_m']:.3f} m.")
+                     f"{slam['ate_rmse_m']:.3f} m RMSE (odometry {slam['odometry_ate_rmse_m']:.3f} m).")
+    if slam["relations_m"] is not None:
+        lines.append(f"Relations metric: {slam['relations_m']:.3f} m.")
     lines += ["", "## Localization (global, from a uniform start)", ""]
     if loc is None:
         lines.append("The localized log has no ground truth: the estimate is in map.png, not scored.")

@@ -18,10 +18,12 @@ from irmcl_warp.nof.beams import (SPLITS, BeamSet, beams_from_log, interleaved_s
 from irmcl_warp.outputs import stage_dir
 
 
-LATER_DATA_FIELDS = {"repair_reversing": False}
+# fields added after caches existed, left out of the cache key at these defaults so those caches stay valid
+LATER_FIELDS = {"repair_reversing": False, "path_seed": None}
 
 
 def input_files(cfg) -> list[Path]:
+    """The files a data config reads (the simulator's: only the pipeline's training poses, when set)."""
     d = cfg.data
     return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path,
                                  d.get("train_poses_path")) if p]
@@ -42,13 +44,13 @@ def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
     """(key, missing-input error): the data settings (+ ``settings``), then "-" and the inputs' size and
     mtime. Without the raw files (a GPU box sent only the caches) the key stops after the settings part
     and the error says which file is missing; a cache is then accepted by that prefix."""
-    # fields added later are left out at their defaults, so the caches made before them stay valid
-    data = {k: v for k, v in OmegaConf.to_container(cfg.data).items()
-            if v is not None and not (k in LATER_DATA_FIELDS and v == LATER_DATA_FIELDS[k])}
-    sim = {k: v for k, v in OmegaConf.to_container(cfg.sim).items() if not (k == "path_seed" and v is None)}
-    key = settings_key(data, sim, *settings)
+    def stable(node, drop_none: bool) -> dict:
+        return {k: v for k, v in OmegaConf.to_container(node).items()
+                if not (drop_none and v is None) and not (k in LATER_FIELDS and v == LATER_FIELDS[k])}
+
+    key = settings_key(stable(cfg.data, drop_none=True), stable(cfg.sim, drop_none=False), *settings)
     try:
-        files = input_files(cfg) if cfg.data.format != "sim" else [resolve(p) for p in [cfg.data.get("train_poses_path")] if p]
+        files = input_files(cfg)
         return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
     except FileNotFoundError as e:
         return key, e
@@ -90,9 +92,7 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
 
 
 def recorded_inputs(cfg) -> list[Path]:
-    """Input files to hash into a manifest: none for the simulator or where only the cache was sent."""
-    if cfg.data.format == "sim":
-        return [resolve(p) for p in [cfg.data.get("train_poses_path")] if p]
+    """Input files to hash into a manifest: none where only the cache was sent."""
     try:
         return input_files(cfg)
     except FileNotFoundError:
