@@ -5,12 +5,11 @@ runs' metrics.json, never typed), and the command that makes the runs. Written b
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-CONVERGED_M = 0.15  # eval.tables: a GMapping run whose mean relations error is below this converged
+from eval.tables import CONVERGED_M, REPO
+from irmcl_warp.config import GlobLocConfig
 
 
 def _pick(runs: dict, exp: str, folder: str):
@@ -40,8 +39,10 @@ def _slam(runs, ds, proposal="paper", resample="selective", particles=30):
 
 
 def _globloc(runs, exp, method, key="localized"):
+    """``method``'s count over the runs of ``exp`` made with the default trigger (not its ablation)."""
     for (e, _), m in runs.items():
-        if e == exp and method in m["methods"] and m.get("settings", {}).get("trigger_confirm_frames", 1) == 2:
+        confirm = m.get("settings", {}).get("trigger_confirm_frames", 1)
+        if e == exp and method in m["methods"] and confirm == GlobLocConfig.trigger_confirm_frames:
             s = m["methods"][method]["summary"]
             return f"{s[key]}/{s['runs']}"
     return None

@@ -56,26 +56,19 @@ class Sweep:
 
 
 def folder(module: str, cfg) -> str:
-    """The output folder of a job, relative to outputs/ (and to results/<group>/)."""
-    from irmcl_warp.train import run_name
+    """The output folder of a job, relative to outputs/ (and to results/<group>/): the stage's own name for it."""
+    from eval.synthesis import synthesis_folder
+    from irmcl_warp.globloc.run import scenario_folder
+    from irmcl_warp.localize import run_tag as localize_tag
+    from irmcl_warp.slam.stage import run_tag as slam_tag
+    from irmcl_warp.train import train_folder
 
-    if module == "irmcl_warp.train":
-        return f"{cfg.exp}/train-{run_name(cfg)}"
-    if module == "eval.synthesis":
-        return f"{cfg.exp}/synthesis-{run_name(cfg)}"
-    if module == "irmcl_warp.localize":
-        from irmcl_warp.localize import run_tag
-
-        return f"{cfg.exp}/{run_tag(cfg.mcl)}"
-    if module == "irmcl_warp.slam":
-        from irmcl_warp.slam.stage import run_tag
-
-        return f"{cfg.exp}/{run_tag(cfg.slam)}"
-    if module == "irmcl_warp.globloc":
-        return f"{cfg.exp}/globloc-{cfg.globloc.scenario}"
-    if module == "irmcl_warp.pipeline":
-        return f"{cfg.exp}/pipeline"
-    raise ValueError(f"no output folder rule for {module}")
+    names = {"irmcl_warp.train": train_folder, "eval.synthesis": synthesis_folder,
+             "irmcl_warp.localize": lambda c: localize_tag(c.mcl), "irmcl_warp.slam": lambda c: slam_tag(c.slam),
+             "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": lambda c: "pipeline"}
+    if module not in names:
+        raise ValueError(f"no output folder rule for {module}")
+    return f"{cfg.exp}/{names[module](cfg)}"
 
 
 SEEDS = list(range(10))
@@ -163,6 +156,24 @@ def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, job
     return cmds
 
 
+def run_sweep(sweep: Sweep, a, outputs: Path, results: Path) -> int:
+    """Report the sweep's jobs; unless listing, run the missing ones. Returns the number of failed commands."""
+    states = [(ov, *job_state(sweep, ov, outputs, results, a.rerun_kept)) for ov in sweep.jobs()]
+    missing = [ov for ov, state, _ in states if state == "missing"]
+    counts = {s: sum(1 for _, st, _ in states if st == s) for s in ("done", "kept", "missing")}
+    print(f"[{sweep.group}] {sweep.module} {' '.join(sweep.fixed)}: {counts['done']} done, {counts['kept']} kept "
+          f"(results/), {counts['missing']} to run" + ("  [sized for a GPU]" if sweep.gpu and missing else ""))
+    if a.list:
+        for ov, state, where in states:
+            print(f"    {state:8s} {' '.join(ov[len(sweep.fixed):]) or '-':50s} {where}")
+        return 0
+    failed = 0
+    for cmd in multirun_commands(sweep, missing, a.launcher, a.jobs, a.hydra_arg):
+        print("  $ " + " ".join(cmd[1:]), flush=True)
+        failed += subprocess.run(cmd, cwd=REPO).returncode != 0
+    return failed
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="+", help="groups to run: nof mcl slam globloc pipeline")
@@ -180,24 +191,13 @@ def main(argv=None) -> int:
     outputs, results = Path(a.outputs), Path(a.results)
     failed = 0
     register()
-    config_dir = initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3")
-    config_dir.__enter__()  # composing only: the jobs run in their own processes
-    # a job shared by several sweeps (the ablations' base run) is found done by the later ones
-    for sweep in [s for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)
-                  and (not a.match or any(a.match in f for f in s.fixed))]:
-        states = [(ov, *job_state(sweep, ov, outputs, results, a.rerun_kept)) for ov in sweep.jobs()]
-        missing = [ov for ov, state, _ in states if state == "missing"]
-        counts = {s: sum(1 for _, st, _ in states if st == s) for s in ("done", "kept", "missing")}
-        print(f"[{sweep.group}] {sweep.module} {' '.join(sweep.fixed)}: {counts['done']} done, {counts['kept']} kept "
-              f"(results/), {counts['missing']} to run" + ("  [sized for a GPU]" if sweep.gpu and missing else ""))
-        if a.list:
-            for ov, state, where in states:
-                print(f"    {state:8s} {' '.join(ov[len(sweep.fixed):]) or '-':50s} {where}")
-            continue
-        for cmd in multirun_commands(sweep, missing, a.launcher, a.jobs, a.hydra_arg):
-            print("  $ " + " ".join(cmd[1:]), flush=True)
-            failed += subprocess.run(cmd, cwd=REPO).returncode != 0
-    config_dir.__exit__(None, None, None)
+    sweeps = [s for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)
+              and (not a.match or any(a.match in f for f in s.fixed))]
+    # composing only in this process: the jobs run in their own. A job shared by several sweeps (the
+    # ablations' base run) is found done by the later ones.
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        for sweep in sweeps:
+            failed += run_sweep(sweep, a, outputs, results)
     if not a.list and not a.no_tables:
         failed += subprocess.run([sys.executable, "-m", "eval.tables", "--write"], cwd=REPO).returncode != 0
         failed += subprocess.run([sys.executable, "-m", "eval.plots"], cwd=REPO).returncode != 0

@@ -72,10 +72,14 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
     save_figure(fig, path)
 
 
+def synthesis_folder(cfg) -> str:
+    return f"synthesis-{run_name(cfg)}"
+
+
 def run_synthesis(cfg) -> Path:
     started = time.time()
     device = pick_device(cfg.device)
-    out = stage_dir(cfg, f"synthesis-{run_name(cfg)}")
+    out = stage_dir(cfg, synthesis_folder(cfg))
     inputs = recorded_inputs(cfg) + [train_dir(cfg) / "nof.pt"]
     if up_to_date(out, cfg, inputs, "synthesis"):
         return out

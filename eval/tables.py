@@ -12,7 +12,7 @@ import json
 import re
 from pathlib import Path
 
-from irmcl_warp.config import GlobLocConfig
+from irmcl_warp.config import GlobLocConfig, MCLConfig
 from irmcl_warp.mapping.mapio import atomic_write_bytes
 
 REPO = Path(__file__).resolve().parents[1]
@@ -152,9 +152,10 @@ def localization_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
-ABLATION_BASE = {"weighting": "nog_raymarch", "mode": "global", "num_particles": 100000, "map_resolution_m": 0.05,
-                 "num_beams": 32, "t_min": 0.001, "empty_below": 0.0, "resample": "low_variance",
-                 "num_samples": 256, "kidnap_at_s": 0.0, "recovery_alpha_fast": 0.0}
+# the ablations' base run: MCLConfig's defaults, which are IR-MCL's global localization
+ABLATION_BASE = {k: getattr(MCLConfig, k) for k in ("weighting", "mode", "num_particles", "map_resolution_m",
+                                                     "num_beams", "t_min", "empty_below", "resample", "num_samples",
+                                                     "kidnap_at_s", "recovery_alpha_fast")}
 ABLATION_NAMES = {"weighting": "likelihood", "map_resolution_m": "NOG / grid resolution (m)",
                   "num_beams": "beams", "t_min": "early termination (transmittance floor)",
                   "empty_below": "empty-space skipping (p_occ floor)", "resample": "resampling"}

@@ -37,9 +37,13 @@ def run_name(cfg) -> str:
     return cfg.train.name + ("" if cfg.render.name == "warp" else f"-{cfg.render.name}")
 
 
+def train_folder(cfg) -> str:
+    return f"train-{run_name(cfg)}"
+
+
 def train_dir(cfg) -> Path:
     """``outputs/<exp>/train-<preset>/``: one folder per recipe, so presets never overwrite each other."""
-    return stage_dir(cfg, f"train-{run_name(cfg)}")
+    return stage_dir(cfg, train_folder(cfg))
 
 
 def run_settings(cfg, train_split: str, far: float) -> tuple[dict, str]:

@@ -317,13 +317,17 @@ def summarise(rows: list, hours: float) -> dict:
     return out
 
 
+def scenario_folder(cfg) -> str:
+    return f"globloc-{cfg.globloc.scenario}"
+
+
 def run_globloc(cfg) -> Path:
     started, device = time.time(), pick_device(cfg.device)
     g, s = cfg.globloc, cfg.sim
     bad = [m for m in g.methods if m not in METHODS]
     if bad:
         raise ValueError(f"globloc.methods: unknown {bad}; choose from {list(METHODS)}")
-    out = stage_dir(cfg, f"globloc-{g.scenario}")
+    out = stage_dir(cfg, scenario_folder(cfg))
     if up_to_date(out, cfg, stage="globloc"):
         return out
     rng = np.random.default_rng(g.seed)
