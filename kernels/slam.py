@@ -128,10 +128,15 @@ def clear_bresenham(cells: wp.array3d(dtype=wp.vec4), p: int, c0: wp.vec2i, c1: 
 
 
 def make_integrate_kernel(line: str):
+    """Two kernels: ``free`` (one thread per particle x beam) adds a visit to every cell a beam passes,
+    ``hits`` (one thread per particle, beams in order) adds the end points. Visits are whole numbers, so
+    their atomic sums do not depend on the order the threads run in; the end points' coordinate sums do,
+    and are added in beam order so that a run replays exactly on a GPU too."""
+
     @wp.kernel(module="unique")
-    def integrate(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-                  angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-                  cells: wp.array3d(dtype=wp.vec4)):
+    def free(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+             angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
+             cells: wp.array3d(dtype=wp.vec4)):
         p, b = wp.tid()
         r = ranges[b]
         if not (r == r) or r <= 0.0:
@@ -143,52 +148,73 @@ def make_integrate_kernel(line: str):
             clear_bresenham(cells, p, c0, c1)
         else:
             clear_dda(cells, p, seg, c0, c1, origin, res)
-        if r <= usable and c1[0] >= 0 and c1[1] >= 0 and c1[0] < cells.shape[2] and c1[1] < cells.shape[1]:
-            wp.atomic_add(cells, p, c1[1], c1[0], wp.vec4(1.0, 1.0, seg[2], seg[3]))
 
-    return integrate
+    @wp.kernel(module="unique")
+    def hits(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+             angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
+             cells: wp.array3d(dtype=wp.vec4)):
+        p = wp.tid()
+        for b in range(ranges.shape[0]):
+            r = ranges[b]
+            if r == r and r > 0.0 and r <= usable:
+                seg = beam_segment(poses[p], T_base_laser, r, angles[b])
+                c1 = cell_of(seg[2], seg[3], origin, res)
+                if c1[0] >= 0 and c1[1] >= 0 and c1[0] < cells.shape[2] and c1[1] < cells.shape[1]:
+                    cells[p, c1[1], c1[0]] = cells[p, c1[1], c1[0]] + wp.vec4(1.0, 1.0, seg[2], seg[3])
+
+    return free, hits
 
 
 def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: float, null_likelihood: float,
-                      free_delta: float, beam_stride: int, beams_per_thread: int):
+                      free_delta: float, beam_stride: int, beams_per_thread: int, free_check: bool = True):
     """One thread per particle x candidate x ``beams_per_thread`` beams (1 on a GPU for parallelism; all
     beams on the CPU, where Warp runs the threads one after another and a thread per beam costs its own
-    index arithmetic and atomics)."""
+    index arithmetic). Each thread writes its partial sums to [P, C, J]; ``reduce`` adds them up in beam
+    order (atomic float sums would depend on the order the GPU runs the threads in, and the hill climbing
+    compares scores, so a run would not replay). A beam's direction comes from the precomputed cos / sin
+    of its angle rotated by the candidate's heading: two trigonometric calls per thread, not per beam."""
 
     @wp.kernel(module="unique")
     def score(poses: wp.array2d(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-              angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-              cells: wp.array3d(dtype=wp.vec4), out_score: wp.array2d(dtype=wp.float32),
-              out_loglik: wp.array2d(dtype=wp.float32), active: wp.array(dtype=wp.int32)):
+              beam_cs: wp.array(dtype=wp.vec2), usable: float, origin: wp.vec2, res: float,
+              cells: wp.array3d(dtype=wp.vec4), part_score: wp.array3d(dtype=wp.float32),
+              part_loglik: wp.array3d(dtype=wp.float32), active: wp.array(dtype=wp.int32)):
         p, c, j = wp.tid()
         if active[p] == 0:
             return
         lp = laser_pose(poses[p, c], T_base_laser)
+        cl = wp.cos(lp[2])
+        sl = wp.sin(lp[2])
         s = float(0.0)
         ll = float(0.0)
         b0 = j * wp.static(beams_per_thread)
         b1 = wp.min(b0 + wp.static(beams_per_thread), ranges.shape[0])
         for b in range(b0, b1):
             r = ranges[b]
-            if b % wp.static(beam_stride) == 0 and r == r and r > 0.0 and r <= usable:
-                a = lp[2] + angles[b]
-                ca = wp.cos(a)
-                sa = wp.sin(a)
+            if (wp.static(beam_stride) == 1 or b % wp.static(beam_stride) == 0) and r == r and r > 0.0 and r <= usable:
+                cs = beam_cs[b]
+                ca = cl * cs[0] - sl * cs[1]
+                sa = sl * cs[0] + cl * cs[1]
                 ex = lp[0] + r * ca
                 ey = lp[1] + r * sa
                 hit_cell = cell_of(ex, ey, origin, res)
                 free_cell = cell_of(ex - wp.static(free_delta) * ca, ey - wp.static(free_delta) * sa, origin, res)
                 best = float(1.0e30)
                 found = int(0)
-                for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
-                    for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+                for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):  # row by row in memory
+                    for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
                         h = cell_at(cells, p, hit_cell[0] + ox, hit_cell[1] + oy)
                         # hits / visits > fullness, and the free cell's < fullness (or unvisited), without dividing
                         if h[0] > 0.0 and h[1] > wp.static(fullness) * h[0]:
-                            f = cell_at(cells, p, free_cell[0] + ox, free_cell[1] + oy)
-                            if f[0] <= 0.0 or f[1] < wp.static(fullness) * f[0]:
-                                mx = ex - h[2] / h[1]
-                                my = ey - h[3] / h[1]
+                            free = int(1)
+                            if wp.static(free_check):
+                                f = cell_at(cells, p, free_cell[0] + ox, free_cell[1] + oy)
+                                if f[0] > 0.0 and f[1] >= wp.static(fullness) * f[0]:
+                                    free = 0
+                            if free == 1:
+                                inv = 1.0 / h[1]
+                                mx = ex - h[2] * inv
+                                my = ey - h[3] * inv
                                 d2 = mx * mx + my * my
                                 if d2 < best:
                                     best = d2
@@ -198,10 +224,27 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
                     ll += -best / wp.static(lsigma)
                 else:
                     ll += wp.static(null_likelihood / lsigma)
-        wp.atomic_add(out_score, p, c, s)
-        wp.atomic_add(out_loglik, p, c, ll)
+        part_score[p, c, j] = s
+        part_loglik[p, c, j] = ll
 
     return score
+
+
+@wp.kernel
+def reduce_partials_kernel(part_score: wp.array3d(dtype=wp.float32), part_loglik: wp.array3d(dtype=wp.float32),
+                           active: wp.array(dtype=wp.int32), out_score: wp.array2d(dtype=wp.float32),
+                           out_loglik: wp.array2d(dtype=wp.float32)):
+    """Sums of the partials in beam order (the same on every run); inactive particles keep their 0."""
+    p, c = wp.tid()
+    if active[p] == 0:
+        return
+    s = float(0.0)
+    ll = float(0.0)
+    for j in range(part_score.shape[2]):
+        s += part_score[p, c, j]
+        ll += part_loglik[p, c, j]
+    out_score[p, c] = s
+    out_loglik[p, c] = ll
 
 
 @wp.kernel
@@ -337,24 +380,25 @@ class Integrator:
         if line not in self.LINES:
             raise ValueError(f"slam.line={line!r}: choose one of {list(self.LINES)}")
         self.usable, self.device = float(usable_range_m), pick_device(device)
-        self.kernel = make_integrate_kernel(line)
+        self.free, self.hits = make_integrate_kernel(line)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
-        wp.launch(self.kernel, (poses.shape[0], ranges.shape[0]),
-                  [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
-                   maps.cells], device=self.device)
+        args = [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
+                maps.cells]
+        wp.launch(self.free, (poses.shape[0], ranges.shape[0]), args, device=self.device)
+        wp.launch(self.hits, poses.shape[0], args, device=self.device)
 
 
 class Scorer:
     """Score and log-likelihood of candidate poses [P, C] against each particle's own map.
 
     On the CPU, Warp runs a launch's threads one after another on the calling thread; the scorer splits
-    the particles into ``cpu_threads`` blocks (default: the machine's cores) and launches them from as many
+    the launch into ``cpu_threads`` blocks (default: the machine's cores) and launches them from as many
     host threads (ctypes drops the GIL during a launch), so that the matcher uses every core."""
 
     def __init__(self, usable_range_m: float, kernel_size: int = 1, fullness: float = 0.1, sigma: float = 0.05,
                  lsigma: float = 0.075, null_likelihood: float = -0.5, free_delta_m: float = 0.05 * np.sqrt(2),
-                 lskip: int = 0, cpu_threads: int | None = None, device: str = "auto"):
+                 lskip: int = 0, free_check: bool = True, cpu_threads: int | None = None, device: str = "auto"):
         import os
 
         self.usable, self.device = float(usable_range_m), pick_device(device)
@@ -362,8 +406,10 @@ class Scorer:
         self.per_thread = 1 if cuda else 1 << 16
         self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
         self._pool = None
+        self._partials, self._beam_cs = {}, None
         self.kernel = make_score_kernel(int(kernel_size), float(fullness), float(sigma), float(lsigma),
-                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1, self.per_thread)
+                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1, self.per_thread,
+                                        bool(free_check))
 
     def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
                  score: wp.array, loglik: wp.array, active: wp.array | None = None) -> None:
@@ -377,21 +423,46 @@ class Scorer:
                 self._all = wp.ones(P, dtype=wp.int32, device=self.device)
             active = self._all
         B, T = ranges.shape[0], wp.vec3(*map(float, T_base_laser))
+        part_s, part_l = self.reserve(P, C, B)
+        beam_cs = self._beam_directions(angles)
 
-        def run(p0: int, p1: int) -> None:
-            wp.launch(self.kernel, (p1 - p0, C, (B + self.per_thread - 1) // self.per_thread),
-                      [candidates[p0:p1], T, ranges, angles, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
-                       score[p0:p1], loglik[p0:p1], active[p0:p1]], device=self.device)
+        def run(p0: int, p1: int, c0: int, c1: int) -> None:
+            wp.launch(self.kernel, (p1 - p0, c1 - c0, part_s.shape[2]),
+                      [candidates[p0:p1, c0:c1], T, ranges, beam_cs, self.usable, maps.origin, maps.res,
+                       maps.cells[p0:p1], part_s[p0:p1, c0:c1], part_l[p0:p1, c0:c1], active[p0:p1]],
+                      device=self.device)
 
-        n = min(self.threads, P)
-        if n == 1:
-            return run(0, P)
+        if self.threads == 1:
+            run(0, P, 0, C)
+        else:
+            self._run_blocks(run, P, C)
+        wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)
+
+    def reserve(self, P: int, C: int, B: int):
+        """The partial-sum buffers for P x C candidates of B beams (allocate before a CUDA graph capture)."""
+        key = (P, C, (B + self.per_thread - 1) // self.per_thread)
+        if key not in self._partials:
+            self._partials[key] = (wp.zeros(key, dtype=wp.float32, device=self.device),
+                                   wp.zeros(key, dtype=wp.float32, device=self.device))
+        return self._partials[key]
+
+    def _beam_directions(self, angles: wp.array) -> wp.array:
+        """(cos, sin) of each beam's angle in the laser frame, computed once per angles array."""
+        if self._beam_cs is None or self._beam_cs[0] is not angles:
+            a = angles.numpy().astype(np.float64)
+            cs = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
+            self._beam_cs = (angles, wp.array(cs, dtype=wp.vec2, device=self.device))
+        return self._beam_cs[1]
+
+    def _run_blocks(self, run, P: int, C: int) -> None:
+        """Runs the launch as blocks of particles from ``threads`` host threads (blocks of candidates, each
+        holding every particle, measured 1.6x slower on 2 cores: each core then reads all maps)."""
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="slam-score")
-        cuts = np.linspace(0, P, n + 1).astype(int)
-        for f in [self._pool.submit(run, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
+        cuts = np.linspace(0, P, min(self.threads, P) + 1).astype(int)
+        for f in [self._pool.submit(run, int(a), int(b), 0, C) for a, b in zip(cuts[:-1], cuts[1:])]:
             f.result()
 
 

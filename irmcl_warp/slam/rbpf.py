@@ -68,14 +68,16 @@ class RBPF:
         self.scorer = SLAM.build("score", usable_range_m=usable_range_m, kernel_size=cfg.kernel_size,
                                  fullness=cfg.fullness, sigma=cfg.sigma, lsigma=cfg.lsigma,
                                  null_likelihood=cfg.null_likelihood, free_delta_m=cfg.resolution_m * np.sqrt(2.0),
-                                 lskip=cfg.lskip, device=d)
+                                 lskip=cfg.lskip, free_check=bool(getattr(cfg, "free_check", True)), device=d)
         self.motion = SLAM.build("motion", srr=cfg.srr, srt=cfg.srt, str_=cfg.str, stt=cfg.stt, device=d)
         self.angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=d)
         self.ranges = wp.zeros(len(angles_rad), dtype=wp.float32, device=d)
         self.poses = wp.zeros(P, dtype=wp.vec3, device=d)
         g = int(cfg.proposal_grid)
         offs = np.stack(np.meshgrid(*[np.arange(-g, g + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        self.grid_offsets = offs * np.array([cfg.lstep, cfg.lstep, cfg.astep])
+        ls = cfg.lstep if getattr(cfg, "proposal_lstep", None) is None else cfg.proposal_lstep
+        as_ = cfg.astep if getattr(cfg, "proposal_astep", None) is None else cfg.proposal_astep
+        self.grid_offsets = offs * np.array([ls, ls, as_])
         self._buffers = {}
         self.log_w = np.zeros(P)  # since the last resampling
         self.log_w_total = np.zeros(P)  # over the whole run (inherited on resampling): picks the best particle
@@ -210,6 +212,7 @@ class RBPF:
                 wp.launch(climb_update_kernel, P, [cand, score, st["pose"], st["best"], st["steps"], st["halvings"],
                                                    st["active"], int(c.iterations)], device=d)
 
+        self.scorer.reserve(P, 6, self.ranges.shape[0])  # no allocation inside the captured block
         if self._graph is None and wp.get_device(d).is_cuda:
             # the block reads and writes the same arrays every time: captured once, replayed as one launch
             try:
