@@ -32,6 +32,7 @@ class DataConfig:
     odom_frame: Optional[str] = None
     no_return_m: Optional[float] = None  # CARMEN: auto-detected as the most common maximum range
     fov_rad: Optional[float] = None  # FLASER carries no FOV; 180 deg unless set
+    angle_min_rad: Optional[float] = None  # FLASER: angle of the first beam; -fov / 2 unless set
     beam_policy: str = "error"  # error | reject | resample scans whose beam count differs
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
@@ -181,6 +182,7 @@ class SlamConfig:
     lskip: int = 0  # use every (lskip + 1)-th beam in the likelihood
     null_likelihood: float = -0.5  # a beam without a match
     fullness: float = 0.1  # a cell is occupied above this hits / visits
+    free_check: bool = True  # the matcher needs the cell before a hit free (False: the released code in effect)
     minimum_score: float = 0.0  # the match replaces the pose only above this score
     srr: float = 0.1  # odometry noise: translation from translation ...
     srt: float = 0.2  # ... rotation from translation
@@ -191,7 +193,9 @@ class SlamConfig:
     resolution_m: float = 0.05
     usable_range_m: Optional[float] = None  # beams beyond: free space only; None = data.usable_range_m
     map_margin_m: float = 10.0  # map = odometry's bounding box + this margin
-    proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses spaced lstep, lstep, astep around the match
+    proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses around the match, spaced as below
+    proposal_lstep: Optional[float] = None  # their spacing in x and y (m); None: lstep
+    proposal_astep: Optional[float] = None  # and in theta (rad); None: astep
     seed: int = 0
 
 

@@ -65,7 +65,7 @@ def load_log(cfg) -> LaserLog:
         raise ValueError(f"data={d.name}: data.path is not set")
     path = resolve(d.path)
     if d.format == "carmen":
-        log = read_carmen(path, no_return_m=d.no_return_m, fov_rad=d.fov_rad, beam_policy=d.beam_policy,
+        log = read_carmen(path, no_return_m=d.no_return_m, fov_rad=d.fov_rad, angle_min_rad=d.angle_min_rad, beam_policy=d.beam_policy,
                           max_speed_mps=d.max_speed_mps, max_step_m=d.max_step_m)
     elif d.format == "bag":
         log = read_bag(path, scan_topic=d.scan_topic, odom_topic=d.odom_topic, base_frame=d.base_frame,
