@@ -68,21 +68,24 @@ def test_integrate_matches_twin(rng, line):
         assert dda.fields(0)["visits"].sum() > 1.2 * _maps_numpy(_integrate_both(log, [0, 7, 14], P=2)[0], 0)["visits"].sum()
 
 
-def test_score_matches_twin_and_peaks_at_the_true_pose(rng):
+@pytest.mark.parametrize("free_check", [True, False])
+def test_score_matches_twin_and_peaks_at_the_true_pose(rng, free_check):
     log = _sim(5.0)
     maps, ref = _integrate_both(log, [0, 5, 10], P=1)
     k = 12
     true = log.ground_truth[k]
     far = np.array([[0.25, 0.0, 0.0], [0.0, -0.25, 0.0], [0.0, 0.0, 0.2]])
     cands = true + np.concatenate([np.zeros((1, 3)), far, rng.normal(0, [0.1, 0.1, 0.05], (5, 3))])
-    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2), device="cpu")
+    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2),
+                        free_check=free_check, device="cpu")
     cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device="cpu")
     score = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
     loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
     scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"),
            wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu"), score, loglik)
     want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                                log.info.angles_rad, 8.0, (-1.0, -1.0), 0.1, free_delta=0.1 * np.sqrt(2)) for c in cands])
+                                log.info.angles_rad, 8.0, (-1.0, -1.0), 0.1, free_delta=0.1 * np.sqrt(2),
+                                free_check=free_check) for c in cands])
     assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
     assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
     got = score.numpy()[0]
@@ -253,3 +256,22 @@ def test_g2o_keyframes_give_true_stamps_by_their_ranges(rng):
     assert stamps[keys].tolist() == [100.5, 200.25, 300.125]
     g2o[2] = g2o[2] + 0.02  # another scan: no match
     assert np.isfinite(g2o_scan_stamps(graph, ranges)).sum() == 2
+
+
+def test_relations_are_scored_in_the_laser_frame(rng):
+    """The relations are motions of the scans: a laser mounted off the axis moves when the robot turns in
+    place, and only the laser's path scores zero against such relations."""
+    from eval.metrics import relations_error
+    from irmcl_warp.geometry import compose, relative
+    from irmcl_warp.io.groundtruth import Relations
+    from irmcl_warp.slam.stage import laser_poses
+
+    T = np.array([rng.uniform(0.1, 0.4), rng.uniform(-0.1, 0.1), 0.0])
+    base = np.column_stack([np.full(6, rng.uniform(-5, 5)), np.full(6, rng.uniform(-5, 5)),
+                            np.cumsum(rng.uniform(0.3, 0.8, 6))])  # turning on the spot
+    stamps = np.arange(6, dtype=float)
+    laser = compose(base, np.broadcast_to(T, base.shape))
+    rel = Relations(stamps[:-1], stamps[1:], relative(laser[:-1], laser[1:]))
+    assert relations_error(stamps, laser_poses(base, T), rel)["trans_abs_mean_m"] < 1e-9
+    # the robot's own path has not moved at all: its error is the laser's travel
+    assert relations_error(stamps, base, rel)["trans_abs_mean_m"] > 0.05

@@ -119,7 +119,7 @@ class Trainer:
             if b % 20 == 0 or b + 1 == self.steps_per_epoch:
                 elapsed = time.time() - t_epoch
                 bar.set_postfix(loss=f"{float(losses[-1]):.3f}",
-                                rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}")
+                                rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}", refresh=False)
             if time.time() - t_ckpt > tc.checkpoint_every_s:
                 self.train_time_s += time.time() - t_ckpt
                 t_ckpt = time.time()

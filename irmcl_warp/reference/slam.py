@@ -84,8 +84,9 @@ def occupancy(maps, ix, iy):
 
 
 def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_size=1, fullness=0.1, sigma=0.05,
-          lsigma=0.075, null_likelihood=-0.5, free_delta=0.05 * np.sqrt(2), lskip=0):
-    """(score, log-likelihood) of one pose against one map (GMapping's matcher model)."""
+          lsigma=0.075, null_likelihood=-0.5, free_delta=0.05 * np.sqrt(2), lskip=0, free_check=True):
+    """(score, log-likelihood) of one pose against one map (GMapping's matcher model); ``free_check=False``
+    accepts an occupied cell whatever the cell before it holds (what the released code does in effect)."""
     lp = laser_pose(pose, T_base_laser)
     s = l = 0.0
     for b, (r, a) in enumerate(zip(ranges, angles)):
@@ -98,7 +99,8 @@ def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_
         best = None
         for ox in range(-kernel_size, kernel_size + 1):
             for oy in range(-kernel_size, kernel_size + 1):
-                if occupancy(maps, hx + ox, hy + oy) > fullness and occupancy(maps, fx + ox, fy + oy) < fullness:
+                if occupancy(maps, hx + ox, hy + oy) > fullness and (
+                        not free_check or occupancy(maps, fx + ox, fy + oy) < fullness):
                     n = maps["hits"][hy + oy, hx + ox]
                     d2 = (ex - maps["sx"][hy + oy, hx + ox] / n) ** 2 + (ey - maps["sy"][hy + oy, hx + ox] / n) ** 2
                     best = d2 if best is None else min(best, d2)

@@ -1,6 +1,7 @@
 """``python -m irmcl_warp.slam.rescore <run folder>...``: score finished SLAM runs against the relations
 again, from their trajectory.tum and config.yaml (e.g. where the relations file was missing on the
-machine that ran them); updates metrics.json in place."""
+machine that ran them, or to score older runs in the laser's frame); updates metrics.json in place.
+The laser's mounting comes from metrics.json, else from the config's data.laser_frame_path."""
 
 from __future__ import annotations
 
@@ -12,16 +13,20 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from eval.metrics import relations_error
-from irmcl_warp.io import read_relations, resolve
+from irmcl_warp.io import read_relations, read_tum, resolve
 from irmcl_warp.outputs import write_json
+from irmcl_warp.slam.stage import laser_poses
 
 
-def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(stamps [N], poses [N, 3]) of a planar TUM file (yaw from the z-axis quaternion)."""
-    rows = np.loadtxt(path, ndmin=2)
-    if rows.shape[1] != 8:
-        raise ValueError(f"{path}: expected 8 columns (stamp x y z qx qy qz qw), got {rows.shape[1]}")
-    return rows[:, 0], np.column_stack([rows[:, 1], rows[:, 2], 2 * np.arctan2(rows[:, 6], rows[:, 7])])
+def mounting(cfg, metrics: dict) -> np.ndarray:
+    """T_base_laser of the run: as recorded in metrics.json, else read from the data config's bag."""
+    if "relations_frame" in metrics:
+        return np.asarray(metrics["relations_frame"]["T_base_laser"], np.float64)
+    if cfg.data.get("laser_frame_path"):
+        from irmcl_warp.io.rosbag import read_bag_extrinsic
+
+        return read_bag_extrinsic(resolve(cfg.data.laser_frame_path), base_frame=cfg.data.get("base_frame"))
+    return np.zeros(3)
 
 
 def rescore(run: Path) -> dict:
@@ -33,7 +38,9 @@ def rescore(run: Path) -> dict:
                          f"not through the trajectory's stamps: rerun the slam stage to score it")
     metrics = json.loads((run / "metrics.json").read_text())
     stamps, poses = read_tum(run / "trajectory.tum")
-    metrics["relations"] = relations_error(stamps, poses, read_relations(resolve(cfg.data.relations_path)))
+    T = mounting(cfg, metrics)
+    metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in T]}
+    metrics["relations"] = relations_error(stamps, laser_poses(poses, T), read_relations(resolve(cfg.data.relations_path)))
     write_json(run / "metrics.json", metrics)
     return metrics["relations"]
 

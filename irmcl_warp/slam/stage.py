@@ -31,8 +31,26 @@ from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
 from kernels import pick_device
 
 
+# settings that name a run when they differ from their default: key -> short name in the folder name
+ABLATION_TAGS = {"free_check": "freecheck", "line": "", "proposal_grid": "grid", "proposal_lstep": "plstep",
+                 "proposal_astep": "pastep"}
+
+
 def run_tag(s) -> str:
-    return f"slam-{s.proposal}-{s.resample}-{s.particles}p-seed{s.seed}"
+    """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then each ablation setting
+    that differs from its default (``-nofreecheck``, ``-bresenham``, ``-plstep0.01``)."""
+    from irmcl_warp.config import SlamConfig
+
+    tag = f"slam-{s.proposal}-{s.resample}-{s.particles}p-seed{s.seed}"
+    defaults = SlamConfig()
+    for key, short in ABLATION_TAGS.items():
+        v = s.get(key, getattr(defaults, key)) if hasattr(s, "get") else getattr(s, key, getattr(defaults, key))
+        if v != getattr(defaults, key):
+            if isinstance(v, bool):
+                tag += f"-{short}" if v else f"-no{short}"
+            else:
+                tag += f"-{short}{v:g}" if isinstance(v, float) else f"-{short}{v}"
+    return tag
 
 
 def map_frame(odom: np.ndarray, margin_m: float, res: float, max_cells: int = 60_000_000):
@@ -80,6 +98,12 @@ def best_map(rbpf: RBPF, particle: int, occ_thresh: float = 0.25, margin_cells: 
     return OccupancyGrid(logodds[y0:y1, x0:x1], origin, rbpf.maps.res)
 
 
+def laser_poses(base_poses: np.ndarray, T_base_laser) -> np.ndarray:
+    """The laser's poses [N, 3] for the robot's (NaN rows stay NaN)."""
+    base_poses = np.asarray(base_poses, np.float64)
+    return compose(base_poses, np.broadcast_to(np.asarray(T_base_laser, np.float64), base_poses.shape))
+
+
 def relation_stamps(cfg, log) -> np.ndarray:
     """The stamps the relations refer to: the log's own, or (data.relation_stamps_path, MIT Killian) the
     true stamps of the g2o keyframes with the same ranges, NaN for the other scans."""
@@ -120,7 +144,7 @@ def run_slam(cfg) -> Path:
         if st.processed:
             neff_rows.append((k, st.neff, int(st.resampled), st.match_rounds))
             if hasattr(bar, "set_postfix"):
-                bar.set_postfix(processed=len(neff_rows), particles=rbpf.P, neff=f"{st.neff:.1f}")
+                bar.set_postfix(processed=len(neff_rows), particles=rbpf.P, neff=f"{st.neff:.1f}", refresh=False)
     wall = time.perf_counter() - t0
     best = rbpf.best_particle()
     scans, poses = rbpf.trajectory(best)
@@ -142,8 +166,10 @@ def run_slam(cfg) -> Path:
         try:
             rel = read_relations(resolve(cfg.data.relations_path))
             stamps = relation_stamps(cfg, log)
-            metrics["relations"] = relations_error(stamps, every, rel)
-            metrics["relations_odometry"] = relations_error(stamps, log.odom, rel)
+            # the relations are motions of the scans, i.e. of the laser: both paths are carried into its frame
+            metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]}
+            metrics["relations"] = relations_error(stamps, laser_poses(every, log.T_base_laser), rel)
+            metrics["relations_odometry"] = relations_error(stamps, laser_poses(log.odom, log.T_base_laser), rel)
         except FileNotFoundError as e:
             metrics["relations"] = f"not scored: {e}"
     if log.ground_truth is not None:
