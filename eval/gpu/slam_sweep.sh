@@ -4,7 +4,10 @@
 #   bash eval/gpu/slam_sweep.sh main      # intel, fr079, mit_csail x paper, gmapping_code x 10 seeds, 30 particles
 #   bash eval/gpu/slam_sweep.sh particles # intel: particles 5..60 x (paper+selective, paper+always, odometry+selective)
 #   bash eval/gpu/slam_sweep.sh killian   # mit_killian (10 cm grid): paper+selective, 30 and 60 particles
-# Env: JOBS (parallel processes, default 8; killian 2), SEEDS (default 0..9). Data: the stream caches and the
+#   bash eval/gpu/slam_sweep.sh replay    # intel and fr079 seed 0, each run twice: are the trajectories identical?
+# Env: JOBS (parallel processes, default 8; killian 2), SEEDS (default 0..9), EXTRA (more overrides for every
+# run of the sweep, e.g. "slam.free_check=false"; the run folders name them), main only: LOGS, PROPOSALS; TAG
+# (appended to the archive's name). Data: the stream caches and the
 # relations (+ the killian g2o) staged beside the code, IRMCL_DATA pointing at them. Results: $OUT/slam-<what>.tgz.
 set -uo pipefail
 what=${1:?main, particles or killian}
@@ -13,16 +16,25 @@ SEEDS=${SEEDS:-"0 1 2 3 4 5 6 7 8 9"}
 jobs=$(mktemp)
 case "$what" in
   main)
-    for exp in gmapping_intel gmapping_fr079 gmapping_mit_csail; do for p in paper gmapping_code; do for s in $SEEDS; do
-      echo "+exp=$exp slam.proposal=$p slam.seed=$s"; done; done; done > "$jobs"; P=${JOBS:-8} ;;
+    for exp in ${LOGS:-gmapping_intel gmapping_fr079 gmapping_mit_csail}; do for p in ${PROPOSALS:-paper gmapping_code}; do for s in $SEEDS; do
+      echo "+exp=$exp slam.proposal=$p slam.seed=$s ${EXTRA:-}"; done; done; done > "$jobs"; P=${JOBS:-8} ;;
+  replay)
+    for exp in gmapping_intel gmapping_fr079; do
+      for k in 1 2; do
+        python -m irmcl_warp.slam device=cuda:0 +exp=$exp slam.seed=0 ${EXTRA:-} 2>&1 | grep -E "scans processed|Error" | tail -1
+        run=$(ls -d outputs/$exp/slam-paper-selective-30p-seed0* | head -1)
+        md5sum "$run/trajectory.tum" | sed "s|^|$exp run $k: |"; rm -rf "$run"
+      done
+    done
+    exit 0 ;;
   particles)
     for s in $SEEDS; do
-      for n in 5 10 15 60; do echo "+exp=gmapping_intel slam.particles=$n slam.seed=$s"; done
-      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.resample=always slam.seed=$s"; done
-      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.proposal=odometry slam.seed=$s"; done
+      for n in 5 10 15 60; do echo "+exp=gmapping_intel slam.particles=$n slam.seed=$s ${EXTRA:-}"; done
+      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.resample=always slam.seed=$s ${EXTRA:-}"; done
+      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.proposal=odometry slam.seed=$s ${EXTRA:-}"; done
     done > "$jobs"; P=${JOBS:-8} ;;
   killian)
-    for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.particles=$n slam.seed=$s"; done; done \
+    for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.particles=$n slam.seed=$s ${EXTRA:-}"; done; done \
       > "$jobs"; P=${JOBS:-2} ;;
   *) echo "unknown sweep $what"; exit 2 ;;
 esac
@@ -34,6 +46,6 @@ tail -n +2 "$jobs" | xargs -P "$P" -I{} sh -c 'python -m irmcl_warp.slam device=
 echo "sweep $what: $(( $(date +%s) - start )) s for $(( $(wc -l < "$jobs") - 1 )) runs with $P processes"
 find outputs -path "*/slam-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name neff.csv \
   -o -name map.png \) > "$OUT/files-$what.txt"
-[ "$what" = main ] && find outputs -path "*/slam-*" -name trajectory.tum >> "$OUT/files-$what.txt"
-tar czf "$OUT/slam-$what.tgz" -T "$OUT/files-$what.txt"
+[ -n "${TRAJECTORIES:-}" ] && find outputs -path "*/slam-*" -name trajectory.tum >> "$OUT/files-$what.txt"  # large: only when asked
+tar czf "$OUT/slam-$what${TAG:-}.tgz" -T "$OUT/files-$what.txt"
 ls -la "$OUT"
