@@ -64,7 +64,7 @@ def folder(module: str, cfg) -> str:
     from irmcl_warp.train import train_folder
 
     names = {"irmcl_warp.train": train_folder, "eval.synthesis": synthesis_folder,
-             "irmcl_warp.localize": lambda c: localize_tag(c.mcl), "irmcl_warp.slam": lambda c: slam_tag(c.slam),
+             "irmcl_warp.localize": lambda c: localize_tag(c.mcl), "irmcl_warp.slam": lambda c: slam_tag(c.slam, c.data),
              "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": lambda c: "pipeline"}
     if module not in names:
         raise ValueError(f"no output folder rule for {module}")

@@ -33,6 +33,7 @@ class DataConfig:
     no_return_m: Optional[float] = None  # CARMEN: auto-detected as the most common maximum range
     fov_rad: Optional[float] = None  # FLASER carries no FOV; 180 deg unless set
     angle_min_rad: Optional[float] = None  # FLASER: angle of the first beam; -fov / 2 unless set
+    laser_offset: Optional[List[float]] = None  # [x, y, yaw] of the laser on the base, in place of the one read
     beam_policy: str = "error"  # error | reject | resample scans whose beam count differs
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0

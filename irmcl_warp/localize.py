@@ -27,7 +27,7 @@ from omegaconf import OmegaConf
 
 from eval.metrics import localization_metrics
 from irmcl_warp.config import MCLConfig, register
-from irmcl_warp.io import load_log
+from irmcl_warp.io import apply_laser_geometry, read_log
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import atomic_write_bytes
@@ -99,13 +99,14 @@ def load_stream(cfg) -> LaserLog:
                 v = z["info"].tolist()
                 info = LaserInfo(int(v[0]), *map(float, v[1:]))
                 gt = z["ground_truth"] if z["ground_truth"].size else None
-                return LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
-                                source=f"{path} (cache of {cfg.data.path or cfg.data.name})")
+                return apply_laser_geometry(LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
+                                                     source=f"{path} (cache of {cfg.data.path or cfg.data.name})"),
+                                            cfg.data)
     except (OSError, KeyError, ValueError):
         pass
     if no_raw is not None:
         raise no_raw
-    log = load_log(cfg)
+    log = read_log(cfg)
     i = log.info
     buf = io.BytesIO()
     np.savez_compressed(buf, key=np.array(key), stamps=log.stamps, ranges_m=log.ranges_m, odom=log.odom,
@@ -114,7 +115,7 @@ def load_stream(cfg) -> LaserLog:
                         info=np.array([i.num_beams, i.angle_min_rad, i.angle_increment_rad, i.range_min_m,
                                        i.range_max_m, i.no_return_m], np.float64))
     atomic_write_bytes(path, buf.getvalue())
-    return log
+    return apply_laser_geometry(log, cfg.data)
 
 
 ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",

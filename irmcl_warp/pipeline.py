@@ -138,7 +138,7 @@ def run_pipeline(cfg) -> Path:
     cfg = with_overrides(cfg, **{"data.train_poses_path": None})
     out = stage_dir(cfg, "pipeline")
     # 1. SLAM over the mapping log
-    slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam)), cfg, recorded_inputs(cfg),
+    slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam, cfg.data)), cfg, recorded_inputs(cfg),
                          lambda: run_slam(cfg), timing)
     log = load_stream(cfg)
     # 2. the SLAM poses: the NOF's training poses

@@ -17,7 +17,8 @@ from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
-__all__ = ["LogDefectWarning", "LogFormatError", "data_root", "load_log", "read_bag", "read_carmen",
+__all__ = ["GEOMETRY_FIELDS", "LogDefectWarning", "LogFormatError", "apply_laser_geometry", "data_root", "load_log",
+           "read_bag", "read_carmen", "read_log",
            "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
            "write_bag"]
 
@@ -56,6 +57,34 @@ def attach_ground_truth(log: LaserLog, stamps, poses) -> int:
 
 def load_log(cfg) -> LaserLog:
     """Read the log that ``cfg.data`` names; ``cfg`` is the whole config (for ``sim`` and ``device``)."""
+    return apply_laser_geometry(read_log(cfg), cfg.data)
+
+
+# data fields that say where the beams point, applied after reading (caches of the read log stay valid)
+GEOMETRY_FIELDS = ("fov_rad", "angle_min_rad", "laser_offset")
+
+
+def apply_laser_geometry(log: LaserLog, d) -> LaserLog:
+    """The log with data.fov_rad / data.angle_min_rad (beam angles: FLASER lines do not record them) and
+    data.laser_offset (T_base_laser, in place of the one read) applied where they are set."""
+    import dataclasses
+
+    fov, start = d.get("fov_rad"), d.get("angle_min_rad")
+    if fov is not None or start is not None:
+        i = log.info
+        fov = float(fov) if fov is not None else i.fov_rad
+        start = float(start) if start is not None else -fov / 2
+        log.info = dataclasses.replace(i, angle_min_rad=start, angle_increment_rad=fov / max(i.num_beams - 1, 1))
+    if d.get("laser_offset") is not None:
+        off = np.asarray(list(d.laser_offset), np.float64)
+        if off.shape != (3,):
+            raise ValueError(f"data.laser_offset={list(d.laser_offset)}: expected [x, y, yaw] of the laser on the base")
+        log.T_base_laser = off
+    return log
+
+
+def read_log(cfg) -> LaserLog:
+    """The log as its files say (no :data:`GEOMETRY_FIELDS` applied): what stream caches hold."""
     d = cfg.data
     if d.format == "sim":
         from irmcl_warp.sim import simulate
@@ -65,7 +94,7 @@ def load_log(cfg) -> LaserLog:
         raise ValueError(f"data={d.name}: data.path is not set")
     path = resolve(d.path)
     if d.format == "carmen":
-        log = read_carmen(path, no_return_m=d.no_return_m, fov_rad=d.fov_rad, angle_min_rad=d.angle_min_rad, beam_policy=d.beam_policy,
+        log = read_carmen(path, no_return_m=d.no_return_m, beam_policy=d.beam_policy,
                           max_speed_mps=d.max_speed_mps, max_step_m=d.max_step_m)
     elif d.format == "bag":
         log = read_bag(path, scan_topic=d.scan_topic, odom_topic=d.odom_topic, base_frame=d.base_frame,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from irmcl_warp.io import load_log, read_splits, resolve
+from irmcl_warp.io import GEOMETRY_FIELDS, load_log, read_splits, resolve
 from irmcl_warp.nof.beams import (SPLITS, BeamSet, beams_from_log, interleaved_splits, load_beams, save_beams,
                                   settings_key, split_beams)
 from irmcl_warp.outputs import stage_dir
@@ -44,11 +44,13 @@ def cache_key(cfg, *settings) -> tuple[str, FileNotFoundError | None]:
     """(key, missing-input error): the data settings (+ ``settings``), then "-" and the inputs' size and
     mtime. Without the raw files (a GPU box sent only the caches) the key stops after the settings part
     and the error says which file is missing; a cache is then accepted by that prefix."""
-    def stable(node, drop_none: bool) -> dict:
+    def stable(node, drop_none: bool, drop=()) -> dict:
         return {k: v for k, v in OmegaConf.to_container(node).items()
-                if not (drop_none and v is None) and not (k in LATER_FIELDS and v == LATER_FIELDS[k])}
+                if not (drop_none and v is None) and not (k in LATER_FIELDS and v == LATER_FIELDS[k]) and k not in drop}
 
-    key = settings_key(stable(cfg.data, drop_none=True), stable(cfg.sim, drop_none=False), *settings)
+    # the beam geometry is applied after reading: a cache holds the log as its files say (io.read_log)
+    key = settings_key(stable(cfg.data, drop_none=True, drop=GEOMETRY_FIELDS), stable(cfg.sim, drop_none=False),
+                       *settings)
     try:
         files = input_files(cfg)
         return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
@@ -60,7 +62,9 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
     """{split name: BeamSet} for the split scheme ``cfg.data.split`` (train, val, test names in that order)."""
     if cfg.data.split not in SPLITS:
         raise ValueError(f"data.split={cfg.data.split!r}: expected one of {sorted(SPLITS)}")
-    key, no_raw = cache_key(cfg, cfg.render.near_m, cfg.render.far_m)
+    # the beams are cut from the log with its geometry applied: the geometry is part of this cache's key
+    geometry = {k: OmegaConf.to_container(cfg.data)[k] for k in GEOMETRY_FIELDS if cfg.data.get(k) is not None}
+    key, no_raw = cache_key(cfg, cfg.render.near_m, cfg.render.far_m, *([geometry] if geometry else []))
     path = stage_dir(cfg, "beams") / "beams.npz"
     sets = load_beams(path, key, prefix_only=no_raw is not None) if cache else None
     if no_raw is not None:

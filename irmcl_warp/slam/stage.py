@@ -36,10 +36,12 @@ ABLATION_TAGS = {"free_check": "freecheck", "line": "", "proposal_grid": "grid",
                  "proposal_astep": "pastep"}
 
 
-def run_tag(s) -> str:
+def run_tag(s, data=None) -> str:
     """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then each ablation setting
-    that differs from its default (``-nofreecheck``, ``-bresenham``, ``-plstep0.01``)."""
+    that differs from its default (``-nofreecheck``, ``-bresenham``, ``-plstep0.01``) and each beam geometry
+    override of ``data`` (``-fov3.13287``, ``-amin-1.56643``, ``-offset0_0_0``)."""
     from irmcl_warp.config import SlamConfig
+    from irmcl_warp.io import GEOMETRY_FIELDS
 
     tag = f"slam-{s.proposal}-{s.resample}-{s.particles}p-seed{s.seed}"
     defaults = SlamConfig()
@@ -50,6 +52,11 @@ def run_tag(s) -> str:
                 tag += f"-{short}" if v else f"-no{short}"
             else:
                 tag += f"-{short}{v:g}" if isinstance(v, float) else f"-{short}{v}"
+    short = {"fov_rad": "fov", "angle_min_rad": "amin", "laser_offset": "offset"}
+    for key in GEOMETRY_FIELDS if data is not None else ():
+        v = data.get(key)
+        if v is not None:
+            tag += f"-{short[key]}" + ("_".join(f"{float(x):g}" for x in v) if key == "laser_offset" else f"{float(v):g}")
     return tag
 
 
@@ -122,7 +129,7 @@ def run_slam(cfg) -> Path:
 
     started, device = time.time(), pick_device(cfg.device)
     s = cfg.slam
-    out = stage_dir(cfg, run_tag(s))
+    out = stage_dir(cfg, run_tag(s, cfg.data))
     if up_to_date(out, cfg, recorded_inputs(cfg), "slam"):
         return out
     log = load_stream(cfg)
