@@ -184,6 +184,7 @@ class SlamConfig:
     null_likelihood: float = -0.5  # a beam without a match
     fullness: float = 0.1  # a cell is occupied above this hits / visits
     free_check: bool = True  # the matcher needs the cell before a hit free (False: the released code in effect)
+    generate_map: bool = True  # particles' maps learn free space (False: end points only, the ROS wrapper's way)
     minimum_score: float = 0.0  # the match replaces the pose only above this score
     srr: float = 0.1  # odometry noise: translation from translation ...
     srt: float = 0.2  # ... rotation from translation

@@ -374,18 +374,22 @@ class ParticleMaps:
 
 
 class Integrator:
+    """Adds a scan to every particle's map; ``free_space=False`` adds the end points only (the released
+    code with generateMap off, the way its ROS wrapper runs the particles: their maps never learn free
+    space, so a cell once hit stays occupied)."""
     LINES = ("bresenham", "dda")
 
-    def __init__(self, usable_range_m: float, line: str = "bresenham", device: str = "auto"):
+    def __init__(self, usable_range_m: float, line: str = "bresenham", free_space: bool = True, device: str = "auto"):
         if line not in self.LINES:
             raise ValueError(f"slam.line={line!r}: choose one of {list(self.LINES)}")
-        self.usable, self.device = float(usable_range_m), pick_device(device)
+        self.usable, self.device, self.free_space = float(usable_range_m), pick_device(device), bool(free_space)
         self.free, self.hits = make_integrate_kernel(line)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
         args = [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
                 maps.cells]
-        wp.launch(self.free, (poses.shape[0], ranges.shape[0]), args, device=self.device)
+        if self.free_space:
+            wp.launch(self.free, (poses.shape[0], ranges.shape[0]), args, device=self.device)
         wp.launch(self.hits, poses.shape[0], args, device=self.device)
 
 

@@ -36,10 +36,10 @@ def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
 
 
 def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None,
-                    line="bresenham"):
+                    line="bresenham", free_space=True):
     maps = ParticleMaps(P, shape, origin, res, device="cpu")
     ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
-    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, device="cpu")
+    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, free_space=free_space, device="cpu")
     angles = wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu")
     for k in scans:
         poses = np.tile(log.ground_truth[k], (P, 1))
@@ -49,7 +49,7 @@ def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), 
               wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"), angles)
         for p in range(P):
             twin.integrate(ref[p], poses[p].astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                           log.info.angles_rad, 8.0, origin, res, line=line)
+                           log.info.angles_rad, 8.0, origin, res, line=line, free_space=free_space)
     return maps, ref
 
 
@@ -63,6 +63,10 @@ def test_integrate_matches_twin(rng, line):
         assert same > 0.998, f"seed {rng.seed}: {same:.4f} of cells agree"  # float32 poses at cell borders
         assert (got["hits"] == ref[p]["hits"]).mean() > 0.998
         assert got["hits"].sum() > 500 and got["visits"].sum() > 20 * got["hits"].sum()  # walls seen, space crossed
+    hits_only, ref_h = _integrate_both(log, [0, 7, 14], P=1, rng=rng, line=line, free_space=False)
+    got = _maps_numpy(hits_only, 0)  # end points only (the ROS wrapper's particles): every visited cell was hit
+    assert np.array_equal(got["visits"], got["hits"]) and (got["hits"] == ref_h[0]["hits"]).mean() > 0.998
+    assert got["hits"].sum() == ref_h[0]["hits"].sum() > 500
     if line == "bresenham":  # one cell per step along the major axis: fewer visits than every crossed cell
         dda, _ = _integrate_both(log, [0, 7, 14], P=2, jitter=0.0, rng=rng, line="dda")
         assert dda.fields(0)["visits"].sum() > 1.2 * _maps_numpy(_integrate_both(log, [0, 7, 14], P=2)[0], 0)["visits"].sum()

@@ -53,9 +53,10 @@ def bresenham_cells(x0, y0, x1, y1, origin, res):
     return out + [(X, Y)]
 
 
-def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, line="bresenham"):
+def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, line="bresenham", free_space=True):
     """maps: dict of [H, W] arrays (visits, hits, sx, sy) of one particle, updated in place; ``line``:
-    bresenham (the released code) or dda (every crossed cell)."""
+    bresenham (the released code) or dda (every crossed cell); ``free_space=False``: only the end cells
+    (the released code with generateMap off, as its ROS wrapper runs it)."""
     walk = bresenham_cells if line == "bresenham" else traversed_cells
     H, W = maps["visits"].shape
     lp = laser_pose(pose, T_base_laser)
@@ -67,6 +68,8 @@ def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, lin
         cells = walk(lp[0], lp[1], ex, ey, origin, res)
         if not hit:
             cells = cells[:-1]  # a beam without echo leaves the cell at the usable range untouched
+        if not free_space:
+            cells = cells[-1:] if hit else []
         for k, (ix, iy) in enumerate(cells):
             if 0 <= ix < W and 0 <= iy < H:
                 maps["visits"][iy, ix] += 1

@@ -64,7 +64,8 @@ class RBPF:
         P, d = int(cfg.particles), self.device
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
         self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
-        self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, line=cfg.line, device=d)
+        self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, line=cfg.line,
+                                     free_space=bool(getattr(cfg, "generate_map", True)), device=d)
         self.scorer = SLAM.build("score", usable_range_m=usable_range_m, kernel_size=cfg.kernel_size,
                                  fullness=cfg.fullness, sigma=cfg.sigma, lsigma=cfg.lsigma,
                                  null_likelihood=cfg.null_likelihood, free_delta_m=cfg.resolution_m * np.sqrt(2.0),

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import warp as wp
 from omegaconf import OmegaConf
 
 from eval.metrics import relations_error
@@ -32,7 +33,7 @@ from kernels import pick_device
 
 
 # settings that name a run when they differ from their default: key -> short name in the folder name
-ABLATION_TAGS = {"free_check": "freecheck", "line": "", "proposal_grid": "grid", "proposal_lstep": "plstep",
+ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "proposal_grid": "grid", "proposal_lstep": "plstep",
                  "proposal_astep": "pastep"}
 
 
@@ -91,10 +92,30 @@ def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
             "yaw_mae_deg": float(e_yaw.mean())}
 
 
-def best_map(rbpf: RBPF, particle: int, occ_thresh: float = 0.25, margin_cells: int = 20) -> OccupancyGrid:
+def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, margin_cells: int = 20) -> OccupancyGrid:
     """The particle's map as an occupancy grid cropped to its visited cells: hits / visits above GMapping's
-    occ_thresh (0.25, slam_gmapping) occupied, below it free, unvisited unknown."""
+    occ_thresh (0.25, slam_gmapping) occupied, below it free, unvisited unknown. Where the particles' maps
+    hold end points only (slam.generate_map false), the map is cast again, free space included, from the
+    particle's path and the processed scans of ``log`` (what the ROS wrapper publishes)."""
     occ = rbpf.maps.occupancy(particle)
+    if not rbpf.integrator.free_space:
+        if log is None:
+            raise ValueError("best_map: the particles' maps hold end points only; pass the log to cast the map")
+        from kernels import SLAM
+        from kernels.slam import ParticleMaps
+
+        _, H, W = rbpf.maps.shape
+        full = ParticleMaps(1, (H, W), (float(rbpf.maps.origin[0]), float(rbpf.maps.origin[1])), rbpf.maps.res,
+                            device=rbpf.device)
+        cast = SLAM.build("integrate", usable_range_m=rbpf.integrator.usable, line=rbpf.cfg.line, device=rbpf.device)
+        scans, poses = rbpf.trajectory(particle)
+        pose = wp.zeros(1, dtype=wp.vec3, device=rbpf.device)
+        ranges = wp.zeros(log.ranges_m.shape[1], dtype=wp.float32, device=rbpf.device)
+        for k, p in zip(scans, poses):
+            pose.assign(wp.array(p[None].astype(np.float32), dtype=wp.vec3, device=rbpf.device))
+            ranges.assign(log.ranges_m[k].astype(np.float32))
+            cast(full, pose, rbpf.T_base_laser, ranges, rbpf.angles)
+        occ = full.occupancy(0)
     logodds = np.where(occ < 0, 0.0, np.where(occ > occ_thresh, 2.0, -2.0)).astype(np.float32)
     iy, ix = np.nonzero(occ >= 0)
     if len(ix) == 0:
@@ -159,7 +180,7 @@ def run_slam(cfg) -> Path:
     write_tum(out / "trajectory.tum", log.stamps, every)
     atomic_write_bytes(out / "neff.csv", ("scan,neff,resampled,match_rounds\n" + "".join(
         f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode())
-    save_map(best_map(rbpf, best), out / "map")
+    save_map(best_map(rbpf, best, log), out / "map")
     metrics = {"dataset": cfg.data.name, "particles": s.particles, "proposal": s.proposal, "resample": s.resample,
                "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
                "odometry_jumps": int(jumps),
