@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 
-from eval.tables import CONVERGED_M, REPO
+from eval.tables import CONVERGED_M, REPO, slam_variant
 from irmcl_warp.config import GlobLocConfig
 
 
@@ -28,9 +28,9 @@ def _loc(runs, exp, tag):
 
 
 def _slam(runs, ds, proposal="paper", resample="selective", particles=30):
-    errs = [m["relations"]["trans_abs_mean_m"] for m in runs.values()
+    errs = [m["relations"]["trans_abs_mean_m"] for (_, tag), m in runs.items()
             if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == resample
-            and m.get("particles") == particles and isinstance(m.get("relations"), dict)]
+            and m.get("particles") == particles and isinstance(m.get("relations"), dict) and not slam_variant(tag)]
     if not errs:
         return None
     e = np.array(errs)

@@ -2,7 +2,8 @@
 the latter winning) into docs/figures/.
 
 * slam_particles_vs_success_<dataset>.png: GMapping's converged runs (relations error < 0.15 m) over seeds
-  against the particle count, per proposal and resampling (Grisetti et al. 2007, Fig. 7 style).
+  against the particle count, per proposal and resampling (Grisetti et al. 2007, Fig. 7 style);
+* ../maps/<exp>.png: the map of each log's best default paper-proposal run.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import argparse
 from collections import defaultdict
 from pathlib import Path
 
-from eval.tables import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam
+from eval.tables import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam, slam_variant
 from irmcl_warp.outputs import save_figure
 
 
@@ -22,8 +23,8 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
     import matplotlib.pyplot as plt
 
     groups = defaultdict(lambda: defaultdict(list))
-    for (_, _), m in runs.items():
-        if m["dataset"] == dataset and isinstance(m.get("relations"), dict):
+    for (_, tag), m in runs.items():
+        if m["dataset"] == dataset and isinstance(m.get("relations"), dict) and not slam_variant(tag):
             where = "" if str(m.get("device", "")).startswith("cuda") else f" ({m.get('device', '?')})"
             groups[f"{m['proposal']} + {m['resample']}{where}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
     if not groups:
@@ -87,6 +88,29 @@ def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
     return save_figure(fig, out)
 
 
+def best_maps(runs: dict, out: Path) -> list[Path]:
+    """docs/maps/<exp>.png: the map of each log's best default paper-proposal run (lowest relations error;
+    30 particles, or the most there are), copied from its run folder (outputs/ wins over results/)."""
+    import shutil
+
+    best = {}
+    for (exp, tag), m in runs.items():
+        if m.get("proposal") != "paper" or m.get("resample") != "selective" or slam_variant(tag) \
+                or not isinstance(m.get("relations"), dict):
+            continue
+        key = (m["particles"] == 30, m["particles"], -m["relations"]["trans_abs_mean_m"])
+        if exp not in best or key > best[exp][0]:
+            best[exp] = (key, tag)
+    made = []
+    for exp, (_, tag) in sorted(best.items()):
+        src = [r / exp / tag / "map.png" for r in reversed(SLAM_ROOTS) if (r / exp / tag / "map.png").exists()]
+        if src:
+            out.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(src[0], out / f"{exp}.png")
+            made.append(out / f"{exp}.png")
+    return made
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m eval.plots")
     ap.add_argument("--out", default=str(REPO / "docs" / "figures"))
@@ -96,6 +120,7 @@ def main(argv=None) -> None:
     runs = collect_slam(SLAM_ROOTS)
     made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
             if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
+    made += best_maps(runs, out.parent / "maps")
     kidnaps = {}  # (experiment, scenario) -> folder; outputs/ wins over results/
     for root in (REPO / "results" / "globloc", REPO / "outputs"):
         for d in sorted(Path(root).glob("*/globloc-kidnap*")):

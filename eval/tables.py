@@ -206,6 +206,14 @@ def kidnap_table(runs: dict) -> str:
     return "\n".join(lines + [r for _, r in sorted(rows)])
 
 
+def slam_variant(tag: str) -> str:
+    """The ablation settings a SLAM run folder names after its seed ("" for the defaults): ``freecheck, dda``."""
+    import re
+
+    m = re.match(r"slam-\w+?-\w+?-\d+p-seed\d+(.*)$", tag)
+    return ", ".join(re.split(r"-(?=[a-z])", m.group(1))[1:]) if m and m.group(1) else ""
+
+
 def collect_slam(roots=SLAM_ROOTS) -> dict:
     """{(exp, run folder): metrics} of the slam stage; later roots override earlier ones."""
     return _collect_runs(roots, "slam-*")
@@ -214,14 +222,16 @@ def collect_slam(roots=SLAM_ROOTS) -> dict:
 def slam_table(runs: dict) -> str:
     """Per dataset and filter variant, over seeds: how many converged (relations error < CONVERGED_M), the
     error of the converged runs (their mean and std over the relations, averaged over those runs: the
-    reference's convention), the mean over all runs, and the wall time; the references below each dataset."""
+    reference's convention), the mean over all runs, and the wall time; the references below each dataset.
+    Runs with ablation settings (their folder names them) follow the default ones, settings in brackets."""
     import numpy as np
 
     groups = {}
     for (exp, tag), m in runs.items():
         if not isinstance(m.get("relations"), dict):
             continue
-        key = (m["dataset"], m["proposal"], m["resample"], m["particles"], m.get("device", "?"))
+        key = (m["dataset"], slam_variant(tag) != "", m["proposal"], m["resample"], m["particles"], slam_variant(tag),
+               m.get("device", "?"))
         groups.setdefault(key, []).append(m)
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
     lines = ["| dataset | method | particles | converged seeds | error of converged runs (m, mean +- std over relations) | rot. (deg) | "
@@ -235,11 +245,12 @@ def slam_table(runs: dict) -> str:
             ok = t < CONVERGED_M
             wall = np.array([r["wall_time_s"] for r in rows])
             conv = f"{t[ok].mean():.3f} +- {t_std[ok].mean():.3f}" if ok.any() else "-"
-            lines.append(f"| {ds} | {key[1]} + {key[2]} | {key[3]} | {ok.sum()}/{len(rows)} | {conv} | "
-                         f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | "
-                         f"{'H100' if str(key[4]).startswith('cuda') else key[4]} |" if ok.any() else
-                         f"| {ds} | {key[1]} + {key[2]} | {key[3]} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
-                         f"{wall.min():.0f}-{wall.max():.0f} s | {'H100' if str(key[4]).startswith('cuda') else key[4]} |")
+            method = f"{key[2]} + {key[3]}" + (f" ({key[5]})" if key[5] else "")
+            dev = "H100" if str(key[6]).startswith("cuda") else key[6]
+            lines.append(f"| {ds} | {method} | {key[4]} | {ok.sum()}/{len(rows)} | {conv} | "
+                         f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {dev} |" if ok.any() else
+                         f"| {ds} | {method} | {key[4]} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
+                         f"{wall.min():.0f}-{wall.max():.0f} s | {dev} |")
         for name, conv, err, wall in SLAM_REFERENCES.get(ds, []):
             lines.append(f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
                          if conv else f"| {ds} | *{name}* | | | | | {err} | | |")

@@ -174,7 +174,7 @@ class SlamConfig:
     resample_threshold: float = 0.5
     sigma: float = 0.05  # matcher score exp(-|mu|^2 / sigma)
     kernel_size: int = 1  # search window (2k + 1)^2 cells around each end point
-    line: builtins.str = "dda"  # cells a beam clears: dda (every crossed cell) | bresenham (the released code)
+    line: builtins.str = "bresenham"  # cells a beam clears: bresenham (the released code) | dda (every crossed cell)
     lstep: float = 0.05  # hill-climbing steps (m, rad), halved `iterations` times
     astep: float = 0.05
     iterations: int = 5
@@ -183,8 +183,8 @@ class SlamConfig:
     lskip: int = 0  # use every (lskip + 1)-th beam in the likelihood
     null_likelihood: float = -0.5  # a beam without a match
     fullness: float = 0.1  # a cell is occupied above this hits / visits
-    free_check: bool = True  # the matcher needs the cell before a hit free (False: the released code in effect)
-    generate_map: bool = True  # particles' maps learn free space (False: end points only, the ROS wrapper's way)
+    free_check: bool = False  # True: the matcher needs the cell before a hit free (False: the released code in effect)
+    generate_map: bool = False  # True: particles' maps learn free space (False: end points only, the ROS wrapper's way)
     minimum_score: float = 0.0  # the match replaces the pose only above this score
     srr: float = 0.1  # odometry noise: translation from translation ...
     srt: float = 0.2  # ... rotation from translation

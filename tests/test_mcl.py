@@ -186,16 +186,25 @@ def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
 
 
 def test_stream_cache_serves_the_log_without_its_source(tmp_path, monkeypatch):
+    from omegaconf import open_dict
+
     import irmcl_warp.localize as loc
 
     monkeypatch.chdir(tmp_path)
     cfg = _sim_cfg()
     first = loc.load_stream(cfg)
-    monkeypatch.setattr(loc, "load_log", lambda cfg: (_ for _ in ()).throw(AssertionError("read the source again")))
+    monkeypatch.setattr(loc, "read_log", lambda cfg: (_ for _ in ()).throw(AssertionError("read the source again")))
     again = loc.load_stream(cfg)
     assert np.array_equal(first.ranges_m, again.ranges_m, equal_nan=True) and np.array_equal(first.odom, again.odom)
     assert np.array_equal(first.ground_truth, again.ground_truth) and again.info == first.info
     assert "cache" in again.source
+    # the beam geometry is applied to the cached log: the cache serves other angles and mountings too
+    with open_dict(cfg):
+        cfg.data.fov_rad, cfg.data.laser_offset = 1.0, [0.1, 0.0, 0.0]
+    moved = loc.load_stream(cfg)
+    assert "cache" in moved.source and np.allclose(moved.T_base_laser, [0.1, 0.0, 0.0])
+    assert np.isclose(moved.info.fov_rad, 1.0) and np.isclose(moved.info.angle_min_rad, -0.5)
+    assert np.array_equal(moved.ranges_m, first.ranges_m, equal_nan=True)
 
 
 def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):

@@ -65,19 +65,19 @@ class RBPF:
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
         self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
         self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, line=cfg.line,
-                                     free_space=bool(getattr(cfg, "generate_map", True)), device=d)
+                                     free_space=bool(cfg.generate_map), device=d)
         self.scorer = SLAM.build("score", usable_range_m=usable_range_m, kernel_size=cfg.kernel_size,
                                  fullness=cfg.fullness, sigma=cfg.sigma, lsigma=cfg.lsigma,
                                  null_likelihood=cfg.null_likelihood, free_delta_m=cfg.resolution_m * np.sqrt(2.0),
-                                 lskip=cfg.lskip, free_check=bool(getattr(cfg, "free_check", True)), device=d)
+                                 lskip=cfg.lskip, free_check=bool(cfg.free_check), device=d)
         self.motion = SLAM.build("motion", srr=cfg.srr, srt=cfg.srt, str_=cfg.str, stt=cfg.stt, device=d)
         self.angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=d)
         self.ranges = wp.zeros(len(angles_rad), dtype=wp.float32, device=d)
         self.poses = wp.zeros(P, dtype=wp.vec3, device=d)
         g = int(cfg.proposal_grid)
         offs = np.stack(np.meshgrid(*[np.arange(-g, g + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        ls = cfg.lstep if getattr(cfg, "proposal_lstep", None) is None else cfg.proposal_lstep
-        as_ = cfg.astep if getattr(cfg, "proposal_astep", None) is None else cfg.proposal_astep
+        ls = cfg.lstep if cfg.proposal_lstep is None else cfg.proposal_lstep
+        as_ = cfg.astep if cfg.proposal_astep is None else cfg.proposal_astep
         self.grid_offsets = offs * np.array([ls, ls, as_])
         self._buffers = {}
         self.log_w = np.zeros(P)  # since the last resampling
