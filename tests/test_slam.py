@@ -279,3 +279,25 @@ def test_relations_are_scored_in_the_laser_frame(rng):
     assert relations_error(stamps, laser_poses(base, T), rel)["trans_abs_mean_m"] < 1e-9
     # the robot's own path has not moved at all: its error is the laser's travel
     assert relations_error(stamps, base, rel)["trans_abs_mean_m"] > 0.05
+
+
+def test_run_folders_name_their_ablations_and_tables_read_them_back():
+    """A run with non-default settings gets its own folder (runs of different settings never share one),
+    and the tables group it apart from the default runs; the rot2x preset changes only the noise."""
+    from omegaconf import OmegaConf
+
+    from eval.tables import slam_variant
+    from irmcl_warp.slam.stage import run_tag
+
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        base = compose("config", overrides=["+exp=gmapping_fr079"])
+        rot = compose("config", overrides=["+exp=gmapping_fr079", "slam=gmapping_rot2x"])
+        odd = compose("config", overrides=["+exp=gmapping_fr079", "slam.free_check=true", "slam.line=dda",
+                                           "data.laser_offset=[0,0,0]"])
+    assert run_tag(base.slam, base.data) == "slam-paper-selective-30p-seed0" and slam_variant(run_tag(base.slam)) == ""
+    changed = {k for k in base.slam if base.slam[k] != rot.slam[k]}
+    assert changed == {"stt", "srt"} and rot.slam.stt == 2 * base.slam.stt
+    assert slam_variant(run_tag(rot.slam, rot.data)) == "srt0.4, stt0.4"
+    assert slam_variant(run_tag(odd.slam, odd.data)) == "freecheck, dda, offset0_0_0"
+    assert OmegaConf.to_container(odd.data)["laser_offset"] == [0, 0, 0]

@@ -33,8 +33,8 @@ from kernels import pick_device
 
 
 # settings that name a run when they differ from their default: key -> short name in the folder name
-ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "proposal_grid": "grid", "proposal_lstep": "plstep",
-                 "proposal_astep": "pastep"}
+ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "srr": "srr", "srt": "srt",
+                 "str": "str", "stt": "stt", "proposal_grid": "grid", "proposal_lstep": "plstep", "proposal_astep": "pastep"}
 
 
 def run_tag(s, data=None) -> str:
