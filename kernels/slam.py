@@ -8,14 +8,18 @@ four arrays: a lookup reads one 16-byte value (on the CPU, the matcher's cost is
 
 * ``SLAM["integrate"]``: one thread per (particle, beam) walks the cells from the laser to the end point
   (``line="bresenham"``: the 8-connected integer line between the two cells, as the released code's
-  gridLine; ``line="dda"``: every cell the ray crosses, Amanatides & Woo), adding a visit to each traversed cell and a visit and a hit (with its point)
-  to the end cell; beams longer than the usable range mark free space up to it and leave the cell there
-  untouched (the released code's registerScan).
+  gridLine; ``line="dda"``: every cell the ray crosses, Amanatides & Woo) adding a visit to each; then one
+  thread per particle adds each end point (a visit, a hit and its point) in beam order. Beams longer than
+  the usable range mark free space up to it and leave the cell there untouched (the released code's
+  registerScan). ``free_space=False`` skips the walk: end points only, as the released code runs with
+  generateMap off (its ROS wrapper's particles).
 * ``SLAM["score"]``: the matcher's measurement model at candidate poses [P, C] (one thread per
-  particle x candidate x beam): for each beam end point, the cells of a (2k+1)^2 window around it that
-  are occupied (> fullness) while the cell one free-delta before the end point, shifted alike, is not;
+  particle x candidate x beam on a GPU, x all beams on the CPU): for each beam end point, the cells of a
+  (2k+1)^2 window around it that are occupied (> fullness) while the cell one free-delta before the end
+  point, shifted alike, is not (``free_check=False``: occupied is enough, the released code in effect);
   mu = the end point minus the nearest such cell's mean hit point. Adds exp(-|mu|^2 / sigma) to the score
-  and -|mu|^2 / lsigma (or null_likelihood / lsigma without a match) to the log-likelihood.
+  and -|mu|^2 / lsigma (or null_likelihood / lsigma without a match) to the log-likelihood, as partial
+  sums that ``reduce_partials_kernel`` adds up in beam order (the same sums on every run).
 * ``SLAM["motion"]``: GMapping's odometry model: the odometry step in the old pose's frame, each
   component perturbed by a Gaussian whose std grows with the motion (srr, srt, str, stt). It takes the
   steps of several scans at once and applies them in order (one launch per processed scan, not per scan).
