@@ -141,7 +141,6 @@ def parse_carmen(path) -> CarmenContents:
 
 
 def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None = None,
-                angle_min_rad: float | None = None,
                 beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0, max_step_m: float = 2.0) -> LaserLog:
     """Read a CARMEN log into a :class:`LaserLog` (scans in file order, odometry from each scan line)."""
     path = Path(path)
@@ -157,8 +156,6 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
     n_beams = ranges.shape[1]
     fov = fov_rad if fov_rad is not None else (first.fov if first.fov is not None else np.pi)
     start = first.start_angle if first.start_angle is not None else -fov / 2
-    if angle_min_rad is not None:
-        start = angle_min_rad
     ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.max_range, report)
     info = LaserInfo(n_beams, float(start), float(fov / max(n_beams - 1, 1)), 0.0, float(no_return), float(no_return))
     stamps = np.array([s.stamp for s in scans])

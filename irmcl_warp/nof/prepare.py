@@ -63,7 +63,8 @@ def prepare_beams(cfg, cache: bool = True) -> dict[str, BeamSet]:
     if cfg.data.split not in SPLITS:
         raise ValueError(f"data.split={cfg.data.split!r}: expected one of {sorted(SPLITS)}")
     # the beams are cut from the log with its geometry applied: the geometry is part of this cache's key
-    geometry = {k: OmegaConf.to_container(cfg.data)[k] for k in GEOMETRY_FIELDS if cfg.data.get(k) is not None}
+    data = OmegaConf.to_container(cfg.data)
+    geometry = {k: data[k] for k in GEOMETRY_FIELDS if data.get(k) is not None}
     key, no_raw = cache_key(cfg, cfg.render.near_m, cfg.render.far_m, *([geometry] if geometry else []))
     path = stage_dir(cfg, "beams") / "beams.npz"
     sets = load_beams(path, key, prefix_only=no_raw is not None) if cache else None

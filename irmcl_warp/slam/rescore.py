@@ -13,9 +13,9 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from eval.metrics import relations_error
+from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_relations, read_tum, resolve
 from irmcl_warp.outputs import write_json
-from irmcl_warp.slam.stage import laser_poses
 
 
 def mounting(cfg, metrics: dict) -> np.ndarray:
@@ -40,7 +40,7 @@ def rescore(run: Path) -> dict:
     stamps, poses = read_tum(run / "trajectory.tum")
     T = mounting(cfg, metrics)
     metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in T]}
-    metrics["relations"] = relations_error(stamps, laser_poses(poses, T), read_relations(resolve(cfg.data.relations_path)))
+    metrics["relations"] = relations_error(stamps, compose(poses, T), read_relations(resolve(cfg.data.relations_path)))
     write_json(run / "metrics.json", metrics)
     return metrics["relations"]
 

@@ -126,12 +126,6 @@ def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, marg
     return OccupancyGrid(logodds[y0:y1, x0:x1], origin, rbpf.maps.res)
 
 
-def laser_poses(base_poses: np.ndarray, T_base_laser) -> np.ndarray:
-    """The laser's poses [N, 3] for the robot's (NaN rows stay NaN)."""
-    base_poses = np.asarray(base_poses, np.float64)
-    return compose(base_poses, np.broadcast_to(np.asarray(T_base_laser, np.float64), base_poses.shape))
-
-
 def relation_stamps(cfg, log) -> np.ndarray:
     """The stamps the relations refer to: the log's own, or (data.relation_stamps_path, MIT Killian) the
     true stamps of the g2o keyframes with the same ranges, NaN for the other scans."""
@@ -196,8 +190,8 @@ def run_slam(cfg) -> Path:
             stamps = relation_stamps(cfg, log)
             # the relations are motions of the scans, i.e. of the laser: both paths are carried into its frame
             metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]}
-            metrics["relations"] = relations_error(stamps, laser_poses(every, log.T_base_laser), rel)
-            metrics["relations_odometry"] = relations_error(stamps, laser_poses(log.odom, log.T_base_laser), rel)
+            metrics["relations"] = relations_error(stamps, compose(every, log.T_base_laser), rel)
+            metrics["relations_odometry"] = relations_error(stamps, compose(log.odom, log.T_base_laser), rel)
         except FileNotFoundError as e:
             metrics["relations"] = f"not scored: {e}"
     if log.ground_truth is not None:
