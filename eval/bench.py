@@ -13,16 +13,17 @@ from __future__ import annotations
 
 import argparse
 import platform
-import time
 from pathlib import Path
 
 import torch
 
+from eval import bench_globloc, bench_mcl, bench_slam
+from eval.timing import time_per_call
 from irmcl_warp.config import ModelConfig
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
 from irmcl_warp.nof.trainer import opacity_regulariser
-from irmcl_warp.outputs import write_json
+from irmcl_warp.services.outputs import write_json
 
 MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_after=2),
           "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8)}
@@ -31,18 +32,6 @@ MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_af
 def _sync(device):
     if device.type == "cuda":
         torch.cuda.synchronize()
-
-
-def time_per_call(fn, sync, steps: int, warmup: int = 2) -> float:
-    """Seconds per call of ``fn`` over ``steps`` calls after ``warmup`` ones; ``sync()`` waits for the device."""
-    for _ in range(warmup):
-        fn()
-    sync()
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        fn()
-    sync()
-    return (time.perf_counter() - t0) / steps
 
 
 def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False) -> dict:
@@ -125,8 +114,6 @@ def main(argv=None):
     t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
     t.add_argument("--tf32", action="store_true")
     t.add_argument("--out", default="outputs/bench")
-    from eval import bench_globloc, bench_mcl, bench_slam
-
     bench_mcl.add_parser(sub)
     bench_slam.add_parser(sub)
     bench_globloc.add_parser(sub)

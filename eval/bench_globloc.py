@@ -15,7 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.outputs import write_json
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.config import register
+from irmcl_warp.geometry import compose
+from irmcl_warp.globloc.database import build_database, describe, keyframe_indices
+from irmcl_warp.globloc.gist import Gist
+from irmcl_warp.globloc.run import Hypotheses, grid_of, laser_angles, make_stream, world_of
+from irmcl_warp.globloc.scan2map import Scan2Map
+from irmcl_warp.sim.camera import Camera, Session, appearance
+from irmcl_warp.sim.trajectory import follow, waypoints
+from kernels import pick_device
 
 
 def add_parser(sub) -> None:
@@ -33,14 +42,6 @@ def add_parser(sub) -> None:
 def run_globloc_bench(a) -> dict:
     from hydra import compose, initialize_config_dir
 
-    from irmcl_warp.config import register
-    from irmcl_warp.globloc.database import build_database, describe, keyframe_indices
-    from irmcl_warp.globloc.gist import Gist
-    from irmcl_warp.globloc.run import Hypotheses, grid_of, laser_angles, make_stream, world_of
-    from irmcl_warp.globloc.scan2map import Scan2Map
-    from irmcl_warp.sim.camera import Camera, Session, appearance
-    from irmcl_warp.sim.trajectory import follow, waypoints
-    from kernels import pick_device
 
     register()
     with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
@@ -65,7 +66,6 @@ def run_globloc_bench(a) -> dict:
     db_s = time.perf_counter() - t
     import warp as wp
 
-    from irmcl_warp.geometry import compose
 
     cams = compose(mapping[kf][: a.render_batch], camera.T_base_cam)
     camera.kernel.render(cams, on_device=True)

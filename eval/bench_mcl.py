@@ -24,12 +24,17 @@ import numpy as np
 import torch
 import warp as wp
 
-from eval.bench import time_per_call
-from irmcl_warp.mcl import MCLConfig, ParticleFilter
+from eval.timing import time_per_call
+from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
-from irmcl_warp.outputs import write_json
+from irmcl_warp.services.filters import WeightingMaps, build_filter
+from irmcl_warp.services.outputs import write_json
 from irmcl_warp.reference.weighting import nog_log_weights_torch
 from kernels import pick_device
+from irmcl_warp.config import register
+from irmcl_warp.sim import simulate
+from kernels import SIM
+from kernels import WEIGHTING
 
 VARIANTS = {"warp": dict(t_min=0.0, empty_below=0.0), "warp+et": dict(t_min=1e-3, empty_below=0.0),
             "warp+et+skip": dict(t_min=1e-3, empty_below=0.01)}
@@ -38,9 +43,6 @@ VARIANTS = {"warp": dict(t_min=0.0, empty_below=0.0), "warp+et": dict(t_min=1e-3
 def simulator_nog(resolution_m: float = 0.05) -> NOG:
     from hydra import compose, initialize_config_dir
 
-    from irmcl_warp.config import register
-    from irmcl_warp.sim import simulate
-    from kernels import SIM
 
     register()
     with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
@@ -61,8 +63,9 @@ def _sync(device: str) -> None:
 
 
 def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) -> dict:
-    cfg = MCLConfig(num_particles=n, far_m=far, resample_threshold=1.0, seed=seed, **VARIANTS[variant])
-    pf = ParticleFilter(nog, cfg, (0.0, 0.0, 0.0), angles, device=device)
+    cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, **VARIANTS[variant])
+    free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
+    pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
     pf.init_uniform()
     u = (0.01, 0.05, -0.01)
     sync = lambda: _sync(device)  # noqa: E731
@@ -102,8 +105,6 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
 
 def measured_scan(nog, far, device, seed=0):
     """360 beams rendered from a free pose on the NOG, plus 2 cm noise."""
-    from kernels import WEIGHTING
-
     rng = np.random.default_rng(seed)
     free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
     pose = np.append(free[rng.integers(len(free))], rng.uniform(-np.pi, np.pi)).astype(np.float32)

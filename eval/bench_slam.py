@@ -12,19 +12,20 @@ import platform
 import time
 from pathlib import Path
 
-from irmcl_warp.outputs import write_json
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.config import register
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.slam.stage import start_filter
+from kernels import pick_device
 
 
 def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
     from hydra import compose, initialize_config_dir
 
-    from irmcl_warp.config import register
-    from irmcl_warp.localize import load_stream
-    from irmcl_warp.slam.stage import start_filter
 
     register()
     with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=[f"+exp={exp}", f"device={device}", f"slam.particles={particles}",
+        cfg = compose("config", overrides=[f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}",
                                            *overrides])
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
@@ -37,7 +38,6 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
 
 
 def run_slam_bench(a) -> list[dict]:
-    from kernels import pick_device
 
     device = pick_device(a.device or "auto")
     rows = [run_one(a.exp, p, device, a.scans, a.override) for p in a.particles]

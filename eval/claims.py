@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 
-from eval.tables import CONVERGED_M, REPO, slam_variant
+from eval.collect import CONVERGED_M, REPO, slam_variant
 from irmcl_warp.config import GlobLocConfig
 
 
@@ -92,7 +92,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
                  "bash eval/gpu/slam_sweep.sh particles"))
     rows.append(("GMapping", "the odometry proposal fails where the scan-based one succeeds",
                  "fails on intel (Grisetti et al. 2007)", _slam(slam, "intel", "odometry", particles=60) or "not run",
-                 "python -m irmcl_warp.slam +exp=gmapping_intel slam.proposal=odometry slam.particles=60"))
+                 "python -m irmcl_warp.slam +exp=gmapping_intel slam.proposal=odometry slam.num_particles=60"))
     for exp, what in (("globloc_corridor", "from random starts"), ("globloc_corridor_kidnap", "after a kidnapping"),
                       ("globloc_corridor_8m", "from random starts, 8 m lidar"),
                       ("globloc_corridor_8m_kidnap", "after a kidnapping, 8 m lidar")):
@@ -109,7 +109,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
         rows.append(("Pipeline", f"raw log to a localized robot ({exp})", "-",
                      (f"converged after {lo['time_to_converge_s']:.1f} s, {lo['location_rmse_cm']:.1f} cm RMSE"
                       if lo and lo["converged"] else "did not converge" if lo else "no ground truth")
-                     + f" ({m['device']})", f"python -m irmcl_warp.pipeline{'' if exp == 'pipeline_sim_office' else ' +exp=pipeline_fr079 train=fast slam.particles=30 ...'}"))
+                     + f" ({m['device']})", f"python -m irmcl_warp.pipeline{'' if exp == 'pipeline_sim_office' else ' +exp=pipeline_fr079 train=fast slam.num_particles=30 ...'}"))
     return rows
 
 

@@ -12,8 +12,8 @@ import argparse
 from collections import defaultdict
 from pathlib import Path
 
-from eval.tables import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam, slam_variant
-from irmcl_warp.outputs import save_figure
+from eval.collect import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam, slam_variant
+from irmcl_warp.services.outputs import save_figure
 
 
 def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:

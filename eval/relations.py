@@ -8,10 +8,10 @@ import time
 import hydra
 import numpy as np
 
-from eval.metrics import relations_error
+from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.config import register
 from irmcl_warp.io import load_log, read_relations, resolve
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
 
 
 def run_relations(cfg):

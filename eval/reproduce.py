@@ -32,7 +32,11 @@ from pathlib import Path
 from hydra import compose, initialize_config_dir
 
 from irmcl_warp.config import register
-from irmcl_warp.outputs import SECTIONS, stage_complete
+from irmcl_warp.globloc.run import scenario_folder
+from irmcl_warp.mcl.stage import run_folder as localize_folder
+from irmcl_warp.nof.folders import synthesis_folder, train_folder
+from irmcl_warp.services.outputs import SECTIONS, stage_complete
+from irmcl_warp.slam.stage import run_tag as slam_tag
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -57,14 +61,8 @@ class Sweep:
 
 def folder(module: str, cfg) -> str:
     """The output folder of a job, relative to outputs/ (and to results/<group>/): the stage's own name for it."""
-    from eval.synthesis import synthesis_folder
-    from irmcl_warp.globloc.run import scenario_folder
-    from irmcl_warp.localize import run_tag as localize_tag
-    from irmcl_warp.slam.stage import run_tag as slam_tag
-    from irmcl_warp.train import train_folder
-
     names = {"irmcl_warp.train": train_folder, "eval.synthesis": synthesis_folder,
-             "irmcl_warp.localize": lambda c: localize_tag(c.mcl), "irmcl_warp.slam": lambda c: slam_tag(c.slam, c.data),
+             "irmcl_warp.localize": localize_folder, "irmcl_warp.slam": lambda c: slam_tag(c.slam, c.data),
              "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": lambda c: "pipeline"}
     if module not in names:
         raise ValueError(f"no output folder rule for {module}")
@@ -86,21 +84,21 @@ SWEEPS = (
     [Sweep("nof", "irmcl_warp.train", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
     + [Sweep("nof", "eval.synthesis", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
     # IR-MCL Tables II-III: global localization (100k particles) and pose tracking (10k), 5 and 10 cm maps
-    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", f"mcl.mode={mode}", f"mcl.num_particles={n}"],
+    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", f"localize.mode={mode}", f"mcl.num_particles={n}"],
              {"mcl.weighting": WEIGHTINGS, "mcl.map_resolution_m": [0.05, 0.1]}, gpu=True)
        for e, p in MCL_EXPS for mode, n in (("global", 100000), ("tracking", 10000))]
-    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "mcl.mode=tracking", "mcl.num_particles=10000",
-                                            "mcl.kidnap_at_s=30", "mcl.recovery_alpha_slow=0.01",
+    + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "localize.mode=tracking", "mcl.num_particles=10000",
+                                            "localize.kidnap_at_s=30", "mcl.recovery_alpha_slow=0.01",
                                             "mcl.recovery_alpha_fast=0.2"],
              {"mcl.weighting": WEIGHTINGS[:2]}, gpu=True) for e, p in MCL_EXPS[:2]]
     # GMapping: relations error of both proposals, 30 particles, 10 seeds; particles vs success on intel
     + [Sweep("slam", "irmcl_warp.slam", [f"+exp={e}"], {"slam.proposal": ["paper", "gmapping_code"], "slam.seed": SEEDS},
              gpu=True) for e in ("gmapping_intel", "gmapping_fr079", "gmapping_mit_csail")]
-    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_intel"] + extra, {"slam.particles": n, "slam.seed": SEEDS},
+    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_intel"] + extra, {"slam.num_particles": n, "slam.seed": SEEDS},
              gpu=True)
        for extra, n in (([], [5, 10, 15, 60]), (["slam.resample=always"], [5, 10, 15, 30, 60]),
                         (["slam.proposal=odometry"], [5, 10, 15, 30, 60]))]
-    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian"], {"slam.particles": [30, 60],
+    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian"], {"slam.num_particles": [30, 60],
                                                                        "slam.seed": SEEDS[:5]}, gpu=True)]
     # lidar + camera global localization: the four corridor scenarios, and the paper's one-frame trigger
     + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}"]) for e in GLOBLOC]
@@ -108,15 +106,15 @@ SWEEPS = (
                                                f"globloc.scenario={'kidnap' if 'kidnap' in e else 'random_starts'}_confirm1"])
        for e in GLOBLOC]
     # ablations, one setting at a time around IR-MCL's global localization (100k particles, NOG 5 cm, 32 beams)
-    + [Sweep("ablation", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "mcl.mode=global",
+    + [Sweep("ablation", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", "localize.mode=global",
                                                  "mcl.num_particles=100000"], {key: values}, gpu=True)
        for e, p in MCL_EXPS[1:] for key, values in ABLATIONS.items()]
     + [Sweep("ablation", module, ["+exp=fr079", "train=fast"], {"render": ["warp", "torch_ref"]}, gpu=True)
        for module in ("irmcl_warp.train", "eval.synthesis")]
     # the end-to-end pipeline on the simulator and on the fr079 bag
     + [Sweep("pipeline", "irmcl_warp.pipeline", []),
-       Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "slam.particles=30", "mcl.num_particles=100000",
-                                                 "mcl.num_samples=256", "localize.run_s=null"], gpu=True)]
+       Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "slam.num_particles=30", "mcl.num_particles=100000",
+                                                 "mcl.num_samples=256", "pipeline.run_s=null"], gpu=True)]
 )
 
 

@@ -12,17 +12,12 @@ import json
 import re
 from pathlib import Path
 
-from irmcl_warp.config import GlobLocConfig, MCLConfig
-from irmcl_warp.mapping.mapio import atomic_write_bytes
+from eval.claims import claims, reproduction_markdown
+from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, TAG, collect_globloc, collect_localization, collect_pipeline,
+                          collect_slam, collect_synthesis, slam_variant)
+from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
+from irmcl_warp.io.atomic import atomic_write_bytes
 
-REPO = Path(__file__).resolve().parents[1]
-ROOTS = (REPO / "results" / "nof", REPO / "outputs")
-MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
-SLAM_ROOTS = (REPO / "results" / "slam", REPO / "outputs")
-GLOBLOC_ROOTS = (REPO / "results" / "globloc", REPO / "outputs")
-GLOBLOC_METHODS = {"lidar_mcl": "lidar-only MCL", "camera_only": "camera only", "paper": "paper's pipeline",
-                   "mcl_seeded": "MCL seeded by the camera"}
-CONVERGED_M = 0.15  # a SLAM run "converged" below this mean relations error (the threshold of issue 6's reference)
 # GMapping references (facts cited, scored with the relations metric, mean translational error):
 # * "released C++": issue 6 of this project: the public GMapping source built without ROS, ROS wrapper defaults,
 #   30 particles, 10 seeds, the same 2-core CPU, on the same derived logs; converged seeds (< 0.15 m), error of
@@ -41,27 +36,6 @@ SLAM_REFERENCES = {
 }
 METHODS = {"nog_raymarch": "IR-MCL (NOG)", "nof_direct": "IR-MCL (NOF, no grid)", "likelihood_field": "likelihood field",
            "beam_model": "beam model"}
-# localize-<weighting>-<mode>-<particles>-<res>cm[-kidnap<s>s][-recovery], see irmcl_warp.localize.run_tag
-TAG = re.compile(r"localize-(?P<w>[a-z_]+)-(?P<mode>global|tracking)-(?P<n>\d+k?)-(?P<res>[\d.]+)cm(?P<rest>.*)$")
-DATASET_ORDER = ("fr079", "intel", "mit_csail", "sim_office")
-
-
-def _load(path: Path):
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise SystemExit(f"{path}: unreadable metrics file ({e}); rerun the stage that wrote it")
-
-
-def collect_synthesis(roots=ROOTS) -> dict:
-    """{(exp, preset): (synthesis metrics, train metrics or None)}; later roots override earlier ones."""
-    runs = {}
-    for root in roots:
-        for f in sorted(Path(root).glob("*/synthesis-*/metrics.json")):
-            exp, preset = f.parent.parent.name, f.parent.name.split("-", 1)[1]
-            train = f.parent.parent / f"train-{preset}" / "metrics.json"
-            runs[(exp, preset)] = (_load(f), _load(train) if train.is_file() else None)
-    return runs
 
 
 def _order(key):
@@ -93,22 +67,6 @@ def synthesis_table(runs: dict) -> str:
         lines.append(f"| {ds} | {split} | {name} | {m['mae_m']:.3f} | {m['median_error_m']:.3f} | {m['accuracy_pct']:.1f} | "
                      f"{m['chamfer_m']:.3f} | {m['fscore_pct']:.1f} | {how} |")
     return "\n".join(lines)
-
-
-def collect_localization(roots=MCL_ROOTS) -> dict:
-    """{(exp, run folder): metrics} of the localize stage; later roots override earlier ones. Folders that do
-    not follow the run-tag naming (older layouts) are left out."""
-    return _collect_runs(roots, "localize-*", TAG.match)
-
-
-def _collect_runs(roots, folders: str, keep=lambda name: True) -> dict:
-    """{(exp, run folder): metrics} of root/<exp>/<folders>/metrics.json; later roots override earlier ones."""
-    runs = {}
-    for root in roots:
-        for f in sorted(Path(root).glob(f"*/{folders}/metrics.json")):
-            if keep(f.parent.name):
-                runs[(f.parent.parent.name, f.parent.name)] = _load(f)
-    return runs
 
 
 def _f(v, fmt="{:.1f}"):
@@ -153,9 +111,10 @@ def localization_table(runs: dict) -> str:
 
 
 # the ablations' base run: MCLConfig's defaults, which are IR-MCL's global localization
-ABLATION_BASE = {k: getattr(MCLConfig, k) for k in ("weighting", "mode", "num_particles", "map_resolution_m",
-                                                     "num_beams", "t_min", "empty_below", "resample", "num_samples",
-                                                     "kidnap_at_s", "recovery_alpha_fast")}
+ABLATION_BASE = {**{k: getattr(MCLConfig, k) for k in ("weighting", "num_particles", "map_resolution_m", "num_beams",
+                                                        "t_min", "empty_below", "resample", "num_samples",
+                                                        "recovery_alpha_fast")},
+                 **{k: getattr(LocalizeConfig, k) for k in ("mode", "kidnap_at_s")}}
 ABLATION_NAMES = {"weighting": "likelihood", "map_resolution_m": "NOG / grid resolution (m)",
                   "num_beams": "beams", "t_min": "early termination (transmittance floor)",
                   "empty_below": "empty-space skipping (p_occ floor)", "resample": "resampling"}
@@ -206,19 +165,6 @@ def kidnap_table(runs: dict) -> str:
     return "\n".join(lines + [r for _, r in sorted(rows)])
 
 
-def slam_variant(tag: str) -> str:
-    """The ablation settings a SLAM run folder names after its seed ("" for the defaults): ``freecheck, dda``."""
-    import re
-
-    m = re.match(r"slam-\w+?-\w+?-\d+p-seed\d+(.*)$", tag)
-    return ", ".join(re.split(r"-(?=[a-z])", m.group(1))[1:]) if m and m.group(1) else ""
-
-
-def collect_slam(roots=SLAM_ROOTS) -> dict:
-    """{(exp, run folder): metrics} of the slam stage; later roots override earlier ones."""
-    return _collect_runs(roots, "slam-*")
-
-
 def slam_table(runs: dict) -> str:
     """Per dataset and filter variant, over seeds: how many converged (relations error < CONVERGED_M), the
     error of the converged runs (their mean and std over the relations, averaged over those runs: the
@@ -257,10 +203,6 @@ def slam_table(runs: dict) -> str:
     return "\n".join(lines)
 
 
-def collect_pipeline(roots=(REPO / "results" / "pipeline", REPO / "outputs")) -> dict:
-    return _collect_runs(roots, "pipeline")
-
-
 def pipeline_table(runs: dict) -> str:
     """One row per pipeline run: SLAM, NOF and global localization of the second log, time per stage."""
     lines = ["| run | device | SLAM: processed scans, ATE (odometry) | NOF: validation MAE | localized scans | "
@@ -277,10 +219,6 @@ def pipeline_table(runs: dict) -> str:
                      f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
                      f"{m['localized_scans']} | {conv} | {rmse} | {took} |")
     return "\n".join(lines)
-
-
-def collect_globloc(roots=GLOBLOC_ROOTS) -> dict:
-    return _collect_runs(roots, "globloc-*")
 
 
 def globloc_table(runs: dict) -> str:
@@ -352,8 +290,6 @@ def main(argv=None):
     for title, table in tables.values():
         print(f"{title}\n\n{table}\n")
     if a.write:
-        from eval.claims import claims, reproduction_markdown
-
         doc = REPO / "docs" / "REPRODUCTION.md"
         atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe)).encode())
         print(f"-> {doc}")

@@ -38,7 +38,7 @@ class DataConfig:
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
     repair_reversing: bool = False  # bags: drive backwards the odometry steps whose velocity is negative (fr079)
-    usable_range_m: Optional[float] = None  # NOF rendering far bound; None = floor(range_max_m) (IR-MCL code)
+    far_m: Optional[float] = None  # the sensor's far bound for every stage (rendering, MCL, SLAM); None = floor(range_max)
     split: str = "interleaved"  # interleaved (train/val/test) | block (train_block/val_block/test_block)
 
 
@@ -101,7 +101,6 @@ class RenderConfig:
     name: str = "warp"  # warp | torch_ref
     num_samples: int = 256
     near_m: float = 0.02
-    far_m: Optional[float] = None  # None = data.usable_range_m
     normalize: bool = True  # divide by the accumulated opacity, as the authors' code does
     t_min: float = 0.0  # early termination: skip samples with transmittance below this (0 = off)
     chunk_rays: int = 2048  # rays per forward pass when rendering without gradients
@@ -138,7 +137,6 @@ class MCLConfig:
     num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
     num_samples: int = 256  # IR-MCL: samples per beam on the NOG
     near_m: float = 0.02
-    far_m: float = 40.0  # the filter's far bound; the localize stage sets it from data.usable_range_m
     t_min: float = 1e-3  # early termination once the transmittance is below (0 = the authors' formulation)
     empty_below: float = 0.0  # NOG nodes below this p_occ read as 0 and are jumped over (0 = authors')
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
@@ -147,20 +145,14 @@ class MCLConfig:
     estimate_share: float = 0.8
     cluster_cell_m: float = 0.5  # best_cluster: histogram cell (m) ...
     cluster_yaw_bins: int = 8  # ... and heading bins
-    reduce_to: int = 5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never)
-    reduce_after_s: float = 20.0  # IR-MCL's code reduces 20 s into the run (global localization only)
+    reduce_to: int = 5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never; when: localize.reduce_after_s)
     update_min_trans_m: float = 0.0  # weigh and resample only after the odometry moved more than this ...
     update_min_rot_rad: float = 0.0  # ... or turned more than this (0/0: any motion, as IR-MCL's code)
     resample: str = "low_variance"  # low_variance | multinomial
     resample_threshold: float = 0.5  # resample when N_eff < threshold * N (1.0 = every step)
     map_resolution_m: float = 0.05  # NOG / grid resolution
-    mode: str = "global"  # global | tracking
-    tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # initial spread (m, m, rad)
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
-    num_starts: int = 10  # start times spread evenly over the sequence
-    kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
-    run_s: float = 60.0  # how long each start is followed
     seed: int = 0
 
 
@@ -168,7 +160,7 @@ class MCLConfig:
 class SlamConfig:
     """GMapping (Grisetti et al. T-RO 2007); defaults = the released code / ROS wrapper's, named as there."""
     # (string fields say builtins.str: the odometry noise field below is named `str`, as in GMapping)
-    particles: int = 30
+    num_particles: int = 30
     proposal: builtins.str = "paper"  # paper (Gaussian fitted around the match) | gmapping_code (the match) | odometry
     resample: builtins.str = "selective"  # selective (N_eff < threshold * N) | always
     resample_threshold: float = 0.5
@@ -193,7 +185,6 @@ class SlamConfig:
     linear_update: float = 1.0  # process a scan after this much travel (m) ...
     angular_update: float = 0.5  # ... or rotation (rad)
     resolution_m: float = 0.05
-    usable_range_m: Optional[float] = None  # beams beyond: free space only; None = data.usable_range_m
     map_margin_m: float = 10.0  # map = odometry's bounding box + this margin
     proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses around the match, spaced as below
     proposal_lstep: Optional[float] = None  # their spacing in x and y (m); None: lstep
@@ -234,7 +225,7 @@ class GlobLocConfig:
     trigger_confirm_frames: int = 2  # ... confirmed by this many following frames' winners (1: the paper's)
     tracking_std: List[float] = field(default_factory=lambda: [0.3, 0.3, 0.1])
     seed_share: float = 0.1  # mcl_seeded: share of particles re-drawn around the camera's hypotheses
-    particles: int = 20_000
+    num_particles: int = 20_000
     beams: int = 60
     recovery_alpha_slow: float = 0.01
     recovery_alpha_fast: float = 0.2
@@ -246,8 +237,19 @@ class GlobLocConfig:
 
 @dataclass
 class LocalizeConfig:
+    """The localize stage's experiment protocol (IR-MCL Sec. IV): where the runs start, for how long, how."""
+    mode: str = "global"  # global (uniform over the free space) | tracking (from a noisy ground-truth pose)
+    tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # tracking: initial spread (m, m, rad)
+    num_starts: int = 10  # start times spread evenly over the sequence
+    run_s: float = 60.0  # how long each start is followed
+    kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
+    reduce_after_s: float = 20.0  # IR-MCL's code keeps the mcl.reduce_to heaviest particles 20 s into a global run
+
+
+@dataclass
+class PipelineConfig:
     """The pipeline's second log, localized globally in the map and NOF made from the first (data.*)."""
-    path: Optional[str] = None  # None: the simulator's second session (sim.path_seed below), or data.path again
+    path: Optional[str] = None  # None: the simulator's second session (sim_path_seed below), or data.path again
     format: Optional[str] = None  # None = data.format
     ground_truth_path: Optional[str] = None  # poses to score against (same frame as data.ground_truth_path)
     sim_path_seed: int = 1  # data=sim: the second session drives this path through the same world
@@ -269,6 +271,7 @@ class Config:
     slam: SlamConfig = field(default_factory=SlamConfig)
     globloc: GlobLocConfig = field(default_factory=GlobLocConfig)
     localize: LocalizeConfig = field(default_factory=LocalizeConfig)
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 

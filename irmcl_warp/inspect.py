@@ -16,7 +16,7 @@ import numpy as np
 from irmcl_warp.config import register
 from irmcl_warp.io import load_log, resolve, write_bag
 from irmcl_warp.mapping import build_map, save_map
-from irmcl_warp.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
 from irmcl_warp.types import LaserLog
 from kernels import pick_device
 

@@ -2,8 +2,7 @@
 so that MCL reads occupancy by a nearest-node lookup instead of running the MLP.
 
 Node (ix, iy) holds p_occ at origin + (ix, iy) * resolution; a point is read from the nearest node
-(round, as the authors' render_rays_grid). ``bake_nog`` caches its result by the hash of the checkpoint
-file and the settings (outputs/<exp>/nog/nog-<hash>.npz).
+(round, as the authors' render_rays_grid). ``services.nog.bake_nog`` bakes a checkpoint's NOG and caches it.
 """
 
 from __future__ import annotations
@@ -15,9 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from irmcl_warp.mapping.mapio import atomic_write_bytes
-from irmcl_warp.nof.beams import settings_key
-from irmcl_warp.outputs import file_digest
+from irmcl_warp.io.atomic import atomic_write_bytes
 
 
 @dataclass
@@ -63,23 +60,3 @@ def evaluate_grid(model, bounds, resolution_m: float, device="cpu", chunk: int =
     for s in range(0, len(xy), chunk):
         out[s:s + chunk] = model(torch.from_numpy(xy[s:s + chunk]).to(device)).float().cpu().numpy()
     return NOG(out.reshape(H, W), (float(xmin), float(ymin)), float(resolution_m))
-
-
-def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None,
-             device="cpu") -> NOG:
-    """Bake (or read from the cache) the NOG of a nof.pt checkpoint."""
-    from irmcl_warp.nof.checkpoint import load_nof
-
-    key = settings_key(file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m))
-    path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None
-    if path is not None and path.is_file():
-        try:
-            return NOG.load(path)
-        except (OSError, KeyError, ValueError):
-            pass  # unreadable cache (interrupted write of an older version): bake again
-    model, _ = load_nof(checkpoint, device)
-    nog = evaluate_grid(model, bounds, resolution_m, device)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        nog.save(path)
-    return nog

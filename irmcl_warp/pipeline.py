@@ -1,11 +1,11 @@
-"""``python -m irmcl_warp.pipeline [data=bag data.path=run.bag] [localize.path=other.bag]``: from a raw log
+"""``python -m irmcl_warp.pipeline [data=bag data.path=run.bag] [pipeline.path=other.bag]``: from a raw log
 to a localized robot, every artifact made by a command.
 
 1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam-<tag>/ (map, trajectory.tum)
 2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/pipeline/slam_poses.tum
 3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train-<preset>/nof.pt
 4. nog       the NOF baked into a neural occupancy grid over the SLAM map (cached by checkpoint digest)
-5. localize  global MCL with the NOG over the second log (``localize.*``; the simulator's second session,
+5. localize  global MCL with the NOG over the second log (``pipeline.*``; the simulator's second session,
              or the mapping log again) -> outputs/<exp>/pipeline/localization.tum
 6. report    outputs/<exp>/pipeline/report.md: the map, trajectories, error plot, timing per stage
 
@@ -24,17 +24,22 @@ import hydra
 import numpy as np
 from omegaconf import OmegaConf
 
-from eval.metrics import localization_metrics
 from irmcl_warp.config import register
 from irmcl_warp.geometry import align_rigid, compose, inverse
-from irmcl_warp.io import load_log
-from irmcl_warp.localize import free_space_view, load_stream, run_one, write_tum
+from irmcl_warp.io import load_log, read_tum, write_tum
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
-from irmcl_warp.nof.prepare import far_m, recorded_inputs
-from irmcl_warp.nog import NOG, bake_nog
-from irmcl_warp.outputs import SECTIONS, file_digest, stage_complete, stage_dir, write_json, write_manifest
-from kernels import WEIGHTING, pick_device
+from irmcl_warp.mcl.track import follow
+from irmcl_warp.nof.stage import run_train, train_dir
+from irmcl_warp.nog import NOG
+from irmcl_warp.services.nog import bake_nog
+from irmcl_warp.pipeline_report import write_report
+from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.outputs import SECTIONS, file_digest, stage_complete, stage_dir, write_json, write_manifest
+from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
+from kernels import pick_device
 
 
 def with_overrides(cfg, **dotted):
@@ -63,8 +68,6 @@ def run_stage(name: str, out: Path, cfg, inputs, run, timing: dict) -> Path:
 def slam_poses(slam_dir: Path, log, every_scan: bool) -> tuple[np.ndarray, np.ndarray]:
     """(scan indices, SLAM poses): of the scans the filter processed (neff.csv; scan 0 starts it), or of
     every scan (each one's pose: the last processed scan's corrected pose + the odometry since)."""
-    from irmcl_warp.io import read_tum
-
     stamps, poses = read_tum(slam_dir / "trajectory.tum")
     if len(stamps) != len(log):
         raise ValueError(f"{slam_dir / 'trajectory.tum'}: {len(stamps)} poses for a log of {len(log)} scans")
@@ -76,9 +79,9 @@ def slam_poses(slam_dir: Path, log, every_scan: bool) -> tuple[np.ndarray, np.nd
 
 
 def second_log(cfg):
-    """The log to localize in and a description: localize.path, the simulator's second session, or the
+    """The log to localize in and a description: pipeline.path, the simulator's second session, or the
     mapping log itself (``cfg`` without training poses, as run_pipeline holds it)."""
-    lc = cfg.localize
+    lc = cfg.pipeline
     if lc.path is not None:
         c = with_overrides(cfg, **{"data.path": lc.path, "data.format": lc.format or cfg.data.format,
                                    "data.ground_truth_path": lc.ground_truth_path, "data.relations_path": None,
@@ -87,29 +90,25 @@ def second_log(cfg):
     if cfg.data.format == "sim":
         c = with_overrides(cfg, **{"sim.path_seed": lc.sim_path_seed})
         return load_log(c), f"the simulator's second session (path seed {lc.sim_path_seed}, same world)"
-    return load_log(cfg), f"{cfg.data.path} again (no localize.path: the scans the map was built from)"
+    return load_log(cfg), f"{cfg.data.path} again (no pipeline.path: the scans the map was built from)"
 
 
-def localize(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(scan indices, estimates [n, 3], final particles) of global MCL over ``log`` in the SLAM map frame."""
-    from irmcl_warp.mcl import ParticleFilter
-
-    m = OmegaConf.merge(cfg.mcl, {"far_m": far_m(cfg)})
+def localize_second_log(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(scan indices, estimates [n, 3], final particles) of global MCL over ``log`` in the SLAM map frame,
+    with the filter every MCL user builds (services.filters.build_filter) and IR-MCL's protocol."""
+    pc = cfg.pipeline
     t = log.stamps - log.stamps[0]
-    end = np.inf if cfg.localize.run_s is None else cfg.localize.start_s + cfg.localize.run_s
-    idx = np.flatnonzero((t >= cfg.localize.start_s) & (t <= end))
+    end = np.inf if pc.run_s is None else pc.start_s + pc.run_s
+    idx = np.flatnonzero((t >= pc.start_s) & (t <= end))
     if len(idx) < 2:
-        raise ValueError(f"localize.start_s={cfg.localize.start_s}, run_s={cfg.localize.run_s}: "
-                         f"{len(idx)} scans of a {t[-1]:.0f} s log in the window")
-    view = free_space_view(slam_map)
-    weighting = WEIGHTING.build("nog_raymarch", nog=nog, t_min=m.t_min, empty_below=m.empty_below,
-                                num_particles=m.num_particles, num_beams=min(m.num_beams, log.info.num_beams),
-                                num_samples=m.num_samples, near_m=m.near_m, far_m=m.far_m, sigma_m=m.sigma_m,
-                                device=device)
-    pf = ParticleFilter(view, m, log.T_base_laser, log.info.angles_rad, device, weighting=weighting)
+        raise ValueError(f"pipeline.start_s={pc.start_s}, run_s={pc.run_s}: {len(idx)} scans of a {t[-1]:.0f} s "
+                         f"log in the window")
+    view = free_space_view(slam_map.probability, slam_map.origin_xy, slam_map.resolution_m, slam_map.known)
+    m = OmegaConf.merge(cfg.mcl, {"weighting": "nog_raymarch"})  # the pipeline localizes with the NOG it baked
+    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg), device, WeightingMaps(nog=nog))
     pf.rng = np.random.default_rng(m.seed)
     pf.init_uniform()
-    est = run_one(pf, log, idx, m)
+    est = follow(pf, log, idx, m, cfg.localize.reduce_after_s)
     return idx, est, pf.particles.numpy()
 
 
@@ -130,10 +129,6 @@ def stage_summary(out: Path) -> dict:
 
 
 def run_pipeline(cfg) -> Path:
-    from irmcl_warp.pipeline_report import write_report
-    from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
-    from irmcl_warp.train import run_train, train_dir
-
     started, device, timing = time.time(), pick_device(cfg.device), {}
     cfg = with_overrides(cfg, **{"data.train_poses_path": None})
     out = stage_dir(cfg, "pipeline")
@@ -142,7 +137,7 @@ def run_pipeline(cfg) -> Path:
                          lambda: run_slam(cfg), timing)
     log = load_stream(cfg)
     # 2. the SLAM poses: the NOF's training poses
-    scans, poses = slam_poses(slam_dir, log, cfg.localize.train_every_scan)
+    scans, poses = slam_poses(slam_dir, log, cfg.pipeline.train_every_scan)
     tmp = out / "slam_poses.tum.new"
     write_tum(tmp, log.stamps[scans], poses)
     if (out / "slam_poses.tum").is_file() and file_digest(tmp) == file_digest(out / "slam_poses.tum"):
@@ -161,7 +156,7 @@ def run_pipeline(cfg) -> Path:
         return out
     # 4. the NOG over the SLAM map's extent of the scans
     t0 = time.time()
-    far = far_m(cfg, log.info.range_max_m)
+    far = far_bound_m(cfg, log.info.range_max_m)
     T_map_laser = compose(poses, log.T_base_laser)
     nog = bake_nog(train_out / "nof.pt", laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
                    cfg.mcl.map_resolution_m, cache_dir=stage_dir(cfg, "nog"),
@@ -171,7 +166,7 @@ def run_pipeline(cfg) -> Path:
     t0 = time.time()
     log2, what = second_log(cfg)
     slam_map = load_map(slam_dir / "map.npz")
-    idx, est, particles = localize(cfg, log2, nog, slam_map, device)
+    idx, est, particles = localize_second_log(cfg, log2, nog, slam_map, device)
     timing["localize"] = {"s": time.time() - t0, "skipped": False, "scans": int(len(idx))}
     write_tum(out / "localization.tum", log2.stamps[idx], est)
     metrics = {"mapping_log": cfg.data.path or cfg.data.name, "localized_log": what, "device": device,

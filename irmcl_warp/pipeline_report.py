@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.outputs import save_figure
-from irmcl_warp.mapping.mapio import atomic_write_bytes
+from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.services.outputs import save_figure
+from irmcl_warp.services.plots import plot_error_axis
 
 
 def _fmt(v, unit="", digits=2):
@@ -47,8 +48,6 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from irmcl_warp.localize import plot_error_axis
-
     fig, ax = plt.subplots(figsize=(8, 3.5))
     plot_error_axis(ax, stamps, est, gt_map, converged_s)
     save_figure(fig, path)
@@ -63,7 +62,7 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
     slam = metrics["slam"]
     lines = [f"# Pipeline report: {cfg.exp}", "",
              f"- mapping log: `{metrics['mapping_log']}`; localized: {metrics['localized_log']}",
-             f"- device: {metrics['device']}; GMapping with {cfg.slam.particles} particles, NOF preset "
+             f"- device: {metrics['device']}; GMapping with {cfg.slam.num_particles} particles, NOF preset "
              f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})", "",
              "## Stages", "", "| stage | time (s) | output |", "|---|---|---|"]
     where = {"slam": f"{slam['run']}/", "train": f"{metrics['nof']['run']}/", "nog": "nog/",

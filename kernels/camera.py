@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import SIM, pick_device
+from kernels.registry import SIM, pick_device
 from kernels.sim import NO_HIT, ray_segment
 
 POSTER_W, POSTER_H, POSTER_Z0 = 0.8, 0.6, 1.2  # poster size (m) and the height of its lower edge

@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import ESTIMATE, launch_reduction, pick_device
+from kernels.resample import max_kernel
+from kernels.registry import ESTIMATE, launch_reduction, pick_device
 
 
 @wp.kernel
@@ -138,8 +139,6 @@ class BestCluster:
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
-        from kernels.resample import max_kernel
-
         n, d = particles.shape[0], self.device
         self.top.fill_(-3.0e38)
         self.hist.zero_()

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from kernels import MAPPING
+from kernels.registry import MAPPING
 from kernels.grid import first_boundary, inside, inv_abs, step_sign
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import RAYCAST, pick_device
+from kernels.registry import RAYCAST, pick_device
 from kernels.grid import first_boundary, inside, inv_abs, step_sign
 
 

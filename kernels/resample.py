@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import RESAMPLE, launch_reduction, pick_device
+from kernels.registry import RESAMPLE, launch_reduction, pick_device
 
 
 @wp.kernel

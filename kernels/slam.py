@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels import SLAM, pick_device
+from kernels.registry import SLAM, pick_device
 from kernels.weighting import laser_pose
 
 UNKNOWN = -1.0

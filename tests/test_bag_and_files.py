@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
-from eval.metrics import relations_error
+from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.config import SimConfig
 from irmcl_warp.geometry import relative
 from irmcl_warp.io import LogFormatError, read_bag, read_g2o, read_matched_csv, read_relations, read_splits, write_bag

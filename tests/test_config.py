@@ -57,7 +57,7 @@ def test_paper_recipe_is_the_authors_script():
     t, r, m = cfg.train, cfg.render, cfg.model
     assert (t.epochs, t.batch_rays, t.num_samples, t.lr, list(t.lr_milestones), t.lr_gamma, t.weight_decay) == \
         (32, 1024, 256, 1e-4, [4, 8], 0.5, 1e-3)
-    assert (t.loss, t.lambda_opacity, r.near_m, cfg.data.usable_range_m) == ("smooth_l1", 1e-5, 0.02, 40.0)
+    assert (t.loss, t.lambda_opacity, r.near_m, cfg.data.far_m) == ("smooth_l1", 1e-5, 0.02, 40.0)
     assert (m.num_freqs, m.width, m.depth, m.skip_after) == (10, 256, 8, 4)
 
 

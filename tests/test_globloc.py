@@ -149,7 +149,7 @@ def test_the_trigger_fires_on_a_kidnap_and_not_on_normal_motion(confirm):
     from irmcl_warp.sim.trajectory import follow
     from kernels import SIM
 
-    cfg = _cfg("globloc.particles=2000", "globloc.beams=30", f"globloc.trigger_confirm_frames={confirm}")
+    cfg = _cfg("globloc.num_particles=2000", "globloc.beams=30", f"globloc.trigger_confirm_frames={confirm}")
     world = world_of(cfg)
     grid, origin = grid_of(world, 0.05)
     y = world.corridor_y

@@ -10,6 +10,7 @@ def test_kernels_package_is_ours_not_the_pypi_one():
 
 
 def test_every_registry_entry_has_a_reference_twin():
+    import irmcl_warp.nof.direct  # noqa: F401  (nof_direct runs the torch MLP: it registers from nof/)
     from kernels import ESTIMATE, MAPPING, MOTION, RAYCAST, RENDER, RESAMPLE, SIM, SLAM, WEIGHTING
 
     assert RAYCAST.names() == ["dda", "distance_field"]

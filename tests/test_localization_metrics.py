@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from eval.metrics import localization_metrics
+from irmcl_warp.services.metrics import localization_metrics
 
 
 def _traj(n=400, rate=5.0):

@@ -12,6 +12,7 @@ from scipy.ndimage import binary_dilation
 from irmcl_warp.config import register
 from irmcl_warp.mcl import MCLConfig, ParticleFilter
 from irmcl_warp.nog import NOG
+from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.sim import simulate
 from kernels import SIM
 from kernels.motion import odometry_step
@@ -34,6 +35,14 @@ def _world_and_map(duration_s=30.0, res=0.1, extra=()):
     return log, nog
 
 
+def _filter(nog, cfg, log, weighting=None):
+    """The filter on the stand-in NOG (its zero nodes: free space), weighted by ``weighting`` when given,
+    else by IR-MCL's nog_raymarch on the NOG; 10 m far bound."""
+    if weighting is None:
+        return build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, "cpu", WeightingMaps(nog=nog))
+    return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, "cpu")
+
+
 @pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
 def test_pose_tracking_stays_within_a_bound(weighting):
     from kernels import WEIGHTING
@@ -44,8 +53,7 @@ def test_pose_tracking_stays_within_a_bound(weighting):
         corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
         lf = WEIGHTING.build("likelihood_field", occupancy=nog.walls, origin_xy=corner,
                              resolution_m=nog.resolution_m, max_range_m=20.0, device="cpu")
-    pf = ParticleFilter(nog, MCLConfig(num_particles=1000, num_samples=128, far_m=10.0, seed=3), log.T_base_laser,
-                        log.info.angles_rad, device="cpu", weighting=lf)
+    pf = _filter(nog, MCLConfig(num_particles=1000, num_samples=128, seed=3), log, lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
     errors, neffs = [], []
     for k in range(1, len(log)):
@@ -62,8 +70,7 @@ def test_pose_tracking_stays_within_a_bound(weighting):
 def test_global_localization_converges_in_a_small_world():
     """5k particles spread over a 14 x 10 m office find the robot within 12 s and stay within 0.3 m."""
     log, nog = _world_and_map(duration_s=30.0, extra=("sim.width_m=14", "sim.height_m=10"))
-    pf = ParticleFilter(nog, MCLConfig(num_particles=5000, num_samples=128, far_m=10.0, seed=1), log.T_base_laser,
-                        log.info.angles_rad, device="cpu")
+    pf = _filter(nog, MCLConfig(num_particles=5000, num_samples=128, seed=1), log)
     pf.init_uniform()
     errors = []
     for k in range(1, len(log)):
@@ -76,15 +83,13 @@ def test_global_localization_converges_in_a_small_world():
 
 def test_bad_input_gives_clear_errors():
     log, nog = _world_and_map(duration_s=2.0)
-    pf = ParticleFilter(nog, MCLConfig(num_particles=16, num_samples=32, far_m=10.0), log.T_base_laser,
-                        log.info.angles_rad, device="cpu")
+    pf = _filter(nog, MCLConfig(num_particles=16, num_samples=32), log)
     with pytest.raises(ValueError, match="scan of 180 beams, the filter was built for a sensor of 360"):
         pf.step((0.0, 0.0, 0.0), np.ones(180))
     with pytest.raises(ValueError, match="particles outside the map"):
         pf.set_particles(np.array([[1e4, 0.0, 0.0]] * 16))
     empty = NOG(np.ones((20, 20), np.float32), nog.origin_xy, nog.resolution_m)
-    pf_full = ParticleFilter(empty, MCLConfig(num_particles=16, num_samples=32, far_m=10.0), log.T_base_laser,
-                             log.info.angles_rad, device="cpu")
+    pf_full = _filter(empty, MCLConfig(num_particles=16, num_samples=32), log)
     with pytest.raises(ValueError, match="no free space"):
         pf_full.init_uniform()
 
@@ -98,14 +103,14 @@ def test_odometry_step_treats_reversing_as_negative_translation():
 def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_path, monkeypatch):
     import json
 
-    from irmcl_warp.localize import run_localize
+    from irmcl_warp.mcl.stage import run_localize
 
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("config", overrides=["+exp=sim_office", "device=cpu", "sim.duration_s=60",
-                                           "mcl.weighting=likelihood_field", "mcl.mode=tracking", "mcl.num_starts=2",
-                                           "mcl.run_s=15", "mcl.num_particles=500", "mcl.map_resolution_m=0.1"])
+                                           "mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.num_starts=2",
+                                           "localize.run_s=15", "mcl.num_particles=500", "mcl.map_resolution_m=0.1"])
     out = run_localize(cfg)
     result = json.loads((out / "metrics.json").read_text())
     assert result["summary"]["starts"] == 2 and result["summary"]["success_rate"] == 1.0
@@ -120,15 +125,14 @@ def test_recovery_injects_only_when_the_likelihood_drops():
     import warp as wp
 
     log, nog = _world_and_map(duration_s=2.0)
-    cfg = MCLConfig(num_particles=64, num_samples=32, far_m=10.0, recovery_alpha_slow=0.01, recovery_alpha_fast=0.5)
-    pf = ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, device="cpu")
+    cfg = MCLConfig(num_particles=64, num_samples=32, recovery_alpha_slow=0.01, recovery_alpha_fast=0.5)
+    pf = _filter(nog, cfg, log)
     probabilities = []
     for level in [-1.0] * 10 + [-0.5] * 5 + [-6.0] * 3:
         pf.log_lik.assign(wp.array(np.full(64, level, np.float32), dtype=wp.float32, device="cpu"))
         probabilities.append(pf.recovery_probability())
     assert max(probabilities[:15]) == 0.0 and probabilities[-1] > 0.5
-    off = ParticleFilter(nog, MCLConfig(num_particles=64, num_samples=32, far_m=10.0), log.T_base_laser,
-                         log.info.angles_rad, device="cpu")
+    off = _filter(nog, MCLConfig(num_particles=64, num_samples=32), log)
     assert off.recovery_probability() == 0.0
 
 
@@ -138,18 +142,18 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
     nothing): augmented MCL's injection finds it again; without recovery the filter stays lost. The slow
     average here learns the likelihood level within ~100 updates (alpha_slow 0.01; AMCL's 0.001 suits
     runs of thousands of updates)."""
-    from irmcl_warp.localize import run_one
+    from irmcl_warp.mcl.track import follow
 
     log, nog = _world_and_map(duration_s=60.0, extra=("sim.width_m=14", "sim.height_m=10"))
     rates = dict(recovery_alpha_slow=0.01, recovery_alpha_fast=0.2) if recovery else {}
-    cfg = MCLConfig(num_particles=2000, num_samples=128, far_m=10.0, mode="tracking", seed=5, **rates)
+    cfg = MCLConfig(num_particles=2000, num_samples=128, seed=5, **rates)
     t = log.stamps - log.stamps[0]
     first = np.flatnonzero(t < 15.0)
     far = np.flatnonzero((t >= 19.0) & (np.hypot(*(log.ground_truth[:, :2] - log.ground_truth[first[-1], :2]).T) > 3.0))
     idx = np.concatenate([first, np.arange(far[0], len(log))])
-    pf = ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, device="cpu")
+    pf = _filter(nog, cfg, log)
     pf.init_gaussian(log.ground_truth[0], (0.2, 0.2, 0.1))
-    est = run_one(pf, log, idx, cfg)
+    est = follow(pf, log, idx, cfg)
     err = np.hypot(*(est[:, :2] - log.ground_truth[idx, :2]).T)
     cut = len(first)
     assert err[cut - 5:cut].max() < 0.3  # tracked before the kidnapping
@@ -172,15 +176,19 @@ def _sim_cfg(*overrides):
 def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
     """The beam model's rays stop in unknown cells; the likelihood field's distances count occupied cells
     only (with unknown as an obstacle every beam ending beyond a wall scored as a hit)."""
-    from irmcl_warp.localize import build_maps
+    from irmcl_warp.mcl.stage import build_maps
+    from irmcl_warp.services.filters import make_weighting
 
     monkeypatch.chdir(tmp_path)
-    view, lf, image = build_maps(_sim_cfg("mcl.weighting=likelihood_field"), "cpu")
+    cfg = _sim_cfg("mcl.weighting=likelihood_field")
+    view, maps, image = build_maps(cfg, "cpu")
+    lf = make_weighting(cfg.mcl, 20.0, "cpu", maps, 1, 32)
     unknown = image == 0.5
     assert unknown.mean() > 0.05  # the training scans leave parts of the office unseen
     dist = lf.grid.numpy()
     assert dist[unknown].max() > 0.5 and np.median(dist[unknown]) > 0.0
-    _, beam, _ = build_maps(_sim_cfg("mcl.weighting=beam_model"), "cpu")
+    cfg = _sim_cfg("mcl.weighting=beam_model")
+    beam = make_weighting(cfg.mcl, 20.0, "cpu", build_maps(cfg, "cpu")[1], 1, 32)
     assert np.all(beam.grid.numpy()[unknown] == 1.0)
     assert np.all(view.occupancy[unknown] == 1.0)  # and no particle starts there
 
@@ -188,7 +196,7 @@ def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
 def test_stream_cache_serves_the_log_without_its_source(tmp_path, monkeypatch):
     from omegaconf import open_dict
 
-    import irmcl_warp.localize as loc
+    import irmcl_warp.services.data as loc
 
     monkeypatch.chdir(tmp_path)
     cfg = _sim_cfg()
@@ -208,10 +216,10 @@ def test_stream_cache_serves_the_log_without_its_source(tmp_path, monkeypatch):
 
 
 def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):
-    from irmcl_warp.localize import run_localize
+    from irmcl_warp.mcl.stage import run_localize
 
     monkeypatch.chdir(tmp_path)
-    cfg = _sim_cfg("mcl.weighting=likelihood_field", "mcl.mode=tracking", "mcl.run_s=10", "mcl.kidnap_at_s=12",
+    cfg = _sim_cfg("mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.run_s=10", "localize.kidnap_at_s=12",
                    "mcl.num_particles=100")
     with pytest.raises(ValueError, match="kidnap_at_s=12.0 must lie inside the run"):
         run_localize(cfg)
@@ -221,8 +229,7 @@ def test_reduce_keeps_the_heaviest_particles_and_their_weights():
     import warp as wp
 
     log, nog = _world_and_map(duration_s=2.0)
-    pf = ParticleFilter(nog, MCLConfig(num_particles=400, num_samples=32, far_m=10.0), log.T_base_laser,
-                        log.info.angles_rad, device="cpu")
+    pf = _filter(nog, MCLConfig(num_particles=400, num_samples=32), log)
     pf.init_uniform()
     before, log_w = pf.particles.numpy().copy(), np.random.default_rng(0).normal(0, 3, 400).astype(np.float32)
     pf.log_w.assign(wp.array(log_w, dtype=wp.float32, device="cpu"))

@@ -10,7 +10,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from eval.metrics import scan_synthesis_metrics
+from irmcl_warp.services.metrics import scan_synthesis_metrics
 from irmcl_warp.config import ModelConfig, register
 from irmcl_warp.nof.beams import BeamSet, interleaved_splits, split_beams
 from irmcl_warp.nof.model import NOF, PositionalEncoding
@@ -100,9 +100,9 @@ def test_scan_metrics_on_known_errors():
 
 def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch):
     """A minute of CPU training must cut the validation range error to well below an untrained field's."""
-    from irmcl_warp.nof.prepare import prepare_beams
+    from irmcl_warp.services.data import prepare_beams
     from irmcl_warp.nof.render import make_renderer, render_scans
-    from irmcl_warp.train import run_train
+    from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
     cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=150",
@@ -122,7 +122,7 @@ def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch)
     again = json.loads((run_train(cfg) / "metrics.json").read_text())
     assert again["epochs_done"] == 2 and again["train_time_s"] == pytest.approx(metrics["train_time_s"])
     # scan synthesis scores the NOF and both grids on the same test beams
-    from eval.synthesis import run_synthesis
+    from irmcl_warp.nof.synthesis import run_synthesis
 
     syn = json.loads((run_synthesis(cfg) / "metrics.json").read_text())
     assert set(syn["methods"]) == {"NOF (quick)", "OGM 5 cm", "OGM 10 cm"}
@@ -132,7 +132,7 @@ def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch)
 
 @pytest.mark.data
 def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
-    from irmcl_warp.nof.prepare import prepare_beams
+    from irmcl_warp.services.data import prepare_beams
 
     monkeypatch.chdir(tmp_path)
     sets = prepare_beams(_cfg(["+exp=fr079"]))
@@ -147,6 +147,6 @@ def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
     assert cached["train"].num_rays == 1_350_698
     import shutil
 
-    shutil.rmtree(tmp_path / "outputs" / "fr079" / "beams")
+    shutil.rmtree(tmp_path / "outputs" / "fr079" / "stream")  # the one cache of the log (and its split ids)
     with pytest.raises(FileNotFoundError, match="no-data-here"):
         prepare_beams(_cfg(["+exp=fr079"]))

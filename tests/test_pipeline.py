@@ -12,9 +12,9 @@ from irmcl_warp.io import read_tum
 from irmcl_warp.sim import simulate
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
-SMALL = ["sim.duration_s=40", "sim.width_m=14", "sim.height_m=10", "device=cpu", "slam.particles=4",
+SMALL = ["sim.duration_s=40", "sim.width_m=14", "sim.height_m=10", "device=cpu", "slam.num_particles=4",
          "train.max_time_s=8", "train.val_scans=4", "train.steps_per_epoch=40", "mcl.num_particles=2000",
-         "mcl.reduce_to=500", "mcl.num_samples=64", "localize.run_s=15"]
+         "mcl.reduce_to=500", "mcl.num_samples=64", "pipeline.run_s=15"]
 
 
 def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):

@@ -5,7 +5,7 @@ import warnings
 import numpy as np
 import pytest
 
-from eval.metrics import relations_error
+from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.io import read_bag, read_carmen, read_matched_csv, read_relations
 from irmcl_warp.io.rosbag import read_bag_extrinsic
 

@@ -9,7 +9,7 @@ from hydra import compose, initialize_config_dir
 
 from eval.reproduce import SWEEPS, Sweep, folder, job_state, multirun_commands
 from irmcl_warp.config import register
-from irmcl_warp.outputs import stage_complete, write_json, write_manifest
+from irmcl_warp.services.outputs import stage_complete, write_json, write_manifest
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 SMALL_SIM = ["sim.duration_s=20", "sim.width_m=14", "sim.height_m=10", "device=cpu"]
@@ -25,7 +25,7 @@ def test_a_finished_stage_is_skipped_and_a_damaged_one_redone(tmp_path, monkeypa
     from irmcl_warp.slam.stage import run_slam
 
     monkeypatch.chdir(tmp_path)  # outputs/ lands in the temporary folder
-    cfg = _compose("+exp=gmapping_sim", "slam.particles=3", *SMALL_SIM)
+    cfg = _compose("+exp=gmapping_sim", "slam.num_particles=3", *SMALL_SIM)
     out = run_slam(cfg)
     traj = out / "trajectory.tum"
     first, stamp = traj.read_text(), traj.stat().st_mtime_ns
@@ -72,7 +72,7 @@ def test_every_sweep_composes_and_names_a_distinct_folder(rng):
     """Two jobs may share a folder only when they are the same run (the ablations' base run is also a cell
     of the localization table); different settings in one folder would overwrite each other. Every
     ablation job (their folder names encode the settings) and a fresh random sample of the others."""
-    from irmcl_warp.outputs import config_digest
+    from irmcl_warp.services.outputs import config_digest
 
     jobs = [(s, ov) for s in SWEEPS for ov in s.jobs()]
     others = [j for j in jobs if j[0].group != "ablation"]

@@ -110,7 +110,7 @@ def test_motion_kernel_noise_follows_the_gmapping_model(rng):
 
 
 def _matcher(log, P=4, proposal="gmapping_code", **kw):
-    cfg = SlamConfig(particles=P, proposal=proposal, resolution_m=0.05, map_margin_m=2.0, **kw)
+    cfg = SlamConfig(num_particles=P, proposal=proposal, resolution_m=0.05, map_margin_m=2.0, **kw)
     lo = log.ground_truth[:, :2].min(0) - 12.0
     shape = tuple((np.ceil((log.ground_truth[:, :2].max(0) + 12.0 - lo) / 0.05).astype(int) + 1)[::-1])
     rbpf = RBPF(cfg, shape, lo, log.T_base_laser, log.info.angles_rad, 8.0, device="cpu")
@@ -156,7 +156,7 @@ def test_low_variance_resampling_keeps_floor_or_ceil_of_each_share(rng):
     parents = low_variance_indices(np.log(w), rng.uniform())
     counts = np.bincount(parents, minlength=30)
     assert counts.sum() == 30 and np.all(np.abs(counts - 30 * w) < 1.0 + 1e-9), f"seed {rng.seed}"
-    cfg = SlamConfig(particles=30)
+    cfg = SlamConfig(num_particles=30)
     rbpf_like = type("R", (), {"cfg": cfg, "P": 30, "log_w": np.log(w) * 200})
     from irmcl_warp.slam.rbpf import RBPF as R
 
@@ -180,7 +180,7 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=60",
-                                           "slam.particles=10"])
+                                           "slam.num_particles=10"])
     out = run_slam(cfg)
     m = json.loads((out / "metrics.json").read_text())
     assert m["processed_scans"] > 20
@@ -224,21 +224,21 @@ def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
 
 def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     """Documented handling: the jump is reported in metrics.json and the filter takes it as motion."""
-    import irmcl_warp.localize as loc
+    import irmcl_warp.slam.stage as stage
     from irmcl_warp.slam.stage import run_slam
 
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=20", "slam.particles=4"])
-    real = loc.load_stream
+        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=20", "slam.num_particles=4"])
+    real = stage.load_stream
 
     def jumping(cfg):
         log = real(cfg)
         log.odom[50:, 0] += 3.0  # 3 m in one step
         return log
 
-    monkeypatch.setattr(loc, "load_stream", jumping)
+    monkeypatch.setattr(stage, "load_stream", jumping)
     m = json.loads((run_slam(cfg) / "metrics.json").read_text())
     assert m["odometry_jumps"] == 1 and m["processed_scans"] > 5
 
@@ -265,7 +265,7 @@ def test_g2o_keyframes_give_true_stamps_by_their_ranges(rng):
 def test_relations_are_scored_in_the_laser_frame(rng):
     """The relations are motions of the scans: a laser mounted off the axis moves when the robot turns in
     place, and only the laser's path scores zero against such relations."""
-    from eval.metrics import relations_error
+    from irmcl_warp.services.metrics import relations_error
     from irmcl_warp.geometry import compose, relative
     from irmcl_warp.io.groundtruth import Relations
 

@@ -9,8 +9,8 @@ from hydra import compose, initialize_config_dir
 
 from irmcl_warp.config import register
 from irmcl_warp.io import LogFormatError, read_tum
-from irmcl_warp.localize import write_tum
-from irmcl_warp.outputs import stage_complete, write_json, write_manifest
+from irmcl_warp.io import write_tum
+from irmcl_warp.services.outputs import stage_complete, write_json, write_manifest
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -7,7 +7,8 @@ import pytest
 import torch
 import warp as wp
 
-from irmcl_warp.nog import NOG, bake_nog, evaluate_grid
+from irmcl_warp.nog import NOG, evaluate_grid
+from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.reference.weighting import nog_log_weights, nog_render
 from kernels import WEIGHTING
 
@@ -193,6 +194,8 @@ def test_torch_formulation_of_the_bench_matches_the_twin(rng):
 
 
 def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
+    import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct)
+
     """The MLP queried at every sample: the twin composites in torch; a small NOF trained on nothing still
     gives the same numbers, and a field that is one wall weighs the pose that sees it right the highest."""
     from irmcl_warp.config import ModelConfig

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # On the lent GPU, after the packages are unpacked (../shared/tools/gpu/README.md) and .gpu/e/abl.tgz is
-# extracted in the repository root (the beams / stream caches and NOF checkpoints of fr079, intel and
+# extracted in the repository root (the stream caches, with their split ids, and NOF checkpoints of fr079, intel and
 # mit_csail, and gpudata/ with the fr079 bag and its matched corrected poses):
 #   bash eval/gpu/ablation.sh loc:fr079 pipeline     # then: loc:intel loc:mit_csail, train
 # Each part is a slice of `python -m eval.reproduce` (group ablation or pipeline) on cuda:0; the metrics

@@ -15,7 +15,7 @@ sweep() {  # mode particles extra...
   local mode=$1 n=$2; shift 2
   for exp in $EXPS; do
     echo "=== $exp $mode $n"
-    python -m irmcl_warp.localize -m +exp="$exp" train="$(preset "$exp")" mcl.mode="$mode" mcl.num_particles="$n" \
+    python -m irmcl_warp.localize -m +exp="$exp" train="$(preset "$exp")" localize.mode="$mode" mcl.num_particles="$n" \
       "$@" ${EXTRA:-} 2>&1 | grep -E "^start|success|Error|error" | grep -v "^\[" | tail -40
   done
 }
@@ -26,7 +26,7 @@ for part in "$@"; do
     global) sweep global "${N_GLOBAL:-100000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
     tracking) sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
-              mcl.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
+              localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;
   esac
 done

@@ -10,7 +10,7 @@ EXPS=${EXPS:-"gmapping_intel gmapping_fr079 gmapping_mit_csail"}
 for exp in $EXPS; do
   echo "=== $exp"
   python -m irmcl_warp.slam -m +exp="$exp" slam.seed="${SEEDS:-0,1,2,3,4,5,6,7,8,9}" \
-    slam.proposal="${PROPOSALS:-paper,gmapping_code}" slam.particles="${PARTICLES:-30}" ${EXTRA:-} 2>&1 \
+    slam.proposal="${PROPOSALS:-paper,gmapping_code}" slam.num_particles="${PARTICLES:-30}" ${EXTRA:-} 2>&1 \
     | grep -E "scans processed|Error|error" | grep -v "^\["
 done
 find outputs -path "*/slam-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name neff.csv \

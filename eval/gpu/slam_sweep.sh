@@ -29,12 +29,12 @@ case "$what" in
     exit 0 ;;
   particles)
     for s in $SEEDS; do
-      for n in 5 10 15 60; do echo "+exp=gmapping_intel slam.particles=$n slam.seed=$s ${EXTRA:-}"; done
-      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.resample=always slam.seed=$s ${EXTRA:-}"; done
-      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.particles=$n slam.proposal=odometry slam.seed=$s ${EXTRA:-}"; done
+      for n in 5 10 15 60; do echo "+exp=gmapping_intel slam.num_particles=$n slam.seed=$s ${EXTRA:-}"; done
+      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.num_particles=$n slam.resample=always slam.seed=$s ${EXTRA:-}"; done
+      for n in 5 10 15 30 60; do echo "+exp=gmapping_intel slam.num_particles=$n slam.proposal=odometry slam.seed=$s ${EXTRA:-}"; done
     done > "$jobs"; P=${JOBS:-8} ;;
   killian)
-    for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.particles=$n slam.seed=$s ${EXTRA:-}"; done; done \
+    for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.num_particles=$n slam.seed=$s ${EXTRA:-}"; done; done \
       > "$jobs"; P=${JOBS:-2} ;;
   *) echo "unknown sweep $what"; exit 2 ;;
 esac

@@ -34,13 +34,13 @@ from irmcl_warp.globloc.database import build_database, cluster_candidates, desc
 from irmcl_warp.globloc.gist import Gist
 from irmcl_warp.globloc.pnp import OrbPnP
 from irmcl_warp.globloc.scan2map import Scan2Map
-from irmcl_warp.localize import write_tum
-from irmcl_warp.nog import NOG
-from irmcl_warp.outputs import stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp.io import write_tum
+from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import office
-from kernels import SIM, WEIGHTING, pick_device
+from kernels import SIM, pick_device
 from kernels.motion import odometry_step
 
 METHODS = ("lidar_mcl", "camera_only", "paper", "mcl_seeded")
@@ -158,17 +158,16 @@ class Hypotheses:
 
 
 def make_filter(cfg, grid, origin, device):
-    from irmcl_warp.mcl.filter import ParticleFilter
-
+    """The MCL of the lidar methods: the likelihood field on the world's grid, AMCL's recovery (the filter
+    every MCL user builds, services.filters.build_filter)."""
     g, res = cfg.globloc, cfg.globloc.map_resolution_m
-    m = OmegaConf.merge(cfg.mcl, {"num_particles": g.particles, "num_beams": g.beams, "far_m": cfg.sim.max_range_m,
+    m = OmegaConf.merge(cfg.mcl, {"num_particles": g.num_particles, "num_beams": g.beams,
                                   "weighting": "likelihood_field", "estimate": "top_share", "reduce_to": 0,
                                   "recovery_alpha_slow": g.recovery_alpha_slow,
                                   "recovery_alpha_fast": g.recovery_alpha_fast, "seed": g.seed})
-    free = NOG(np.where(grid > 0.5, 1.0, 0.0).astype(np.float32), (origin[0] + res / 2, origin[1] + res / 2), res)
-    weighting = WEIGHTING.build("likelihood_field", occupancy=grid, origin_xy=origin, resolution_m=res,
-                                max_range_m=cfg.sim.max_range_m, device=device)
-    return ParticleFilter(free, m, (cfg.sim.laser_x_m, 0.0, 0.0), laser_angles(cfg), device, weighting=weighting)
+    maps = WeightingMaps(occupancy=grid, origin_xy=origin, resolution_m=res)
+    return build_filter(m, free_space_view(grid, origin, res), (cfg.sim.laser_x_m, 0.0, 0.0), laser_angles(cfg),
+                        cfg.sim.max_range_m, device, maps)
 
 
 def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, rng) -> tuple[np.ndarray, list]:
@@ -250,8 +249,8 @@ def seed_particles(pf, poses, share: float, std, rng) -> None:
     pick = rng.choice(len(P), n, replace=False)
     centres = np.asarray(poses)[rng.integers(0, len(poses), n)]
     P[pick] = centres + rng.normal(0, 1, (n, 3)) * np.asarray(std)
-    H, W = pf.nog.shape
-    cells = pf.nog.node_of(P[:, :2])
+    H, W = pf.free_space.shape
+    cells = pf.free_space.node_of(P[:, :2])
     inside = np.all((cells >= 0) & (cells < np.array([W, H])), 1)
     pf.set_particles(P[inside].astype(np.float32))
 

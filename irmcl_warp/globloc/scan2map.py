@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from irmcl_warp.geometry import compose
+from kernels.raycast import distance_to_occupied
 
 
 class Scan2Map:
@@ -19,7 +20,6 @@ class Scan2Map:
             raise ValueError(f"Scan2Map: expected a 2D occupancy grid, got {self.occ.shape}")
         self.origin, self.res, self.kind, self.sigma = np.asarray(origin_xy, float), float(resolution_m), kind, sigma_m
         if kind == "likelihood_field":
-            from kernels.raycast import distance_to_occupied
 
             self.dist = distance_to_occupied(self.occ, self.res, occ_threshold)
 

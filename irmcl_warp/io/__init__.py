@@ -13,14 +13,14 @@ import numpy as np
 
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
-from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum
+from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum, write_tum
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
 __all__ = ["GEOMETRY_FIELDS", "LogDefectWarning", "LogFormatError", "apply_laser_geometry", "data_root", "load_log",
            "read_bag", "read_carmen", "read_log",
            "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
-           "write_bag"]
+           "write_bag", "write_tum"]
 
 
 def data_root() -> Path:
@@ -87,7 +87,7 @@ def read_log(cfg) -> LaserLog:
     """The log as its files say (no :data:`GEOMETRY_FIELDS` applied): what stream caches hold."""
     d = cfg.data
     if d.format == "sim":
-        from irmcl_warp.sim import simulate
+        from irmcl_warp.sim import simulate  # lazy: only the simulator source needs its Warp kernels and world builder
 
         return simulate(cfg.sim, device=cfg.device)[0]
     if d.path is None:

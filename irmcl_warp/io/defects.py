@@ -10,6 +10,7 @@ import numpy as np
 
 from irmcl_warp.geometry import wrap_angle
 from irmcl_warp.types import DefectReport
+from irmcl_warp.geometry import compose, relative
 
 
 def count_stamps_backwards(stamps_recording_order) -> int:
@@ -47,8 +48,6 @@ def repair_reversing(poses, forward_velocity_mps) -> tuple[np.ndarray, int, floa
     mean forward velocity but which advances along the heading is driven backwards instead (its
     translation, in the frame of the step's first pose, negated; its rotation kept), and the chain is
     re-integrated. fr079's bag needs it: its odometry never reverses (../shared/data/README.md)."""
-    from irmcl_warp.geometry import compose, relative
-
     p = np.asarray(poses, dtype=np.float64)
     v = np.asarray(forward_velocity_mps, dtype=np.float64)
     steps = relative(p[:-1], p[1:])

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.carmen import _floats, _parse_robotlaser, open_text
 from irmcl_warp.io.errors import LogFormatError
 
@@ -75,6 +76,12 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
         raise LogFormatError(path, None, "no poses (empty file or comments only)")
     a = np.array(rows)
     return a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi])
+
+
+def write_tum(path, stamps, poses) -> None:
+    """Poses [N, 3] (x, y, yaw) at ``stamps`` as a TUM trajectory (``read_tum``'s format), written atomically."""
+    lines = [f"{t:.6f} {x:.4f} {y:.4f} 0 0 0 {np.sin(a / 2):.6f} {np.cos(a / 2):.6f}" for t, (x, y, a) in zip(stamps, poses)]
+    atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
 
 
 def read_relations(path) -> Relations:

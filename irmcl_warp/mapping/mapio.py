@@ -7,30 +7,14 @@ pose of the lower-left pixel; with negate 0, p_occ = (255 - pixel) / 255; we wri
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.grid import OccupancyGrid
 
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_server's defaults
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write via a temporary file in the same folder and rename: a crash never leaves half a file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def to_trinary(grid: OccupancyGrid) -> np.ndarray:

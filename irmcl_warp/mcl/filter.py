@@ -14,31 +14,43 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.config import MCLConfig
-from kernels import ESTIMATE, MOTION, RESAMPLE, WEIGHTING, pick_device
+from kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
 from kernels.resample import LogMeanLikelihood, ParticleWeights, accumulate_kernel, inject_kernel
+
+# mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
+ESTIMATORS = {
+    "top_share": lambda cfg, n, bounds, d: ESTIMATE.build("top_share", num_particles=n, share=cfg.estimate_share,
+                                                          device=d),
+    "best_cluster": lambda cfg, n, bounds, d: ESTIMATE.build("best_cluster", num_particles=n, bounds=bounds,
+                                                             cell_m=cfg.cluster_cell_m, yaw_bins=cfg.cluster_yaw_bins,
+                                                             device=d),
+    "mean": lambda cfg, n, bounds, d: None,
+}
 
 
 class ParticleFilter:
-    def __init__(self, nog, cfg: MCLConfig, T_base_laser, scan_angles_rad, device: str = "auto", weighting=None):
-        """``nog``: the map particles are spread over (free nodes); ``weighting``: a WEIGHTING entry already
-        built (e.g. ``likelihood_field`` on an occupancy grid), else IR-MCL's ``nog_raymarch`` on ``nog``."""
-        self.cfg, self.device = cfg, pick_device(device)
+    def __init__(self, free_space, cfg: MCLConfig, T_base_laser, scan_angles_rad, far_m: float, make_weighting,
+                 device: str = "auto"):
+        """``free_space``: a NOG whose zero nodes are free space (the uniform start and recovery draw there);
+        ``far_m``: beams at or beyond are no return; ``make_weighting(num_particles, num_beams)``: the
+        observation model sized for the filter (services.filters.build_filter makes it), called again by
+        ``reduce``."""
+        self.cfg, self.device, self.far_m = cfg, pick_device(device), float(far_m)
         n_sensor = len(scan_angles_rad)
         if n_sensor < 1:
             raise ValueError("MCL: the sensor has no beams")
-        if cfg.estimate not in ("top_share", "best_cluster", "mean"):
-            raise ValueError(f"MCL: unknown estimate {cfg.estimate!r}; choose top_share, best_cluster or mean")
+        if cfg.estimate not in ESTIMATORS:
+            raise ValueError(f"MCL: unknown estimate {cfg.estimate!r}; choose one of {sorted(ESTIMATORS)}")
         self.beam_index = np.unique(np.linspace(0, n_sensor - 1, min(cfg.num_beams, n_sensor)).round().astype(int))
-        self.num_sensor_beams, self.nog, self.T_base_laser = n_sensor, nog, tuple(map(float, T_base_laser))
+        self.num_sensor_beams, self.free_space, self.T_base_laser = n_sensor, free_space, tuple(map(float, T_base_laser))
         N, B, d = cfg.num_particles, len(self.beam_index), self.device
         self.motion = MOTION.build("odometry", alphas=cfg.alphas, device=d)
-        self.weighting = weighting or WEIGHTING.build(
-            "nog_raymarch", nog=nog, num_particles=N, num_beams=B, num_samples=cfg.num_samples, near_m=cfg.near_m,
-            far_m=cfg.far_m, t_min=cfg.t_min, sigma_m=cfg.sigma_m, empty_below=cfg.empty_below, device=d)
+        self.make_weighting = make_weighting
         self.resampler = RESAMPLE.build(cfg.resample, device=d)
-        H, W = nog.shape
-        lo = np.asarray(nog.origin_xy, float)
-        self.bounds = (lo[0], lo[1], lo[0] + (W - 1) * nog.resolution_m, lo[1] + (H - 1) * nog.resolution_m)
+        H, W = free_space.shape
+        lo = np.asarray(free_space.origin_xy, float)
+        self.bounds = (lo[0], lo[1], lo[0] + (W - 1) * free_space.resolution_m, lo[1] + (H - 1) * free_space.resolution_m)
+        self.weighting = None
         self._allocate(N)
         self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
         self.measured = wp.zeros(B, dtype=wp.float32, device=d)
@@ -47,21 +59,18 @@ class ParticleFilter:
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
         self.log_mean_likelihood = LogMeanLikelihood(d)
-        free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
+        free = np.argwhere(free_space.occupancy < 0.5)[:, ::-1] * free_space.resolution_m + np.asarray(free_space.origin_xy)
         self.free_xy = wp.array(free.astype(np.float32), dtype=wp.vec2, device=d) if len(free) else None
 
     def _allocate(self, n: int) -> None:
-        """The per-particle arrays and the objects sized by the particle count (again after ``reduce``)."""
+        """The per-particle arrays and the objects sized by the particle count, the weighting's scratch
+        included (again after ``reduce`` and when a run starts with another count)."""
         cfg, d = self.cfg, self.device
         centre = ((self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2)
         self.weights = ParticleWeights(n, device=d, centre=centre)
-        if cfg.estimate == "top_share":
-            self.estimator = ESTIMATE.build("top_share", num_particles=n, share=cfg.estimate_share, device=d)
-        elif cfg.estimate == "best_cluster":
-            self.estimator = ESTIMATE.build("best_cluster", num_particles=n, bounds=self.bounds,
-                                            cell_m=cfg.cluster_cell_m, yaw_bins=cfg.cluster_yaw_bins, device=d)
-        else:
-            self.estimator = None  # the weighted mean of all particles
+        self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d)
+        self.weighting = None  # the old set's scratch is released before the new one is allocated
+        self.weighting = self.make_weighting(n, len(self.beam_index))
         self.particles = wp.zeros(n, dtype=wp.vec3, device=d)
         self.scratch = wp.zeros(n, dtype=wp.vec3, device=d)
         self.log_w = wp.zeros(n, dtype=wp.float32, device=d)  # accumulated since the last resampling
@@ -79,20 +88,19 @@ class ParticleFilter:
             return
         order = np.argsort(-self.log_w.numpy(), kind="stable")[:keep]
         poses, log_w = self.particles.numpy()[order], self.log_w.numpy()[order]
-        self._allocate(keep)
+        self._allocate(keep)  # a weighting sized for the smaller set: the larger set's scratch is released
         self.particles.assign(wp.array(poses, dtype=wp.vec3, device=self.device))
         self.log_w.assign(wp.array(log_w - log_w.max(), dtype=wp.float32, device=self.device))
 
     # --- initialisation ---------------------------------------------------------------------------
-    def init_uniform(self, free_threshold: float = 0.1) -> None:
+    def init_uniform(self) -> None:
         """Global localization: particles spread uniformly over the free nodes of the map, any heading."""
-        occ = self.nog.occupancy
-        iy, ix = np.nonzero(occ < free_threshold)
+        iy, ix = np.nonzero(self.free_space.occupancy < 0.5)
         if len(ix) == 0:
             raise ValueError("MCL: the map has no free space to spread particles over")
         k = self.rng.integers(0, len(ix), self.cfg.num_particles)
-        res = self.nog.resolution_m
-        xy = np.stack([ix[k], iy[k]], -1) * res + np.asarray(self.nog.origin_xy) + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
+        res = self.free_space.resolution_m
+        xy = np.stack([ix[k], iy[k]], -1) * res + np.asarray(self.free_space.origin_xy) + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
         self.set_particles(np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))]))
 
     def init_gaussian(self, pose, std=(0.5, 0.5, 0.3)) -> None:
@@ -104,8 +112,8 @@ class ParticleFilter:
         poses = np.asarray(poses, np.float32)
         if poses.ndim != 2 or poses.shape[1] != 3 or not 1 <= len(poses) <= self.cfg.num_particles:
             raise ValueError(f"MCL: particles must be [n, 3] with 1 <= n <= {self.cfg.num_particles}, got {poses.shape}")
-        H, W = self.nog.shape
-        cells = self.nog.node_of(poses[:, :2])
+        H, W = self.free_space.shape
+        cells = self.free_space.node_of(poses[:, :2])
         if np.any((cells < 0) | (cells >= np.array([W, H]))):
             raise ValueError("MCL: particles outside the map")
         if len(poses) != self.num_particles:
@@ -125,7 +133,7 @@ class ParticleFilter:
         self.steps += 1
         self.motion(self.particles, odom_step, seed=self.cfg.seed * 1_000_003 + self.steps)
         chosen = ranges_m[self.beam_index]
-        chosen = np.where((chosen > self.cfg.near_m) & (chosen < self.cfg.far_m), chosen, np.nan).astype(np.float32)
+        chosen = np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
         self.measured.assign(chosen)
         self.weighting(self.particles, self.T_base_laser, self.angles, self.measured, self.log_lik)
         wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
@@ -139,7 +147,7 @@ class ParticleFilter:
                        limit, self.log_w)
         self.particles, self.scratch = self.scratch, self.particles
         if p_inject > 0 and self.free_xy is not None:
-            wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.nog.resolution_m,
+            wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.free_space.resolution_m,
                       float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
         pose, neff, self.spread = self.weights.summary()
         if self.estimator is not None:

@@ -8,10 +8,7 @@ simulator, which has no split file, uses the same rule (``interleaved_splits``).
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -118,36 +115,3 @@ def split_beams(beams: BeamSet, splits: dict[str, np.ndarray], names, source: st
                              f"scan with a ground-truth pose (first: {ids[idx < 0][0]:.6f})")
         out[name] = beams.subset(np.sort(idx), name)
     return out
-
-
-def save_beams(path: Path, sets: dict[str, BeamSet], key: str) -> None:
-    """One npz of all splits, stamped with ``key`` (a hash of the settings that made it); atomic."""
-    from irmcl_warp.mapping.mapio import atomic_write_bytes
-    import io
-
-    arrays = {"key": np.array(key)}
-    for n, b in sets.items():
-        arrays.update({f"{n}/stamps": b.stamps, f"{n}/T_map_laser": b.T_map_laser, f"{n}/ranges_m": b.ranges_m,
-                       f"{n}/valid": b.valid, f"{n}/angles_rad": b.angles_rad})
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
-    atomic_write_bytes(path, buf.getvalue())
-
-
-def load_beams(path: Path, key: str | None = None, prefix_only: bool = False) -> dict[str, BeamSet] | None:
-    """The splits saved by :func:`save_beams`, or None when missing, unreadable, or made with another key
-    (``prefix_only``: compare only the part of the key before the first '-')."""
-    try:
-        with np.load(path) as z:
-            stored = str(z["key"])
-            if key is not None and (stored.split("-")[0] != key if prefix_only else stored != key):
-                return None
-            names = sorted({k.split("/")[0] for k in z.files if "/" in k})
-            return {n: BeamSet(z[f"{n}/stamps"], z[f"{n}/T_map_laser"], z[f"{n}/ranges_m"], z[f"{n}/angles_rad"],
-                               z[f"{n}/valid"], n) for n in names}
-    except (OSError, KeyError, ValueError):
-        return None
-
-
-def settings_key(*parts) -> str:
-    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -3,7 +3,8 @@
 ``make_renderer(name, ...)`` is asked once; both renderers take occupancies p [R, N] at depths z [R, N]
 and return (ranges [R], opacity [R]):
 * ``warp``: the Warp kernels of kernels/render.py behind a torch.autograd.Function (hand-written adjoint);
-* ``torch_ref``: the same formula in torch (irmcl_warp/reference/render.py), differentiated by autograd.
+* ``torch_ref``: the same formula in torch (``composite_torch`` below), differentiated by autograd; it is
+  also the twin the RENDER kernel is tested against (irmcl_warp/reference/render.py names it).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from irmcl_warp.reference.render import composite_torch
 from kernels import RENDER
 
 
@@ -29,6 +29,24 @@ class _WarpComposite(torch.autograd.Function):
         grad_r = torch.zeros_like(ranges) if grad_r is None else grad_r
         grad_w = torch.zeros_like(opacity) if grad_w is None else grad_w
         return ctx.compositor.backward(p, z, ranges, opacity, grad_r, grad_w), None, None
+
+
+def termination_weights(p: torch.Tensor, t_min: float = 0.0) -> torch.Tensor:
+    """alpha_k = p_k prod_{j<k}(1 - p_j) for p [..., N]; samples with transmittance below t_min get 0."""
+    T = torch.cumprod(torch.cat([torch.ones_like(p[..., :1]), 1.0 - p[..., :-1]], dim=-1), dim=-1)
+    alpha = p * T
+    if t_min > 0.0:
+        alpha = alpha * (T >= t_min).to(p.dtype)
+    return alpha
+
+
+def composite_torch(p: torch.Tensor, z: torch.Tensor, normalize: bool = True, t_min: float = 0.0,
+                    eps: float = 1e-10):
+    """p, z [R, N] -> (ranges [R], opacity [R]); the same formula as the Warp kernels."""
+    alpha = termination_weights(p, t_min)
+    opacity = alpha.sum(-1)
+    depth = (alpha * z.to(p.dtype)).sum(-1)
+    return (depth / (opacity + eps) if normalize else depth), opacity
 
 
 def make_renderer(name: str = "warp", normalize: bool = True, t_min: float = 0.0, eps: float = 1e-10):

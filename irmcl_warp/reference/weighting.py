@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from irmcl_warp.reference.raycast import dda_range
 
 
 def laser_poses(particles, T_base_laser):
@@ -57,8 +58,6 @@ def likelihood_field_log_weights(dist, origin, res, particles, T_base_laser, ang
 def beam_model_log_weights(occ, origin, res, particles, T_base_laser, angles, measured, z_hit, z_short, z_max,
                            z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
     """Thrun et al. Table 6.1 in logs, expected ranges from the DDA twin (one Python loop per ray)."""
-    from irmcl_warp.reference.raycast import dda_range
-
     pose = laser_poses(particles, T_base_laser)
     out = np.zeros(len(pose))
     for p, (x, y, yaw) in enumerate(pose):

@@ -32,9 +32,18 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.geometry import compose, relative, wrap_angle
-from irmcl_warp.reference.resample import low_variance_indices  # P is small: the numpy draw is the filter's
 from kernels import SLAM, pick_device
-from kernels.slam import ParticleMaps
+from kernels.slam import ParticleMaps, climb_candidates_kernel, climb_update_kernel
+
+
+def low_variance_parents(w: np.ndarray, offset: float) -> np.ndarray:
+    """Thrun et al. Table 4.4 on the host (P is small): pointers (offset + i) / P into the cumulative
+    normalised weights ``w``; returns each new particle's parent."""
+    log_w = np.log(w)
+    p = np.exp(log_w - np.max(log_w))
+    cdf = np.cumsum(p / p.sum())
+    u = (offset + np.arange(len(cdf))) / len(cdf)
+    return np.minimum(np.searchsorted(cdf, u, side="right"), len(cdf) - 1)
 
 
 @dataclass
@@ -56,12 +65,14 @@ class History:
 class RBPF:
     def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float,
                  device: str = "auto"):
-        if cfg.proposal not in ("paper", "gmapping_code", "odometry"):
-            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose paper, gmapping_code or odometry")
+        proposals = {"paper": self.propose_paper, "gmapping_code": self.propose_match, "odometry": self.propose_odometry}
+        if cfg.proposal not in proposals:
+            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {sorted(proposals)}")
+        self.propose = proposals[cfg.proposal]  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
         if cfg.resample not in ("selective", "always"):
             raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
         self.cfg, self.device = cfg, pick_device(device)
-        P, d = int(cfg.particles), self.device
+        P, d = int(cfg.num_particles), self.device
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
         self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
         self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, line=cfg.line,
@@ -146,21 +157,7 @@ class RBPF:
         t = self._tick("motion", t)
         self._set_ranges(ranges_m)
         sampled = self.poses.numpy().astype(np.float64)
-        if self.cfg.proposal == "odometry":
-            new, gain, rounds = sampled, self.evaluate(sampled[:, None])[1][:, 0], 0
-        else:
-            matched, score, rounds = self.match(sampled)
-            ok = score > self.cfg.minimum_score
-            if self.cfg.proposal == "gmapping_code":
-                new = np.where(ok[:, None], matched, sampled)
-                gain = self.evaluate(new[:, None])[1][:, 0]
-            else:
-                # the motion prior is centred on each particle's noise-free odometry prediction from its pose
-                # at the last processed scan (the sampled pose already carries the motion noise once)
-                predicted = compose(self.history.poses[-1], np.broadcast_to(moved, (self.P, 3)))
-                new, gain = self.gaussian_proposal(matched, predicted, moved)
-                fallback = self.evaluate(sampled[:, None])[1][:, 0]
-                new, gain = np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback)
+        new, gain, rounds = self.propose(sampled, moved)
         t = self._tick("matching", t)
         self.log_w += gain
         self.log_w_total += gain
@@ -170,7 +167,7 @@ class RBPF:
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
-            parents = self.maps.resample(low_variance_indices(np.log(w), self.rng.uniform()))
+            parents = self.maps.resample(low_variance_parents(w, self.rng.uniform()))
             self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
@@ -187,8 +184,6 @@ class RBPF:
         the best move if it raises the score, else halves the steps (one launch); a particle stops after
         ``iterations`` halvings. The host looks at the active flags every ``check_every`` rounds only.
         Returns (poses [P, 3], scores [P], rounds). Twin: irmcl_warp/reference/slam.py ``hill_climb``."""
-        from kernels.slam import climb_candidates_kernel, climb_update_kernel
-
         c, d, P = self.cfg, self.device, self.P
         if not hasattr(self, "_climb"):
             self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
@@ -235,6 +230,28 @@ class RBPF:
         pose = st["pose"].numpy().astype(np.float64)
         pose[:, 2] = wrap_angle(pose[:, 2])
         return pose, st["best"].numpy().astype(np.float64), rounds
+
+    # --- proposals: (poses sampled from the motion model, odometry step) -> (new poses, log-weight gain, rounds)
+    def propose_odometry(self, sampled, moved):
+        """The motion model alone (the paper's baseline)."""
+        return sampled, self.evaluate(sampled[:, None])[1][:, 0], 0
+
+    def propose_match(self, sampled, moved):
+        """The released code's: the scan matcher's pose where its score beats ``minimum_score``."""
+        matched, score, rounds = self.match(sampled)
+        new = np.where((score > self.cfg.minimum_score)[:, None], matched, sampled)
+        return new, self.evaluate(new[:, None])[1][:, 0], rounds
+
+    def propose_paper(self, sampled, moved):
+        """The paper's: a Gaussian fitted around the match (eq. 9-12), the motion prior centred on each
+        particle's noise-free odometry prediction from its pose at the last processed scan (the sampled pose
+        already carries the motion noise once)."""
+        matched, score, rounds = self.match(sampled)
+        ok = score > self.cfg.minimum_score
+        predicted = compose(self.history.poses[-1], np.broadcast_to(moved, (self.P, 3)))
+        new, gain = self.gaussian_proposal(matched, predicted, moved)
+        fallback = self.evaluate(sampled[:, None])[1][:, 0]
+        return np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback), rounds
 
     def gaussian_proposal(self, matched: np.ndarray, predicted: np.ndarray, moved: np.ndarray):
         """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match, the motion

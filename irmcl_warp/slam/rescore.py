@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from eval.metrics import relations_error
+from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_relations, read_tum, resolve
-from irmcl_warp.outputs import write_json
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.io.rosbag import read_bag_extrinsic
 
 
 def mounting(cfg, metrics: dict) -> np.ndarray:
@@ -23,7 +24,6 @@ def mounting(cfg, metrics: dict) -> np.ndarray:
     if "relations_frame" in metrics:
         return np.asarray(metrics["relations_frame"]["T_base_laser"], np.float64)
     if cfg.data.get("laser_frame_path"):
-        from irmcl_warp.io.rosbag import read_bag_extrinsic
 
         return read_bag_extrinsic(resolve(cfg.data.laser_frame_path), base_frame=cfg.data.get("base_frame"))
     return np.zeros(3)

@@ -1,4 +1,4 @@
-"""``python -m irmcl_warp.slam +exp=gmapping_intel [slam.particles=30 slam.proposal=paper slam.seed=0]``
+"""The slam stage: ``python -m irmcl_warp.slam +exp=gmapping_intel [slam.num_particles=30 slam.proposal=paper slam.seed=0]``
 
 Runs GMapping's RBPF over the whole log (file order; scans + odometry of the data config) and writes
 outputs/<exp>/slam-<proposal>-<resample>-<N>p-seed<k>/: the best particle's map (map.pgm/.yaml/.png), its
@@ -21,15 +21,20 @@ import numpy as np
 import warp as wp
 from omegaconf import OmegaConf
 
-from eval.metrics import relations_error
-from irmcl_warp.geometry import align_rigid, compose, wrap_angle
+from irmcl_warp.config import SlamConfig
+from irmcl_warp.geometry import compose
+from irmcl_warp.io import GEOMETRY_FIELDS, read_relations, resolve, write_tum
+from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
+from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
 from irmcl_warp.mapping.grid import OccupancyGrid
-from irmcl_warp.mapping.mapio import atomic_write_bytes, save_map
-from irmcl_warp.nof.prepare import far_m, recorded_inputs
-from irmcl_warp.outputs import stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp.mapping.mapio import save_map
+from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp.services.metrics import aligned_error, relations_error
+from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
-from kernels import pick_device
+from kernels import SLAM, pick_device
+from kernels.slam import ParticleMaps
 
 
 # settings that name a run when they differ from their default: key -> short name in the folder name
@@ -41,10 +46,7 @@ def run_tag(s, data=None) -> str:
     """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then each ablation setting
     that differs from its default (``-nofreecheck``, ``-bresenham``, ``-plstep0.01``) and each beam geometry
     override of ``data`` (``-fov3.13287``, ``-amin-1.56643``, ``-offset0_0_0``)."""
-    from irmcl_warp.config import SlamConfig
-    from irmcl_warp.io import GEOMETRY_FIELDS
-
-    tag = f"slam-{s.proposal}-{s.resample}-{s.particles}p-seed{s.seed}"
+    tag = f"slam-{s.proposal}-{s.resample}-{s.num_particles}p-seed{s.seed}"
     defaults = SlamConfig()
     for key, short in ABLATION_TAGS.items():
         v = s.get(key, getattr(defaults, key)) if hasattr(s, "get") else getattr(s, key, getattr(defaults, key))
@@ -75,21 +77,11 @@ def map_frame(odom: np.ndarray, margin_m: float, res: float, max_cells: int = 60
 def start_filter(cfg, log, device: str) -> RBPF:
     """The RBPF of ``cfg.slam`` for ``log`` (map framed on its odometry), started on its first scan."""
     s = cfg.slam
-    usable = float(s.usable_range_m) if s.usable_range_m is not None else far_m(cfg)
+    usable = far_bound_m(cfg, log.info.range_max_m)
     shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
     rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
     rbpf.start(log.odom[0], log.ranges_m[0])
     return rbpf
-
-
-def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
-    """RMSE of positions after the rigid 2D alignment (Horn / Umeyama without scale) of est onto gt, and the
-    mean absolute yaw error after it; over poses where both are finite."""
-    ok = np.all(np.isfinite(est), 1) & np.all(np.isfinite(gt), 1)
-    moved = compose(align_rigid(est, gt), est[ok])
-    e_yaw = np.degrees(np.abs(wrap_angle(moved[:, 2] - gt[ok, 2])))
-    return {"poses": int(ok.sum()), "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved[:, :2] - gt[ok, :2]) ** 2, 1)))),
-            "yaw_mae_deg": float(e_yaw.mean())}
 
 
 def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, margin_cells: int = 20) -> OccupancyGrid:
@@ -101,9 +93,6 @@ def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, marg
     if not rbpf.integrator.free_space:
         if log is None:
             raise ValueError("best_map: the particles' maps hold end points only; pass the log to cast the map")
-        from kernels import SLAM
-        from kernels.slam import ParticleMaps
-
         _, H, W = rbpf.maps.shape
         full = ParticleMaps(1, (H, W), (float(rbpf.maps.origin[0]), float(rbpf.maps.origin[1])), rbpf.maps.res,
                             device=rbpf.device)
@@ -131,17 +120,12 @@ def relation_stamps(cfg, log) -> np.ndarray:
     true stamps of the g2o keyframes with the same ranges, NaN for the other scans."""
     if not cfg.data.get("relation_stamps_path"):
         return log.stamps
-    from irmcl_warp.io import resolve
-    from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
-
     stamps = g2o_scan_stamps(read_g2o(resolve(cfg.data.relation_stamps_path)), log.ranges_m)
     print(f"{cfg.data.name}: {np.isfinite(stamps).sum()} scans carry a true stamp from {cfg.data.relation_stamps_path}")
     return stamps
 
 
 def run_slam(cfg) -> Path:
-    from irmcl_warp.localize import load_stream, write_tum
-
     started, device = time.time(), pick_device(cfg.device)
     s = cfg.slam
     out = stage_dir(cfg, run_tag(s, cfg.data))
@@ -175,7 +159,7 @@ def run_slam(cfg) -> Path:
     atomic_write_bytes(out / "neff.csv", ("scan,neff,resampled,match_rounds\n" + "".join(
         f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode())
     save_map(best_map(rbpf, best, log), out / "map")
-    metrics = {"dataset": cfg.data.name, "particles": s.particles, "proposal": s.proposal, "resample": s.resample,
+    metrics = {"dataset": cfg.data.name, "particles": s.num_particles, "proposal": s.proposal, "resample": s.resample,
                "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
                "odometry_jumps": int(jumps),
                "resamplings": int(sum(r for _, _, r, _ in neff_rows)), "wall_time_s": wall,
@@ -183,8 +167,6 @@ def run_slam(cfg) -> Path:
                "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
                "settings": OmegaConf.to_container(s)}
     if cfg.data.relations_path:
-        from irmcl_warp.io import read_relations, resolve
-
         try:
             rel = read_relations(resolve(cfg.data.relations_path))
             stamps = relation_stamps(cfg, log)

@@ -1,10 +1,11 @@
-"""Trajectory metrics. Each takes arrays and returns a flat dict of floats, ready for metrics.json."""
+"""Metrics the stages compute (below every stage, so eval and the stages share them). Each takes arrays and
+returns a flat dict of floats, ready for metrics.json."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from irmcl_warp.geometry import relative, wrap_angle
+from irmcl_warp.geometry import align_rigid, compose, relative, wrap_angle
 from irmcl_warp.types import match_stamps
 
 
@@ -118,3 +119,13 @@ def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float
     high = (e_xy > diverged_m) & tracking
     out["divergences"] = int(np.sum(high[1:] & ~high[:-1]) + (high[0] if len(high) else 0))
     return out
+
+
+def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
+    """RMSE of positions after the rigid 2D alignment (Horn / Umeyama without scale) of est onto gt, and the
+    mean absolute yaw error after it; over poses where both are finite."""
+    ok = np.all(np.isfinite(est), 1) & np.all(np.isfinite(gt), 1)
+    moved = compose(align_rigid(est, gt), est[ok])
+    e_yaw = np.degrees(np.abs(wrap_angle(moved[:, 2] - gt[ok, 2])))
+    return {"poses": int(ok.sum()), "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved[:, :2] - gt[ok, :2]) ** 2, 1)))),
+            "yaw_mae_deg": float(e_yaw.mean())}

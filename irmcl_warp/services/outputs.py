@@ -17,9 +17,14 @@ import subprocess
 import time
 from pathlib import Path
 
-from irmcl_warp.mapping.mapio import atomic_write_bytes
+from irmcl_warp.io.atomic import atomic_write_bytes
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def settings_key(*parts) -> str:
+    """A short digest of settings (any JSON-able parts): cache keys and resume keys."""
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def write_json(path, obj) -> Path:

@@ -1,0 +1,17 @@
+"""Timing shared by the benchmarks: seconds per call after warm-up, the device synchronised around."""
+
+from __future__ import annotations
+
+import time
+
+
+def time_per_call(fn, sync, steps: int, warmup: int = 2) -> float:
+    """Seconds per call of ``fn`` over ``steps`` calls after ``warmup`` ones; ``sync()`` waits for the device."""
+    for _ in range(warmup):
+        fn()
+    sync()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        fn()
+    sync()
+    return (time.perf_counter() - t0) / steps

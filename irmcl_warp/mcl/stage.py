@@ -1,0 +1,191 @@
+"""The localize stage: ``python -m irmcl_warp.localize +exp=<name> [mcl.weighting=nog_raymarch|likelihood_field|beam_model]``
+
+Runs MCL over the recorded stream (scans + odometry) from ``localize.num_starts`` start times spread over
+the sequence, each for ``localize.run_s`` seconds, globally (uniform over the free space) or tracking from a
+noisy pose (``localize.mode``). The map comes from the training split only: the NOF of ``train=<preset>`` baked into a NOG
+(nog_raymarch), or a log-odds grid of the training scans (grid baselines); particles start on the
+grid's known free cells for every method. As IR-MCL's code, the filter weighs and resamples only after
+the odometry moved (``mcl.update_min_*``), and a global run keeps the ``mcl.reduce_to`` heaviest
+particles ``localize.reduce_after_s`` into the run.
+
+``localize.kidnap_at_s`` > 0 teleports the robot: that far into each run the stream jumps to the next start
+time (another place; the odometry does not see the jump), and metrics.json scores the recovery.
+
+Writes outputs/<exp>/localize-<tag>/ (tag: weighting, mode, particles, resolution, kidnap; see
+``run_tag``): trajectories (TUM: stamp x y z qx qy qz qw), metrics.json (per start and summary),
+start0.png. The stream is cached in outputs/<exp>/stream/ (a GPU box can run without the raw log).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from irmcl_warp.config import MCLConfig
+from irmcl_warp.io import write_tum
+from irmcl_warp.mapping import integrate_scans
+from irmcl_warp.mapping.grid import laser_bounds
+from irmcl_warp.mcl.track import follow
+from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.nof.folders import train_folder
+from irmcl_warp.nog import NOG
+from irmcl_warp.services.nog import bake_nog
+from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams, recorded_inputs
+from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp.services.plots import plot_run
+from kernels import pick_device
+
+
+def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
+    """(free-space view for initialisation as a NOG, what the weighting reads, occupancy image for plots:
+    p_occ, 0.5 where unknown) from the training split."""
+    train = prepare_beams(cfg)["train"]
+    m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg)
+    grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
+                           device=device)
+    free_view = free_space_view(grid.probability, grid.origin_xy, res, grid.known)
+    image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
+    if m.weighting not in NOF_WEIGHTINGS:
+        # unknown cells stop the beam model's rays (AMCL's map_calc_range), but they are no obstacle for the
+        # likelihood field, whose distance map counts occupied cells only (as AMCL's)
+        unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
+        occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
+        return free_view, WeightingMaps(occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=res), image
+    (ckpt,) = nof_inputs(cfg)
+    if not ckpt.is_file():
+        raise FileNotFoundError(f"{ckpt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
+    if m.weighting == "nof_direct":
+        return free_view, WeightingMaps(model=load_nof(ckpt, "cuda" if device.startswith("cuda") else "cpu")[0]), image
+    nog = bake_nog(ckpt, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
+                   cache_dir=stage_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
+    return free_view, WeightingMaps(nog=nog), image
+
+
+ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",
+                 "resample": "", "estimate": "", "sigma_m": "sigma"}
+
+
+def run_tag(m, loc) -> str:
+    """Output folder name of a localization run (``m``: the mcl section, ``loc``: the localize protocol):
+    what differs between the paper's table cells, then each ablation setting that differs from its default
+    (``-beams16``, ``-tmin0``, ``-multinomial``)."""
+    n = f"{m.num_particles // 1000}k" if m.num_particles % 1000 == 0 else str(m.num_particles)
+    res = m.map_resolution_m * 100
+    tag = f"localize-{m.weighting}-{loc.mode}-{n}-{round(res) if abs(res - round(res)) < 1e-6 else f'{res:g}'}cm"
+    tag += f"-kidnap{loc.kidnap_at_s:g}s" if loc.kidnap_at_s > 0 else ""
+    tag += "-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else ""
+    defaults = MCLConfig()
+    for key, short in ABLATION_TAGS.items():
+        if m[key] != getattr(defaults, key):
+            tag += f"-{short}{m[key]:g}" if short else f"-{m[key]}"
+    return tag
+
+
+def run_folder(cfg) -> str:
+    return run_tag(cfg.mcl, cfg.localize)
+
+
+def nof_inputs(cfg) -> list[Path]:
+    """The trained field a NOF-weighted run reads (its digest decides whether the run is up to date)."""
+    if cfg.mcl.weighting not in NOF_WEIGHTINGS:
+        return []
+    return [stage_dir(cfg, train_folder(cfg)) / "nof.pt"]
+
+
+def start_indices(t: np.ndarray, starts: np.ndarray, k: int, loc) -> np.ndarray:
+    """The scans of run ``k`` (times ``t`` since the log's start): ``loc.run_s`` from ``starts[k]`` on; when
+    kidnapped, the rest of the run continues from the next start time (another place)."""
+    t0 = starts[k]
+    idx = np.flatnonzero((t >= t0) & (t <= t0 + loc.run_s))
+    if loc.kidnap_at_s > 0:
+        t1 = starts[(k + 1) % len(starts)]
+        idx = np.concatenate([idx[t[idx] < t0 + loc.kidnap_at_s],
+                              np.flatnonzero((t >= t1) & (t <= t1 + loc.run_s - loc.kidnap_at_s))])
+    return idx
+
+
+def run_localize(cfg) -> Path:
+    started, device = time.time(), pick_device(cfg.device)
+    m, loc, far = cfg.mcl, cfg.localize, far_bound_m(cfg)
+    out = stage_dir(cfg, run_folder(cfg))
+    inputs = recorded_inputs(cfg) + nof_inputs(cfg)
+    if up_to_date(out, cfg, inputs, "localize"):
+        return out
+    log = load_stream(cfg)
+    if log.ground_truth is None:
+        raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
+    view, maps, image = build_maps(cfg, device)
+    t = log.stamps - log.stamps[0]
+    starts = np.linspace(0.0, max(t[-1] - loc.run_s, 0.0), loc.num_starts)
+    runs, kidnapped = [], loc.kidnap_at_s > 0
+    if kidnapped and not (0 < loc.kidnap_at_s < loc.run_s and loc.num_starts >= 2):
+        raise ValueError(f"localize.kidnap_at_s={loc.kidnap_at_s} must lie inside the run (localize.run_s={loc.run_s}) "
+                         f"and the robot needs another start time to be teleported to (localize.num_starts={loc.num_starts})")
+    for k, t0 in enumerate(starts):
+        pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
+        pf.rng = np.random.default_rng(m.seed * 1000 + k)
+        idx = start_indices(t, starts, k, loc)
+        if loc.mode == "global":
+            pf.init_uniform()
+        else:
+            first = idx[np.all(np.isfinite(log.ground_truth[idx]), axis=1)][0]
+            pf.init_gaussian(log.ground_truth[first], loc.tracking_std)
+        t_run = time.perf_counter()
+        # synchronous: every step reads its estimate back; IR-MCL reduces the particles in global runs only
+        est = follow(pf, log, idx, m, loc.reduce_after_s if loc.mode == "global" else None)
+        ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
+        stamps = log.stamps[idx]
+        cut = int(np.argmax(np.diff(idx) != 1) + 1) if kidnapped else len(idx)  # the first scan after a jump
+        if kidnapped:  # a continuous clock over the jump: the second part follows the first
+            dt = np.diff(stamps, prepend=stamps[0])
+            dt[cut] = np.median(dt[1:cut])
+            stamps = stamps[0] + np.cumsum(dt)
+        write_tum(out / f"start{k}.tum", stamps, est)
+        gt = log.ground_truth[idx]
+        metrics = localization_metrics(stamps, est, gt)
+        if kidnapped:
+            before = localization_metrics(stamps[:cut], est[:cut], gt[:cut])
+            recovery = localization_metrics(stamps[cut:], est[cut:], gt[cut:])
+            metrics = {**metrics, "localized_before_kidnap": before["converged"],
+                       "recovered": bool(before["converged"] and recovery["success"]),
+                       "recovery_time_s": recovery["time_to_converge_s"]}
+        runs.append({"start_s": float(t0), "ms_per_scan": ms_per_scan, **metrics})
+        print(f"start {k} at {t0:.0f} s: " + (f"converged after {metrics['time_to_converge_s']:.1f} s, RMSE "
+              f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge")
+              + (f"; recovered from the kidnapping: {metrics['recovered']}" if kidnapped else ""))
+        if k == 0:
+            plot_run(out / "start0.png", view, image, stamps, gt, est, pf.particles.numpy(),
+                     metrics["time_to_converge_s"], stamps[cut] - stamps[0] if kidnapped else None)
+    settings = {**OmegaConf.to_container(m), **OmegaConf.to_container(loc), "far_m": far}
+    summary = summarise(runs, settings, device)
+    write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs, "settings": settings})
+    write_manifest(out, cfg, inputs, device, started)
+    print(f"{cfg.data.name}, {m.weighting} ({loc.mode}): success {summary['successes']}/{len(runs)} -> {out}")
+    return out
+
+
+def summarise(runs: list[dict], s: dict, device: str) -> dict:
+    """The summary of a localize run's starts (``s``: its settings, mcl and localize sections together)."""
+    ok = [r for r in runs if r["success"]]
+
+    def mean(key, rows):
+        vals = [r[key] for r in rows if r.get(key) is not None]
+        return float(np.mean(vals)) if vals else None
+
+    summary = {"weighting": s["weighting"], "mode": s["mode"], "num_particles": s["num_particles"],
+               "map_resolution_m": s["map_resolution_m"], "device": device, "starts": len(runs), "successes": len(ok),
+               "success_rate": len(ok) / len(runs), "divergences": int(sum(r["divergences"] for r in runs))}
+    summary["ms_per_scan_median"] = float(np.median([r["ms_per_scan"] for r in runs]))  # the first start also compiles
+    for key in ("location_rmse_cm", "yaw_rmse_deg", "time_to_converge_s", "within_5cm_pct", "within_10cm_pct",
+                "within_20cm_pct", "within_0.5deg_pct", "within_1deg_pct", "within_2deg_pct"):
+        summary[f"{key}_mean"] = mean(key, ok)
+    if s["kidnap_at_s"] > 0:
+        summary["kidnap_at_s"] = s["kidnap_at_s"]
+        summary["recovered"] = int(sum(r["recovered"] for r in runs))
+        summary["recovery_time_s_mean"] = mean("recovery_time_s", [r for r in runs if r["recovered"]])
+    return summary

@@ -1,0 +1,37 @@
+"""Driving a particle filter over a recorded log: ``follow(pf, log, idx, mcl)``, the loop every MCL user
+shares (the localize stage, the pipeline)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from irmcl_warp.types import LaserLog
+from kernels.motion import odometry_step
+
+
+def moved(odom_step, min_trans: float, min_rot: float) -> bool:
+    """Has the robot moved enough since the last update (AMCL's update_min_d / update_min_a)?"""
+    rot1, trans, rot2 = odom_step
+    return abs(trans) > min_trans or abs(rot1 + rot2) > min_rot
+
+
+def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None) -> np.ndarray:
+    """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised. As
+    IR-MCL's code, the filter weighs and resamples only after the odometry moved (``m.update_min_*``), and
+    keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). A jump in
+    ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero."""
+    est = np.empty((len(idx), 3))
+    last_odom, t_start, pose = log.odom[idx[0]], log.stamps[idx[0]], None
+    reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
+    for j, i in enumerate(idx):
+        if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
+            last_odom = log.odom[i]
+        u = odometry_step(last_odom, log.odom[i])
+        if pose is None or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+            pose = pf.step(u, log.ranges_m[i])[0]
+            last_odom = log.odom[i]
+            if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
+                pf.reduce(m.reduce_to)
+                reduce_pending = False
+        est[j] = pose
+    return est

@@ -1,0 +1,76 @@
+"""One factory for the particle filter: ``build_filter(mcl, free_space, laser, far_m, device, maps)``.
+
+Every user of MCL (the localize stage, the pipeline, global localization, the benchmarks) builds its filter
+here, from the ``mcl`` config and a map:
+
+* ``free_space``: where particles may start (``free_space_view`` of an occupancy grid);
+* ``WeightingMaps``: what the observation model reads: a NOG (``nog_raymarch``), a NOF model
+  (``nof_direct``) or an occupancy grid (``likelihood_field``, ``beam_model``).
+
+The weighting is sized by the filter (particles x chosen beams): the filter calls the returned
+``make_weighting(num_particles, num_beams)`` once at start and again in ``reduce()``, which releases the
+scratch arrays sized for the larger set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from irmcl_warp.mcl.filter import ParticleFilter
+from irmcl_warp.nog import NOG
+from kernels import WEIGHTING
+
+FREE_BELOW_P = 0.35  # a known cell under this p_occ is free space for the particles' uniform start
+NOF_WEIGHTINGS = ("nog_raymarch", "nof_direct")  # the observation models that read the trained field
+
+
+def free_space_view(probability: np.ndarray, origin_xy, resolution_m: float, known: np.ndarray | None = None) -> NOG:
+    """The grid's known free cells (p_occ < FREE_BELOW_P) as 0, the rest 1, in a NOG whose nodes sit at the
+    cell centres (``origin_xy``: the grid's lower-left corner): the filter spreads its uniform start over the
+    zeros."""
+    free = probability < FREE_BELOW_P
+    if known is not None:
+        free &= known
+    centre = (origin_xy[0] + resolution_m / 2, origin_xy[1] + resolution_m / 2)
+    return NOG(np.where(free, 0.0, 1.0).astype(np.float32), centre, resolution_m)
+
+
+@dataclass
+class WeightingMaps:
+    """What an observation model reads; only the one ``mcl.weighting`` names needs to be set."""
+    nog: NOG | None = None  # nog_raymarch
+    model: object | None = None  # nof_direct: a NOF (torch module)
+    occupancy: np.ndarray | None = None  # grid models: p_occ per cell (unknown cells as the model wants them)
+    origin_xy: tuple[float, float] | None = None  # ... the grid's lower-left corner
+    resolution_m: float | None = None
+
+
+def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_particles: int, num_beams: int):
+    """The WEIGHTING entry ``mcl.weighting`` for ``num_particles`` x ``num_beams``."""
+    w = mcl.weighting
+    if w in NOF_WEIGHTINGS:
+        shared = dict(num_particles=num_particles, num_beams=num_beams, num_samples=mcl.num_samples,
+                      near_m=mcl.near_m, far_m=far_m, sigma_m=mcl.sigma_m, device=device)
+        if w == "nof_direct":
+            import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct; lazy: it needs torch)
+
+            return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
+        return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below, **shared)
+    return WEIGHTING.build(w, occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
+                           resolution_m=maps.resolution_m, max_range_m=far_m, device=device)
+
+
+def _need(value, weighting: str, what: str):
+    if value is None:
+        raise ValueError(f"mcl.weighting={weighting} reads {what}, and none was given")
+    return value
+
+
+def build_filter(mcl, free_space: NOG, T_base_laser, scan_angles_rad, far_m: float, device: str,
+                 maps: WeightingMaps) -> ParticleFilter:
+    """The particle filter of ``mcl`` on this map, its weighting sized by the filter."""
+    return ParticleFilter(free_space, mcl, T_base_laser, scan_angles_rad, far_m,
+                          partial(make_weighting, mcl, far_m, device, maps), device)

@@ -1,0 +1,28 @@
+"""``bake_nog``: the NOG of a trained NOF, cached by the hash of the checkpoint file and the settings
+(outputs/<exp>/nog/nog-<hash>.npz), so every stage that localizes with the same field bakes it once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.nog import NOG, evaluate_grid
+from irmcl_warp.services.outputs import file_digest, settings_key
+
+
+def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None,
+             device="cpu") -> NOG:
+    """Bake (or read from the cache) the NOG of a nof.pt checkpoint."""
+    key = settings_key(file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m))
+    path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None
+    if path is not None and path.is_file():
+        try:
+            return NOG.load(path)
+        except (OSError, KeyError, ValueError):
+            pass  # unreadable cache (interrupted write of an older version): bake again
+    model, _ = load_nof(checkpoint, device)
+    nog = evaluate_grid(model, bounds, resolution_m, device)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        nog.save(path)
+    return nog

@@ -1,0 +1,51 @@
+"""The floors of docs/ARCHITECTURE.md as checks: the import contracts of pyproject.toml (import-linter) hold,
+a forbidden import breaks them, and no module imports itself through others (no cycles between files)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import grimp
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("irmcl_warp", "kernels", "eval")
+
+
+def _lint(root: Path) -> subprocess.CompletedProcess:
+    """lint-imports on the packages under ``root`` (its pyproject.toml), as CI would run it."""
+    code = "import sys; from importlinter.cli import lint_imports_command; sys.exit(lint_imports_command())"
+    env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"}
+    return subprocess.run([sys.executable, "-c", code, "--config", str(root / "pyproject.toml")], cwd=root,
+                          capture_output=True, text=True, env=env, timeout=300)
+
+
+def test_import_contracts_hold():
+    run = _lint(REPO)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
+    assert "0 broken" in run.stdout
+
+
+@pytest.mark.parametrize("importer, forbidden, contract", [
+    ("kernels/grid.py", "from irmcl_warp.nof.model import NOF", "kernels is a leaf"),
+    ("irmcl_warp/slam/stage.py", "from irmcl_warp.mcl.stage import run_localize", "no stage imports another stage"),
+    ("irmcl_warp/services/data.py", "from eval.tables import main", "stage services import no stage"),
+])
+def test_a_forbidden_import_breaks_a_contract(tmp_path, importer, forbidden, contract):
+    for name in PACKAGES:
+        shutil.copytree(REPO / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(REPO / "pyproject.toml", tmp_path / "pyproject.toml")
+    with open(tmp_path / importer, "a") as f:
+        f.write(f"\n{forbidden}  # noqa\n")
+    run = _lint(tmp_path)
+    assert run.returncode != 0 and f"{contract}" in run.stdout and "BROKEN" in run.stdout, run.stdout[-3000:]
+
+
+def test_no_module_imports_itself_through_others():
+    graph = grimp.build_graph(*PACKAGES, include_external_packages=False)
+    cycles = sorted({tuple(sorted((a, b))) for a in graph.modules for b in graph.find_modules_directly_imported_by(a)
+                     if graph.chain_exists(importer=b, imported=a)})
+    assert cycles == [], cycles
