@@ -24,6 +24,7 @@ from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
 from irmcl_warp.nof.trainer import opacity_regulariser
 from irmcl_warp.services.outputs import write_json
+from irmcl_warp.services.cli import guard
 
 MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_after=2),
           "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8)}
@@ -129,4 +130,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    guard(main)

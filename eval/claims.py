@@ -28,10 +28,10 @@ def _loc(runs, exp, tag):
 
 
 def _slam(runs, ds, proposal="paper", resample="selective", particles=30, variant=""):
-    errs = [m["relations"]["trans_abs_mean_m"] for (_, tag), m in runs.items()
+    errs = [m["relations"]["trans_abs_mean_m"] for m in runs.values()
             if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == resample
             and m.get("particles") == particles and isinstance(m.get("relations"), dict)
-            and slam_variant(tag) == variant]
+            and slam_variant(m) == variant]
     if not errs:
         return None
     e = np.array(errs)

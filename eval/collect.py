@@ -1,6 +1,9 @@
-"""Collecting the runs: every metrics.json under ``results/`` (runs kept in the repository, e.g. GPU runs) and
-``outputs/`` (your own runs; they win where both hold the same experiment and run folder). Tables, claims
-and plots read runs only through here."""
+"""Collecting the runs: the runs kept in the repository (``results/<group>/<exp>.json``, written by
+``python -m eval.keep``) and your own (``outputs/<exp>/<stage>-*/`` with config.yaml and metrics.json; they
+win where both hold the same experiment and run folder). Tables, claims and plots read runs only through
+here, and every label they print comes from a run's config and metrics, never from its folder's name.
+
+A run is its metrics dict (``Run``) with the config sections its stage read as ``run.config``."""
 
 from __future__ import annotations
 
@@ -8,69 +11,103 @@ import json
 import re
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
+from eval.keep import read_run, stage_of
+from irmcl_warp.mcl.stage import run_tag as localize_run_tag
+from irmcl_warp.slam.stage import run_tag as slam_run_tag
+
 REPO = Path(__file__).resolve().parents[1]
-ROOTS = (REPO / "results" / "nof", REPO / "outputs")
-MCL_ROOTS = (REPO / "results" / "mcl", REPO / "outputs")
-SLAM_ROOTS = (REPO / "results" / "slam", REPO / "outputs")
-GLOBLOC_ROOTS = (REPO / "results" / "globloc", REPO / "outputs")
+RESULTS, OUTPUTS = REPO / "results", REPO / "outputs"
 GLOBLOC_METHODS = {"lidar_mcl": "lidar-only MCL", "camera_only": "camera only", "paper": "paper's pipeline",
                    "mcl_seeded": "MCL seeded by the camera"}
 CONVERGED_M = 0.15  # a SLAM run "converged" below this mean relations error (the threshold of issue 6's reference)
-# localize-<weighting>-<mode>-<particles>-<res>cm[-kidnap<s>s][-recovery], see irmcl_warp.localize.run_tag
-TAG = re.compile(r"localize-(?P<w>[a-z_]+)-(?P<mode>global|tracking)-(?P<n>\d+k?)-(?P<res>[\d.]+)cm(?P<rest>.*)$")
 DATASET_ORDER = ("fr079", "intel", "mit_csail", "sim_office")
 
 
-def _load(path: Path):
+class Run(dict):
+    """A run's metrics.json, with ``config``: the config sections its stage read, and ``source``: "results"
+    (kept in the repository) or "outputs" (your own)."""
+
+    def __init__(self, metrics: dict, config: dict, source: str = "outputs"):
+        super().__init__(metrics)
+        self.config, self.source = config, source
+
+
+def _load_kept(path: Path) -> dict:
     try:
         return json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as e:
-        raise SystemExit(f"{path}: unreadable metrics file ({e}); rerun the stage that wrote it")
+        raise SystemExit(f"{path}: unreadable results file ({e}); regenerate it with python -m eval.keep")
 
 
-def collect_synthesis(roots=ROOTS) -> dict:
-    """{(exp, preset): (synthesis metrics, train metrics or None)}; later roots override earlier ones."""
+def collect(group: str, stages: tuple[str, ...], results: Path = RESULTS, outputs: Path | None = OUTPUTS) -> dict:
+    """{(exp, run folder): Run} of the stages ``stages`` (results/<group>/<exp>.json, then outputs/)."""
     runs = {}
-    for root in roots:
-        for f in sorted(Path(root).glob("*/synthesis-*/metrics.json")):
-            exp, preset = f.parent.parent.name, f.parent.name.split("-", 1)[1]
-            train = f.parent.parent / f"train-{preset}" / "metrics.json"
-            runs[(exp, preset)] = (_load(f), _load(train) if train.is_file() else None)
+    for path in sorted((Path(results) / group).glob("*.json")):
+        doc = _load_kept(path)
+        for folder, r in doc["runs"].items():
+            if stage_of(folder) in stages:
+                runs[(doc["exp"], folder)] = Run(r["metrics"], r["config"], "results")
+    for stage in stages if outputs is not None else ():
+        for f in sorted(Path(outputs).glob(f"*/{stage}*/metrics.json")):
+            if stage_of(f.parent.name) != stage:
+                continue
+            try:
+                r = read_run(f.parent)
+            except (OSError, ValueError) as e:
+                raise SystemExit(f"{f.parent}: unreadable run ({e}); rerun the stage that wrote it")
+            runs[(f.parent.parent.name, f.parent.name)] = Run(r["metrics"], r["config"])
     return runs
 
 
-def collect_localization(roots=MCL_ROOTS) -> dict:
-    """{(exp, run folder): metrics} of the localize stage; later roots override earlier ones. Folders that do
-    not follow the run-tag naming (older layouts) are left out."""
-    return _collect_runs(roots, "localize-*", TAG.match)
+def run_name(run: Run) -> str:
+    """A NOF run's preset, plus the renderer when it is not Warp (nof.folders.run_name, from its config)."""
+    c = run.config
+    return c["train"]["name"] + ("" if c["render"]["name"] == "warp" else f"-{c['render']['name']}")
 
 
-def _collect_runs(roots, folders: str, keep=lambda name: True) -> dict:
-    """{(exp, run folder): metrics} of root/<exp>/<folders>/metrics.json; later roots override earlier ones."""
-    runs = {}
-    for root in roots:
-        for f in sorted(Path(root).glob(f"*/{folders}/metrics.json")):
-            if keep(f.parent.name):
-                runs[(f.parent.parent.name, f.parent.name)] = _load(f)
-    return runs
+def collect_synthesis(**where) -> dict:
+    """{(exp, preset): (synthesis metrics, train metrics or None)}: each scan-synthesis run with the training
+    run of the same preset and renderer from the same place (the field it scored)."""
+    runs = collect("nof", ("synthesis", "train"), **where)
+    trained = {(exp, run_name(r), r.source): r for (exp, folder), r in runs.items() if stage_of(folder) == "train"}
+    return {(exp, run_name(r)): (r, trained.get((exp, run_name(r), r.source)))
+            for (exp, folder), r in runs.items() if stage_of(folder) == "synthesis"}
 
 
-def slam_variant(tag: str) -> str:
-    """The ablation settings a SLAM run folder names after its seed ("" for the defaults): ``freecheck, dda``."""
-    import re
-
-    m = re.match(r"slam-\w+?-\w+?-\d+p-seed\d+(.*)$", tag)
-    return ", ".join(re.split(r"-(?=[a-z])", m.group(1))[1:]) if m and m.group(1) else ""
+def collect_localization(**where) -> dict:
+    return collect("mcl", ("localize",), **where)
 
 
-def collect_slam(roots=SLAM_ROOTS) -> dict:
-    """{(exp, run folder): metrics} of the slam stage; later roots override earlier ones."""
-    return _collect_runs(roots, "slam-*")
+def collect_slam(**where) -> dict:
+    return collect("slam", ("slam",), **where)
 
 
-def collect_pipeline(roots=(REPO / "results" / "pipeline", REPO / "outputs")) -> dict:
-    return _collect_runs(roots, "pipeline")
+def collect_pipeline(**where) -> dict:
+    return collect("pipeline", ("pipeline",), **where)
 
 
-def collect_globloc(roots=GLOBLOC_ROOTS) -> dict:
-    return _collect_runs(roots, "globloc-*")
+def collect_globloc(**where) -> dict:
+    return collect("globloc", ("globloc",), **where)
+
+
+def slam_variant(run: Run) -> str:
+    """The ablation settings of a SLAM run that differ from the defaults ("" for none): ``freecheck, dda``,
+    from its settings and data config (as the slam stage names its folder)."""
+    s = run.config["slam"]
+    tag = slam_run_tag(OmegaConf.create(s), OmegaConf.create(run.config.get("data", {})))
+    base = f"slam-{s['proposal']}-{s['resample']}-{s['num_particles']}p-seed{s['seed']}"
+    return ", ".join(re.split(r"-(?=[a-z])", tag[len(base):])[1:])
+
+
+def localize_cell(run: Run) -> dict:
+    """A localize run's table cell, from its settings (the mcl and localize sections it ran with): weighting,
+    mode, map resolution as the stage names it ("5", "2.5" cm), and ``extra``: what its run tag adds beyond
+    the cell (kidnapping, recovery, ablation settings; "" for a run of the paper's cells)."""
+    st = OmegaConf.create(run["settings"])
+    res = st.map_resolution_m * 100
+    res = str(round(res)) if abs(res - round(res)) < 1e-6 else f"{res:g}"
+    n = f"{st.num_particles // 1000}k" if st.num_particles % 1000 == 0 else str(st.num_particles)
+    base = f"localize-{st.weighting}-{st.mode}-{n}-{res}cm"
+    return {"weighting": st.weighting, "mode": st.mode, "res": res, "extra": localize_run_tag(st, st)[len(base):]}

@@ -12,8 +12,9 @@ import argparse
 from collections import defaultdict
 from pathlib import Path
 
-from eval.collect import CONVERGED_M, REPO, SLAM_ROOTS, collect_slam, slam_variant
+from eval.collect import CONVERGED_M, OUTPUTS, REPO, RESULTS, collect_globloc, collect_slam, slam_variant
 from irmcl_warp.services.outputs import save_figure
+from irmcl_warp.services.cli import guard
 
 
 def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
@@ -23,8 +24,8 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
     import matplotlib.pyplot as plt
 
     groups = defaultdict(lambda: defaultdict(list))
-    for (_, tag), m in runs.items():
-        if m["dataset"] == dataset and isinstance(m.get("relations"), dict) and not slam_variant(tag):
+    for m in runs.values():
+        if m["dataset"] == dataset and isinstance(m.get("relations"), dict) and not slam_variant(m):
             where = "" if str(m.get("device", "")).startswith("cuda") else f" ({m.get('device', '?')})"
             groups[f"{m['proposal']} + {m['resample']}{where}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
     if not groups:
@@ -52,12 +53,10 @@ def particles_vs_success(runs: dict, dataset: str, out: Path) -> Path | None:
     return save_figure(fig, out)
 
 
-def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
+def kidnapped_run(exp: str, name: str, metrics: dict, out: Path) -> Path | None:
     """Position error over time of every method on the first run of a kidnap scenario (``first_run`` of its
-    metrics.json), the kidnapping and the paper pipeline's relocalizations marked."""
-    import json
-
-    first = json.loads((run_dir / "metrics.json").read_text()).get("first_run", {})
+    metrics), the kidnapping and the paper pipeline's relocalizations marked."""
+    first = metrics.get("first_run", {})
     methods = [m for m in first if isinstance(first[m], dict)]
     if len(methods) < 2:  # a figure compares methods (ablation runs of one method are left out)
         return None
@@ -82,7 +81,7 @@ def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
     ax.axhline(0.5, color="gray", lw=0.8, ls="--")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("position error (m)")
-    ax.set_title(f"{run_dir.parent.name}/{run_dir.name}: run 0 (dotted: the pipeline's relocalizations)")
+    ax.set_title(f"{exp}/{name}: run 0 (dotted: the pipeline's relocalizations)")
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     return save_figure(fig, out)
@@ -90,12 +89,13 @@ def kidnapped_run(run_dir: Path, out: Path) -> Path | None:
 
 def best_maps(runs: dict, out: Path) -> list[Path]:
     """docs/maps/<exp>.png: the map of each log's best default paper-proposal run (lowest relations error;
-    30 particles, or the most there are), copied from its run folder (outputs/ wins over results/)."""
+    30 particles, or the most there are), copied from its run folder in outputs/ or its kept map
+    (results/slam/maps/<exp>/<run>.png; outputs/ wins)."""
     import shutil
 
     best = {}
     for (exp, tag), m in runs.items():
-        if m.get("proposal") != "paper" or m.get("resample") != "selective" or slam_variant(tag) \
+        if m.get("proposal") != "paper" or m.get("resample") != "selective" or slam_variant(m) \
                 or not isinstance(m.get("relations"), dict):
             continue
         key = (m["particles"] == 30, m["particles"], -m["relations"]["trans_abs_mean_m"])
@@ -103,7 +103,7 @@ def best_maps(runs: dict, out: Path) -> list[Path]:
             best[exp] = (key, tag)
     made = []
     for exp, (_, tag) in sorted(best.items()):
-        src = [r / exp / tag / "map.png" for r in reversed(SLAM_ROOTS) if (r / exp / tag / "map.png").exists()]
+        src = [p for p in (OUTPUTS / exp / tag / "map.png", RESULTS / "slam" / "maps" / exp / f"{tag}.png") if p.exists()]
         if src:
             out.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(src[0], out / f"{exp}.png")
@@ -117,16 +117,13 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    runs = collect_slam(SLAM_ROOTS)
+    runs = collect_slam()
     made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
             if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
     made += best_maps(runs, out.parent / "maps")
-    kidnaps = {}  # (experiment, scenario) -> folder; outputs/ wins over results/
-    for root in (REPO / "results" / "globloc", REPO / "outputs"):
-        for d in sorted(Path(root).glob("*/globloc-kidnap*")):
-            kidnaps[(d.parent.name, d.name)] = d
-    for (exp, name), d in sorted(kidnaps.items()):
-        if (p := kidnapped_run(d, out / f"globloc_{exp}_{name}.png")) is not None:
+    for (exp, name), m in sorted(collect_globloc().items()):  # outputs/ wins over results/
+        if m.get("kidnap_at_s", m.get("settings", {}).get("kidnap_at_s", 0)) > 0 \
+                and (p := kidnapped_run(exp, name, m, out / f"globloc_{exp}_{name}.png")) is not None:
             made.append(p)
     for p in made:
         print(f"-> {p}")
@@ -135,4 +132,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guard(main)

@@ -23,6 +23,7 @@ take days. The commands of every kept figure are in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import json
 import itertools
 import subprocess
 import sys
@@ -35,6 +36,7 @@ from irmcl_warp.config import register
 from irmcl_warp.globloc.run import scenario_folder
 from irmcl_warp.mcl.stage import run_folder as localize_folder
 from irmcl_warp.nof.folders import synthesis_folder, train_folder
+from irmcl_warp.services.cli import guard
 from irmcl_warp.services.outputs import SECTIONS, stage_complete
 from irmcl_warp.slam.stage import run_tag as slam_tag
 
@@ -42,7 +44,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 KEPT = {"irmcl_warp.train": "nof", "eval.synthesis": "nof", "irmcl_warp.localize": "mcl", "irmcl_warp.slam": "slam",
-        "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # results/<this>/<exp>/<folder>
+        "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # results/<this>/<exp>.json (eval.keep)
 
 
 @dataclass
@@ -130,9 +132,10 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
     done, why = stage_complete(outputs / rel, cfg, sections=SECTIONS.get(sweep.module.rsplit(".", 1)[-1]))
     if done:
         return "done", str(outputs / rel)
-    kept = results / KEPT[sweep.module] / rel / "metrics.json"
-    if kept.is_file() and not rerun_kept:
-        return "kept", str(kept.parent)
+    exp, name = rel.split("/", 1)
+    kept = results / KEPT[sweep.module] / f"{exp}.json"
+    if not rerun_kept and kept.is_file() and name in json.loads(kept.read_text())["runs"]:
+        return "kept", f"{kept} [{name}]"
     return "missing", why
 
 
@@ -205,4 +208,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(guard(main))

@@ -13,10 +13,11 @@ import re
 from pathlib import Path
 
 from eval.claims import claims, reproduction_markdown
-from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, TAG, collect_globloc, collect_localization, collect_pipeline,
-                          collect_slam, collect_synthesis, slam_variant)
+from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, collect_globloc, collect_localization,
+                          collect_pipeline, collect_slam, collect_synthesis, localize_cell, slam_variant)
 from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.services.cli import guard
 
 # GMapping references (facts cited, scored with the relations metric, mean translational error):
 # * "released C++": issue 6 of this project: the public GMapping source built without ROS, ROS wrapper defaults,
@@ -78,11 +79,11 @@ def localization_table(runs: dict) -> str:
     succeeded; the starts are seeded and spread over the sequence). Where a cell was run with several
     particle counts, the largest is shown (the paper's setting; smaller ones are quick checks)."""
     cells = {}
-    for (exp, tag), m in runs.items():
-        t = TAG.match(tag)
-        if t["rest"]:
-            continue  # kidnapping runs: kidnap_table
-        key = (m["dataset"], t["w"], float(t["res"]), t["mode"])
+    for m in runs.values():
+        t = localize_cell(m)
+        if t["extra"]:
+            continue  # kidnapping runs (kidnap_table) and ablations (ablation_table)
+        key = (m["dataset"], t["weighting"], float(t["res"]), t["mode"])
         if key not in cells or m["summary"]["num_particles"] >= cells[key]["num_particles"]:
             cells[key] = m["summary"]
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
@@ -152,14 +153,14 @@ def kidnap_table(runs: dict) -> str:
     lines = ["| dataset | method | map | particles | kidnapped at (s) | recovery rates (slow / fast) | recovered | "
              "recovery time (s) | divergences |", "|---|---|---|---|---|---|---|---|---|"]
     rows = []
-    for (exp, tag), m in runs.items():
-        t, s_ = TAG.match(tag), m["summary"]
+    for m in runs.values():
+        t, s_ = localize_cell(m), m["summary"]
         if "recovered" not in s_:
             continue
         st = m.get("settings", {})
         rates = f"{st.get('recovery_alpha_slow', '?')} / {st.get('recovery_alpha_fast', '?')}"
         rows.append((DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99,
-                     f"| {m['dataset']} | {METHODS.get(t['w'], t['w'])} | {t['res']} cm | {s_['num_particles'] // 1000}k | "
+                     f"| {m['dataset']} | {METHODS.get(t['weighting'], t['weighting'])} | {t['res']} cm | {s_['num_particles'] // 1000}k | "
                      f"{s_['kidnap_at_s']:g} | {rates} | {s_['recovered']}/{s_['starts']} | "
                      f"{_f(s_['recovery_time_s_mean'])} | {s_['divergences']} |"))
     return "\n".join(lines + [r for _, r in sorted(rows)])
@@ -173,10 +174,11 @@ def slam_table(runs: dict) -> str:
     import numpy as np
 
     groups = {}
-    for (exp, tag), m in runs.items():
+    for m in runs.values():
         if not isinstance(m.get("relations"), dict):
             continue
-        key = (m["dataset"], slam_variant(tag) != "", m["proposal"], m["resample"], m["particles"], slam_variant(tag),
+        variant = slam_variant(m)
+        key = (m["dataset"], variant != "", m["proposal"], m["resample"], m["particles"], variant,
                m.get("device", "?"))
         groups.setdefault(key, []).append(m)
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
@@ -302,4 +304,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    guard(main)

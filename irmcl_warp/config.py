@@ -279,3 +279,96 @@ class Config:
 def register() -> None:
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
+
+
+class ConfigError(ValueError):
+    """A setting outside what its key allows, or a key no schema declares."""
+
+
+# choices of the string settings (a typo is an error, not a silent fallback)
+CHOICES = {
+    "data.format": ("sim", "carmen", "bag"), "data.beam_policy": ("error", "reject", "resample"),
+    "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
+    "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"), "mapping.kernel": ("logodds",),
+    "mcl.weighting": ("nog_raymarch", "nof_direct", "likelihood_field", "beam_model"),
+    "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.resample": ("low_variance", "multinomial"),
+    "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
+    "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"),
+    "globloc.scan2map": ("paper", "likelihood_field"), "globloc.cluster_space": ("pose", "index"),
+}
+# numeric settings: (lowest, highest, what) with None for no bound; lowest is exclusive where the name says "> "
+RANGES = {
+    "data.far_m": ("> 0", None), "data.max_speed_mps": ("> 0", None), "data.max_step_m": ("> 0", None),
+    "data.no_return_m": ("> 0", None), "data.fov_rad": ("> 0", 6.2832),
+    "sim.rate_hz": ("> 0", None), "sim.num_beams": (1, None), "sim.max_range_m": ("> 0", None),
+    "sim.speed_mps": ("> 0", None), "sim.width_m": ("> 0", None), "sim.height_m": ("> 0", None),
+    "sim.dropout_prob": (0, 1), "sim.range_noise_std_m": (0, None),
+    "mapping.resolution_m": ("> 0", None), "mapping.max_range_m": ("> 0", None),
+    "model.num_freqs": (1, None), "model.width": (1, None), "model.depth": (1, None), "model.skip_after": (0, None),
+    "render.num_samples": (2, None), "render.near_m": (0, None), "render.t_min": (0, 1), "render.chunk_rays": (1, None),
+    "train.epochs": (1, None), "train.batch_rays": (1, None), "train.num_samples": (2, None), "train.lr": ("> 0", None),
+    "train.weight_decay": (0, None), "train.steps_per_epoch": (1, None), "train.val_scans": (1, None),
+    "train.max_time_s": ("> 0", None), "train.checkpoint_every_s": ("> 0", None),
+    "mcl.num_particles": (1, None), "mcl.num_beams": (1, None), "mcl.num_samples": (2, None), "mcl.near_m": (0, None),
+    "mcl.t_min": (0, 1), "mcl.empty_below": (0, 1), "mcl.sigma_m": ("> 0", None), "mcl.estimate_share": ("> 0", 1),
+    "mcl.cluster_cell_m": ("> 0", None), "mcl.cluster_yaw_bins": (1, None), "mcl.reduce_to": (0, None),
+    "mcl.update_min_trans_m": (0, None), "mcl.update_min_rot_rad": (0, None), "mcl.resample_threshold": (0, 1),
+    "mcl.map_resolution_m": ("> 0", None), "mcl.recovery_alpha_slow": (0, 1), "mcl.recovery_alpha_fast": (0, 1),
+    "localize.num_starts": (1, None), "localize.run_s": ("> 0", None), "localize.kidnap_at_s": (0, None),
+    "localize.reduce_after_s": (0, None),
+    "slam.num_particles": (1, None), "slam.resample_threshold": (0, 1), "slam.sigma": ("> 0", None),
+    "slam.kernel_size": (0, None), "slam.lstep": ("> 0", None), "slam.astep": ("> 0", None), "slam.iterations": (0, None),
+    "slam.lsigma": ("> 0", None), "slam.ogain": ("> 0", None), "slam.lskip": (0, None), "slam.fullness": (0, 1),
+    "slam.srr": (0, None), "slam.srt": (0, None), "slam.str": (0, None), "slam.stt": (0, None),
+    "slam.linear_update": (0, None), "slam.angular_update": (0, None), "slam.resolution_m": ("> 0", None),
+    "slam.map_margin_m": (0, None), "slam.proposal_grid": (0, None), "slam.proposal_lstep": ("> 0", None),
+    "slam.proposal_astep": ("> 0", None),
+    "globloc.num_particles": (1, None), "globloc.beams": (1, None), "globloc.runs": (1, None),
+    "globloc.run_s": ("> 0", None), "globloc.kidnap_at_s": (0, None), "globloc.top_n": (1, None),
+    "globloc.clusters": (1, None), "globloc.pnp_per_cluster": (1, None), "globloc.trigger_confirm_frames": (1, None),
+    "globloc.map_resolution_m": ("> 0", None), "globloc.seed_share": (0, 1), "globloc.camera_every_s": ("> 0", None),
+    "pipeline.start_s": (0, None), "pipeline.run_s": ("> 0", None),
+}
+
+
+def _in_range(v, lo, hi) -> bool:
+    if isinstance(lo, builtins.str):
+        ok = v > float(lo[2:])
+    else:
+        ok = lo is None or v >= lo
+    return ok and (hi is None or v <= hi)
+
+
+def validate(cfg) -> None:
+    """Raise ConfigError naming the key and what it allows for a setting no schema declares (``+mcl.foo=1``),
+    a choice that is not one of its choices, or a number outside its range."""
+    import dataclasses
+
+    from omegaconf import OmegaConf
+
+    c = OmegaConf.to_container(cfg, resolve=True)
+    schema = {f.name: f for f in dataclasses.fields(Config)}
+    for key, section in c.items():
+        if key not in schema:
+            raise ConfigError(f"{key}: no such setting (sections: {', '.join(sorted(schema))})")
+        if isinstance(section, dict) and dataclasses.is_dataclass(schema[key].default_factory()
+                                                                  if schema[key].default_factory is not dataclasses.MISSING
+                                                                  else None):
+            declared = {f.name for f in dataclasses.fields(schema[key].default_factory())}
+            extra = sorted(set(section) - declared)
+            if extra:
+                raise ConfigError(f"{key}.{extra[0]}: no such setting in {key} (declared: {', '.join(sorted(declared))})")
+    for key, choices in CHOICES.items():
+        sec, name = key.split(".")
+        v = c.get(sec, {}).get(name)
+        if v is not None and v not in choices:
+            raise ConfigError(f"{key}={v!r}: expected one of {', '.join(choices)}")
+    for key, (lo, hi) in RANGES.items():
+        sec, name = key.split(".")
+        v = c.get(sec, {}).get(name)
+        if v is None or isinstance(v, bool):
+            continue
+        if not isinstance(v, (int, float)) or v != v or not _in_range(v, lo, hi):
+            lo_text = lo if isinstance(lo, builtins.str) else (f">= {lo}" if lo is not None else "")
+            bounds = " and ".join(b for b in (lo_text, f"<= {hi}" if hi is not None else "") if b)
+            raise ConfigError(f"{key}={v!r}: expected a number {bounds}")

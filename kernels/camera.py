@@ -25,8 +25,6 @@ import warp as wp
 from kernels.registry import SIM, pick_device
 from kernels.sim import NO_HIT, ray_segment
 
-POSTER_W, POSTER_H, POSTER_Z0 = 0.8, 0.6, 1.2  # poster size (m) and the height of its lower edge
-POSTER_NX, POSTER_NY = 8, 6
 
 
 @wp.func
@@ -76,18 +74,19 @@ def columns_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp
 
 @wp.func
 def paint(segments: wp.array(dtype=wp.vec4), colours: wp.array(dtype=wp.vec3), posters: wp.array(dtype=wp.vec2),
-          k: int, u: float, z: float, light: wp.vec2) -> wp.vec3:
-    """Colour of segment k at (u along it, z above the floor), shaded by the angle to the light."""
+          poster: wp.vec3, cells: wp.vec2, k: int, u: float, z: float, light: wp.vec2) -> wp.vec3:
+    """Colour of segment k at (u along it, z above the floor), shaded by the angle to the light; ``poster``:
+    a poster's (width, height, height of its lower edge) in m, ``cells``: its pattern's cells across and up."""
     c = colours[k]
     if z < 0.9:
         c = 0.7 * c
     pst = posters[k]  # (poster id or -1, u of its centre)
     if pst[0] >= 0.0:
-        du = u - pst[1] + 0.5 * POSTER_W
-        dz = z - POSTER_Z0
-        if du >= 0.0 and du < POSTER_W and dz >= 0.0 and dz < POSTER_H:
-            i = int(du / POSTER_W * float(POSTER_NX))
-            j = int(dz / POSTER_H * float(POSTER_NY))
+        du = u - pst[1] + 0.5 * poster[0]
+        dz = z - poster[2]
+        if du >= 0.0 and du < poster[0] and dz >= 0.0 and dz < poster[1]:
+            i = int(du / poster[0] * cells[0])
+            j = int(dz / poster[1] * cells[1])
             pid = int(pst[0])
             c = wp.vec3(hash3(pid, i, j), hash3(pid, j, i + 17), hash3(pid + 7, i, j + 31))
     s = segments[k]
@@ -98,8 +97,8 @@ def paint(segments: wp.array(dtype=wp.vec4), colours: wp.array(dtype=wp.vec3), p
 
 @wp.kernel
 def pixels_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.float32),
-                  colours: wp.array(dtype=wp.vec3), posters: wp.array(dtype=wp.vec2),
-                  cam_poses: wp.array(dtype=wp.vec3), fx: float, fy: float, cx: float, cy: float,
+                  colours: wp.array(dtype=wp.vec3), posters: wp.array(dtype=wp.vec2), poster: wp.vec3,
+                  cells: wp.vec2, cam_poses: wp.array(dtype=wp.vec3), fx: float, fy: float, cx: float, cy: float,
                   cam_height: float, wall_height: float, near_t: wp.array2d(dtype=wp.float32),
                   near_k: wp.array2d(dtype=wp.int32), near_u: wp.array2d(dtype=wp.float32),
                   wall_t: wp.array2d(dtype=wp.float32), wall_k: wp.array2d(dtype=wp.int32),
@@ -121,7 +120,7 @@ def pixels_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.
         zd = tn / stretch
         h = cam_height - yc * zd
         if h >= 0.0 and h <= heights[near_k[f, col]]:
-            colour = paint(segments, colours, posters, near_k[f, col], near_u[f, col], h, light)
+            colour = paint(segments, colours, posters, poster, cells, near_k[f, col], near_u[f, col], h, light)
             z_depth = zd
             done = 1
     if done == 0:
@@ -130,7 +129,7 @@ def pixels_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.
             zd = tw / stretch
             h = cam_height - yc * zd
             if h >= 0.0 and h <= wall_height:
-                colour = paint(segments, colours, posters, wall_k[f, col], wall_u[f, col], h, light)
+                colour = paint(segments, colours, posters, poster, cells, wall_k[f, col], wall_u[f, col], h, light)
                 z_depth = zd
                 done = 1
     if done == 0:
@@ -159,9 +158,10 @@ def pixels_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.
 class SegmentCamera:
     """RGB [F, H, W, 3] (0..255, float32) and depth [F, H, W] (m) of camera poses [F, 3] (x, y, yaw of the
     camera) in a world of segments [K, 4] with heights [K] (m), colours [K, 3] (0..1) and posters [K, 2]
-    (poster id or -1, u of its centre along the segment)."""
+    (poster id or -1, u of its centre along the segment); every poster measures ``poster_m`` (width, height,
+    height of its lower edge) and its pattern ``poster_cells`` (across, up): the world's (irmcl_warp/sim/camera.py)."""
 
-    def __init__(self, segments, heights, colours, posters, width: int = 320, height: int = 240,
+    def __init__(self, segments, heights, colours, posters, poster_m, poster_cells, width: int = 320, height: int = 240,
                  hfov_rad: float = np.radians(58.0), cam_height_m: float = 1.0, wall_height_m: float = 2.5,
                  device: str = "auto"):
         self.device = pick_device(device)
@@ -170,6 +170,7 @@ class SegmentCamera:
         self.heights = wp.array(np.asarray(heights, np.float32), dtype=wp.float32, device=d)
         self.colours = wp.array(np.asarray(colours, np.float32), dtype=wp.vec3, device=d)
         self.posters = wp.array(np.asarray(posters, np.float32), dtype=wp.vec2, device=d)
+        self.poster, self.cells = wp.vec3(*map(float, poster_m)), wp.vec2(*map(float, poster_cells))
         self.W, self.H = int(width), int(height)
         self.fx = self.fy = 0.5 * self.W / np.tan(0.5 * hfov_rad)
         self.cx, self.cy = 0.5 * self.W, 0.5 * self.H
@@ -196,7 +197,8 @@ class SegmentCamera:
         rgb = wp.zeros((F, self.H, self.W, 3), dtype=wp.float32, device=d)
         depth = wp.zeros((F, self.H, self.W), dtype=wp.float32, device=d)
         wp.launch(pixels_kernel, (F, self.H, self.W),
-                  [self.segments, self.heights, self.colours, self.posters, wp_poses, float(self.fx), float(self.fy),
+                  [self.segments, self.heights, self.colours, self.posters, self.poster, self.cells, wp_poses,
+                   float(self.fx), float(self.fy),
                    float(self.cx), float(self.cy), self.cam_height, self.wall_height, *cols,
                    wp.array(exp_, dtype=wp.float32, device=d), wp.array(tint_, dtype=wp.vec3, device=d),
                    float(noise_std), int(seed), rgb, depth], device=d)

@@ -19,6 +19,7 @@ from irmcl_warp.sim.world import office
 from tests.test_slam import CONF
 
 
+@pytest.mark.data
 def test_gist_reproduces_lear_on_the_golden_image(data_dir):
     img = np.load(data_dir / "gist/scene.npy").astype(np.float64)
     want = np.array((data_dir / "gist/scene.no_arg.result").read_text().split(), float)

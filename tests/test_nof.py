@@ -73,6 +73,7 @@ def test_bad_inputs_give_clear_errors():
         split_beams(b, {"val": np.array([100.0, 555.0])}, ["val"], "splits/x.json")
 
 
+@pytest.mark.data
 def test_interleaved_rule_reproduces_a_shared_split_file(data_dir):
     from irmcl_warp.io import read_matched_csv, read_splits
 

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
+from eval.keep import keep
 from eval.reproduce import SWEEPS, Sweep, folder, job_state, multirun_commands
 from irmcl_warp.config import register
 from irmcl_warp.services.outputs import stage_complete, write_json, write_manifest
@@ -51,8 +53,11 @@ def test_runner_tells_done_kept_and_missing_apart(tmp_path):
             write_json(outputs / rel[k] / "metrics.json", {"seed": k})
             write_manifest(outputs / rel[k], cfgs[k], [], "cpu", 0.0)
         (outputs / rel[3] / "metrics.json").write_text('{"seed": ')
-        (results / "slam" / rel[1]).mkdir(parents=True)  # a GPU run kept in the repository
-        (results / "slam" / rel[1] / "metrics.json").write_text(json.dumps({"seed": 1}))
+        gpu = tmp_path / "gpu" / rel[1]  # a GPU run kept in the repository (eval.keep)
+        gpu.mkdir(parents=True)
+        (gpu / "metrics.json").write_text(json.dumps({"seed": 1}))
+        (gpu / "config.yaml").write_text(OmegaConf.to_yaml(cfgs[1]))
+        keep([gpu], results)
         states = [job_state(sweep, ov, outputs, results, rerun_kept=False)[0] for ov in sweep.jobs()]
         assert states == ["done", "kept", "missing", "missing"]
         assert job_state(sweep, sweep.jobs()[1], outputs, results, rerun_kept=True)[0] == "missing"

@@ -1,15 +1,30 @@
-"""eval.tables builds its table from metrics.json files and rewrites only the marked README block."""
+"""eval.tables builds its tables from the runs (kept in results/<group>/<exp>.json by eval.keep, or in
+outputs/), labels them from their configs, and rewrites only the marked README block."""
 
+import dataclasses
 import json
 
 import pytest
+import yaml
 
+from eval.keep import keep
 from eval.tables import collect_synthesis, replace_block, synthesis_table
+from irmcl_warp.config import LocalizeConfig, MCLConfig, SlamConfig
 
 
 def _write(path, obj):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(obj))
+
+
+def _run(root, exp, folder, metrics, config):
+    """A finished run folder: metrics.json and the resolved config.yaml."""
+    _write(root / exp / folder / "metrics.json", metrics)
+    (root / exp / folder / "config.yaml").write_text(yaml.safe_dump(config))
+    return root / exp / folder
+
+
+NOF_CONFIG = {"train": {"name": "fast"}, "render": {"name": "warp"}}
 
 
 def _synthesis(mae_nof, mae_grid):
@@ -20,11 +35,13 @@ def _synthesis(mae_nof, mae_grid):
 
 
 def test_table_rows_come_from_files_and_later_roots_win(tmp_path):
-    kept, mine = tmp_path / "results", tmp_path / "outputs"
-    _write(kept / "fr079/synthesis-fast/metrics.json", _synthesis(0.3, 0.33))
-    _write(kept / "fr079/train-fast/metrics.json", {"train_time_s": 89.4, "epochs_done": 6, "gpu": "H100", "device": "cuda:0"})
-    _write(mine / "fr079/synthesis-fast/metrics.json", _synthesis(0.2777, 0.33))
-    table = synthesis_table(collect_synthesis((kept, mine)))
+    gpu, kept, mine = tmp_path / "gpu", tmp_path / "results", tmp_path / "outputs"
+    keep([_run(gpu, "fr079", "synthesis-fast", _synthesis(0.3, 0.33), NOF_CONFIG),
+          _run(gpu, "fr079", "train-fast", {"train_time_s": 89.4, "epochs_done": 6, "gpu": "H100", "device": "cuda:0"},
+               NOF_CONFIG)], kept)
+    assert (kept / "nof" / "fr079.json").is_file()
+    _run(mine, "fr079", "synthesis-fast", _synthesis(0.2777, 0.33), NOF_CONFIG)
+    table = synthesis_table(collect_synthesis(results=kept, outputs=mine))
     lines = table.splitlines()
     assert len(lines) == 4  # header, rule, NOF, one grid
     assert "| fr079 | test | NOF (fast) | 0.278 |" in lines[2] and lines[2].endswith("| ? |")  # no train file in outputs
@@ -38,33 +55,41 @@ def test_replace_block_keeps_the_rest_and_needs_markers():
         replace_block(text, "mcl", "x")
 
 
-def test_a_half_written_metrics_file_is_reported(tmp_path):
-    f = tmp_path / "fr079/synthesis-fast/metrics.json"
-    f.parent.mkdir(parents=True)
+def test_a_half_written_metrics_or_results_file_is_reported(tmp_path):
+    f = _run(tmp_path / "outputs", "fr079", "synthesis-fast", {}, NOF_CONFIG) / "metrics.json"
     f.write_text('{"dataset": "fr0')
-    with pytest.raises(SystemExit, match="unreadable metrics file"):
-        collect_synthesis((tmp_path,))
+    with pytest.raises(SystemExit, match="synthesis-fast: unreadable run"):
+        collect_synthesis(results=tmp_path / "results", outputs=tmp_path / "outputs")
+    (tmp_path / "results" / "nof").mkdir(parents=True)
+    (tmp_path / "results" / "nof" / "fr079.json").write_text('{"runs": {"synth')
+    with pytest.raises(SystemExit, match="fr079.json: unreadable results file"):
+        collect_synthesis(results=tmp_path / "results", outputs=None)
 
 
-def _loc(dataset, weighting, mode, n, successes, rmse, **extra):
+def _loc(dataset, weighting, mode, n, successes, rmse, res=0.05, kidnap_at_s=0.0, **extra):
     summary = {"weighting": weighting, "mode": mode, "num_particles": n, "starts": 10, "successes": successes,
                "time_to_converge_s_mean": 2.0, "location_rmse_cm_mean": rmse, "yaw_rmse_deg_mean": 1.5,
                "within_10cm_pct_mean": 80.0, "within_1deg_pct_mean": 50.0, "divergences": 0, **extra}
-    return {"dataset": dataset, "summary": summary, "settings": {"recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.2}}
+    if kidnap_at_s:
+        summary["kidnap_at_s"] = kidnap_at_s
+    recovery = {"recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.2} if kidnap_at_s else {}
+    settings = {**dataclasses.asdict(MCLConfig()), **dataclasses.asdict(LocalizeConfig()), "weighting": weighting,
+                "mode": mode, "num_particles": n, "map_resolution_m": res, "kidnap_at_s": kidnap_at_s, **recovery}
+    return {"dataset": dataset, "summary": summary, "settings": settings}
 
 
 def test_localization_table_pairs_global_and_tracking_and_keeps_the_largest_particle_count(tmp_path):
     from eval.tables import collect_localization, kidnap_table, localization_table
 
-    kept, mine = tmp_path / "results", tmp_path / "outputs"
-    _write(kept / "fr079/localize-nog_raymarch-global-100k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "global", 100000, 10, 6.3))
-    _write(kept / "fr079/localize-nog_raymarch-tracking-10k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "tracking", 10000, 9, 6.1))
-    _write(mine / "fr079/localize-nog_raymarch-global-2k-5cm/metrics.json", _loc("fr079", "nog_raymarch", "global", 2000, 0, None))
-    _write(kept / "fr079/localize-likelihood_field-global-100k-10cm/metrics.json", _loc("fr079", "likelihood_field", "global", 100000, 5, 5.6))
-    _write(kept / "fr079/localize-nog_raymarch-tracking-10k-5cm-kidnap30s-recovery/metrics.json",
-           _loc("fr079", "nog_raymarch", "tracking", 10000, 0, None, recovered=8, recovery_time_s_mean=7.04, kidnap_at_s=30.0))
-    _write(mine / "fr079/localize-nog_raymarch/metrics.json", {"an": "older layout"})  # left out by name
-    runs = collect_localization((kept, mine))
+    gpu, kept, mine = tmp_path / "gpu", tmp_path / "results", tmp_path / "outputs"
+    # folder names say nothing to the tables: the cells come from the settings
+    keep([_run(gpu, "fr079", "localize-a", _loc("fr079", "nog_raymarch", "global", 100000, 10, 6.3), {}),
+          _run(gpu, "fr079", "localize-b", _loc("fr079", "nog_raymarch", "tracking", 10000, 9, 6.1), {}),
+          _run(gpu, "fr079", "localize-c", _loc("fr079", "likelihood_field", "global", 100000, 5, 5.6, res=0.1), {}),
+          _run(gpu, "fr079", "localize-d", _loc("fr079", "nog_raymarch", "tracking", 10000, 0, None, recovered=8,
+                                                 recovery_time_s_mean=7.04, kidnap_at_s=30.0), {})], kept)
+    _run(mine, "fr079", "localize-e", _loc("fr079", "nog_raymarch", "global", 2000, 0, None), {})
+    runs = collect_localization(results=kept, outputs=mine)
     lines = localization_table(runs).splitlines()
     assert len(lines) == 4, lines  # header, rule, IR-MCL 5 cm (global + tracking in one row), likelihood field 10 cm
     assert lines[2].startswith("| fr079 | IR-MCL (NOG) | 5 cm | 100k | 10/10 | 2.0 | 6.3 / 1.50 | 80 / 50 | 10k | 9/10 | 6.1 / 1.50 | 0 |")
@@ -81,24 +106,33 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
                 "device": "cuda:0", "wall_time_s": 10.0 + seed,
                 "relations": {"trans_abs_mean_m": err, "trans_abs_std_m": std, "rot_abs_mean_deg": 2.0}}
 
+    def config(seed):
+        return {"slam": {**dataclasses.asdict(SlamConfig()), "seed": seed}, "data": {"name": "intel"}}
+
     for seed, err in enumerate([0.05, 0.07, 1.9]):
-        _write(tmp_path / f"gmapping_intel/slam-paper-selective-30p-seed{seed}/metrics.json", run(seed, err))
-    _write(tmp_path / "gmapping_intel/slam-paper-selective-30p-seed9/metrics.json",
-           {**run(9, 0.0), "relations": "not scored: no relations file"})  # left out
-    lines = slam_table(collect_slam((tmp_path,))).splitlines()
+        _run(tmp_path, "gmapping_intel", f"slam-{seed}", run(seed, err), config(seed))
+    _run(tmp_path, "gmapping_intel", "slam-9", {**run(9, 0.0), "relations": "not scored: no relations file"},
+         config(9))  # left out
+    _run(tmp_path, "gmapping_intel", "slam-dda", run(4, 0.05), {**config(4), "slam": {**config(4)["slam"], "line": "dda"}})
+    lines = slam_table(collect_slam(results=tmp_path / "none", outputs=tmp_path)).splitlines()
     ours = [l for l in lines if "paper + selective" in l]
-    assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |"]
+    assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |",
+                    "| intel | paper + selective (dda) | 30 | 1/1 | 0.050 +- 0.050 | 2.00 | 0.050 | 14-14 s | H100 |"]
     assert any("*released C++, derived/intel.fileorder*" in l and "10/10" in l for l in lines)
 
 
 def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path):
+    from eval.collect import Run
     from eval.plots import particles_vs_success
 
-    runs = {("gmapping_intel", f"slam-paper-selective-{n}p-seed{s}"): {
+    def config(n, s):
+        return {"slam": {**dataclasses.asdict(SlamConfig()), "num_particles": n, "seed": s}, "data": {}}
+
+    runs = {("gmapping_intel", f"slam-paper-selective-{n}p-seed{s}"): Run({
         "dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n, "device": "cuda:0",
-        "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0}} for n in (5, 15) for s in range(3)}
-    runs[("gmapping_fr079", "slam-x")] = {"dataset": "fr079", "proposal": "paper", "resample": "selective",
-                                          "particles": 30, "relations": "not scored"}
+        "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0}}, config(n, s)) for n in (5, 15) for s in range(3)}
+    runs[("gmapping_fr079", "slam-x")] = Run({"dataset": "fr079", "proposal": "paper", "resample": "selective",
+                                              "particles": 30, "relations": "not scored"}, config(30, 0))
     assert particles_vs_success(runs, "fr079", tmp_path / "fr079.png") is None
     out = particles_vs_success(runs, "intel", tmp_path / "intel.png")
     assert out.is_file() and out.stat().st_size > 5000

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# Back on this machine: extract the returned archive (e.g. into /tmp/gpu) and keep its run folders in the
+# repository with python -m eval.keep /tmp/gpu/outputs/<exp>/<run>... (results/<group>/<exp>.json).
 # On the lent GPU, after the packages are unpacked (../shared/tools/gpu/README.md) and .gpu/e/abl.tgz is
 # extracted in the repository root (the stream caches, with their split ids, and NOF checkpoints of fr079, intel and
 # mit_csail, and gpudata/ with the fr079 bag and its matched corrected poses):

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# Back on this machine: extract the returned archive (e.g. into /tmp/gpu) and keep its run folders in the
+# repository with python -m eval.keep /tmp/gpu/outputs/<exp>/<run>... (results/<group>/<exp>.json).
 # One GPU session of MCL measurements (docs/benchmarks.md). Usage: bash eval/gpu/mcl.sh <part>...
 #   bench    python -m eval.bench mcl on the fr079 NOG (10k / 100k / 1M particles, the torch reference)
 #   global   global localization, 100k particles: every dataset x {nog_raymarch, likelihood_field,

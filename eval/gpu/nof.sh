@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# Back on this machine: extract the returned archive (e.g. into /tmp/gpu) and keep its run folders in the
+# repository with python -m eval.keep /tmp/gpu/outputs/<exp>/<run>... (results/<group>/<exp>.json).
 # One GPU session of NOF measurements (docs/benchmarks.md): the training benchmark, then train + scan
 # synthesis for each experiment and preset given, copying the results to $OUT (or ./gpu-out).
 # Usage: bash eval/gpu/nof.sh "<preset>:<exp> ..."   e.g. "fast:fr079 fast:intel paper:intel"

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# Back on this machine: extract the returned archive (e.g. into /tmp/gpu) and keep its run folders in the
+# repository with python -m eval.keep /tmp/gpu/outputs/<exp>/<run>... (results/<group>/<exp>.json).
 # One GPU session of GMapping runs (docs/benchmarks.md): per experiment a Hydra multirun over seeds and
 # proposals, then the metrics, N_eff traces and maps packed into $OUT/slam-results.tgz.
 # Env: EXPS (default "gmapping_intel gmapping_fr079 gmapping_mit_csail"), SEEDS (0,...,9), PROPOSALS

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# Back on this machine: extract the returned archive (e.g. into /tmp/gpu) and keep its run folders in the
+# repository with python -m eval.keep /tmp/gpu/outputs/<exp>/<run>... (results/<group>/<exp>.json).
 # GMapping runs on one GPU box, several processes at a time (each run is bound by Python launch overhead,
 # not by the GPU): one line of overrides per run, from the job lists below, through xargs -P.
 #   bash eval/gpu/slam_sweep.sh main      # intel, fr079, mit_csail x paper, gmapping_code x 10 seeds, 30 particles

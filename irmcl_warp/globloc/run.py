@@ -32,16 +32,15 @@ from omegaconf import OmegaConf
 from irmcl_warp.geometry import compose, relative, wrap_angle
 from irmcl_warp.globloc.database import build_database, cluster_candidates, describe, keyframe_indices
 from irmcl_warp.globloc.gist import Gist
+from irmcl_warp.globloc.methods import laser_angles, run_method
 from irmcl_warp.globloc.pnp import OrbPnP
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.io import write_tum
-from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
 from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import office
 from kernels import SIM, pick_device
-from kernels.motion import odometry_step
 
 METHODS = ("lidar_mcl", "camera_only", "paper", "mcl_seeded")
 
@@ -111,11 +110,6 @@ def make_stream(cfg, world, look, rng, k: int, device: str) -> Stream:
     return Stream(np.arange(len(truth)) * dt, truth, odom, ranges, cam_idx, rgb, len(first) if kidnap else -1)
 
 
-def laser_angles(cfg) -> np.ndarray:
-    s = cfg.sim
-    return -s.fov_rad / 2 + np.arange(s.num_beams) * s.fov_rad / max(s.num_beams - 1, 1)
-
-
 class Hypotheses:
     """Camera hypotheses of one query frame: per cluster the best PnP pose, its inliers and Scan2Map."""
 
@@ -155,104 +149,6 @@ class Hypotheses:
             self.timing[key] += b - a
         self.timing["frames"] += 1
         return scored
-
-
-def make_filter(cfg, grid, origin, device):
-    """The MCL of the lidar methods: the likelihood field on the world's grid, AMCL's recovery (the filter
-    every MCL user builds, services.filters.build_filter)."""
-    g, res = cfg.globloc, cfg.globloc.map_resolution_m
-    m = OmegaConf.merge(cfg.mcl, {"num_particles": g.num_particles, "num_beams": g.beams,
-                                  "weighting": "likelihood_field", "estimate": "top_share", "reduce_to": 0,
-                                  "recovery_alpha_slow": g.recovery_alpha_slow,
-                                  "recovery_alpha_fast": g.recovery_alpha_fast, "seed": g.seed})
-    maps = WeightingMaps(occupancy=grid, origin_xy=origin, resolution_m=res)
-    return build_filter(m, free_space_view(grid, origin, res), (cfg.sim.laser_x_m, 0.0, 0.0), laser_angles(cfg),
-                        cfg.sim.max_range_m, device, maps)
-
-
-def run_method(method: str, cfg, st: Stream, hyps: list, grid, origin, device, rng) -> tuple[np.ndarray, list]:
-    """Estimates [N, 3] (NaN before a method has any) and the scan indices where it relocalized."""
-    g = cfg.globloc
-    scorer = Scan2Map(grid, origin, g.map_resolution_m, g.scan2map)  # once: its likelihood field is an EDT
-    est = np.full((len(st.truth), 3), np.nan)
-    relocs = []
-    cam_at = {int(i): j for j, i in enumerate(st.cam_idx)}
-    pf = None
-    if method in ("lidar_mcl", "mcl_seeded"):
-        pf = make_filter(cfg, grid, origin, device)
-        pf.rng = np.random.default_rng(int(rng.integers(1 << 30)))
-        pf.init_uniform()
-    pose, last_cam_t, pending, agreed = None, None, None, 0
-    for i in range(len(st.truth)):
-        u = odometry_step(st.odom[i - 1], st.odom[i]) if i > 0 else np.zeros(3)
-        step = relative(st.odom[i - 1][None], st.odom[i][None])[0] if i > 0 else np.zeros(3)
-        if pose is not None and pf is None:  # camera only: dead reckoning between frames
-            pose = compose(pose, step)
-        if pending is not None:  # a relocalization candidate moves with the odometry until confirmed
-            pending = compose(pending, step)
-        if i in cam_at:
-            h = hyps[cam_at[i]]
-            if method == "camera_only" and h:
-                pose = max(h, key=lambda x: x[1])[0]
-            elif method == "paper" and h:
-                win = max(h, key=lambda x: x[2])
-                if pf is None:
-                    pf = make_filter(cfg, grid, origin, device)
-                    pf.rng = np.random.default_rng(int(rng.integers(1 << 30)))
-                    pf.init_gaussian(win[0], g.tracking_std)
-                    relocs.append(i)
-                elif pose is not None:
-                    reach = g.max_speed_mps * (st.stamps[i] - last_cam_t) + g.trigger_slack_m
-                    here = pf_scan2map(cfg, pose, st.ranges[i], scorer)
-                    far = np.hypot(*(win[0][:2] - pose[:2])) > reach
-                    if far and win[2] > here + g.trigger_margin * max(here, 1e-6):
-                        # a new winner out of reach: relocalize once the winners of the next
-                        # ``trigger_confirm_frames`` frames agree with it (moved by the odometry in between)
-                        if pending is not None and np.hypot(*(win[0][:2] - pending[:2])) < g.trigger_slack_m:
-                            agreed += 1
-                            pending = np.asarray(win[0], np.float64)
-                        else:
-                            pending, agreed = np.asarray(win[0], np.float64), 0
-                        if agreed >= g.trigger_confirm_frames:
-                            pf.init_gaussian(win[0], g.tracking_std)
-                            relocs.append(i)
-                            pending = None
-                    else:
-                        pending = None
-            elif method == "mcl_seeded" and h:
-                seed_particles(pf, [p for p, _, _ in h], g.seed_share, g.tracking_std, rng)
-            last_cam_t = st.stamps[i]
-        if pf is not None:
-            pose = np.asarray(pf.step(u, st.ranges[i])[0], np.float64)
-        if pose is not None:
-            est[i] = pose
-    return est, relocs
-
-
-def pf_scan2map(cfg, pose, ranges, scorer: Scan2Map) -> float:
-    """Scan2Map of the tracked pose: the best over a small grid around it (``trigger_search_m`` /
-    ``trigger_search_rad``, 3 x 3 x 3 poses). The paper's score counts end points landing in occupied cells,
-    so a tracked pose a few centimetres off scores far below a PnP pose on a look-alike bay; the search takes
-    that tracking error out of the comparison."""
-    g = cfg.globloc
-    d = np.array([-1.0, 0.0, 1.0])
-    offs = np.stack(np.meshgrid(d * g.trigger_search_m, d * g.trigger_search_m, d * g.trigger_search_rad,
-                                indexing="ij"), -1).reshape(-1, 3)
-    poses = np.asarray(pose, np.float64)[None] + offs
-    return float(scorer(poses, (cfg.sim.laser_x_m, 0.0, 0.0), ranges, laser_angles(cfg)).max())
-
-
-def seed_particles(pf, poses, share: float, std, rng) -> None:
-    """Re-draw ``share`` of the particles around the camera's hypotheses (equal weights afterwards)."""
-    P = pf.particles.numpy().astype(np.float64)
-    n = int(share * len(P))
-    pick = rng.choice(len(P), n, replace=False)
-    centres = np.asarray(poses)[rng.integers(0, len(poses), n)]
-    P[pick] = centres + rng.normal(0, 1, (n, 3)) * np.asarray(std)
-    H, W = pf.free_space.shape
-    cells = pf.free_space.node_of(P[:, :2])
-    inside = np.all((cells >= 0) & (cells < np.array([W, H])), 1)
-    pf.set_particles(P[inside].astype(np.float32))
 
 
 def localized_mask(est, truth, trans_m: float, rot_deg: float) -> np.ndarray:

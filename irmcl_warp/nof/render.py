@@ -49,14 +49,23 @@ def composite_torch(p: torch.Tensor, z: torch.Tensor, normalize: bool = True, t_
     return (depth / (opacity + eps) if normalize else depth), opacity
 
 
+def _warp_renderer(normalize: bool, t_min: float, eps: float):
+    compositor = RENDER.build("composite", normalize=normalize, t_min=t_min, eps=eps)
+    return lambda p, z: _WarpComposite.apply(p, z, compositor)
+
+
+def _torch_renderer(normalize: bool, t_min: float, eps: float):
+    return lambda p, z: composite_torch(p, z, normalize=normalize, t_min=t_min, eps=eps)
+
+
+RENDERERS = {"warp": _warp_renderer, "torch_ref": _torch_renderer}  # render.name -> factory
+
+
 def make_renderer(name: str = "warp", normalize: bool = True, t_min: float = 0.0, eps: float = 1e-10):
     """A function (p, z) -> (ranges, opacity). ``normalize`` divides by the accumulated opacity (authors' code)."""
-    if name == "warp":
-        compositor = RENDER.build("composite", normalize=normalize, t_min=t_min, eps=eps)
-        return lambda p, z: _WarpComposite.apply(p, z, compositor)
-    if name == "torch_ref":
-        return lambda p, z: composite_torch(p, z, normalize=normalize, t_min=t_min, eps=eps)
-    raise KeyError(f"render: unknown renderer {name!r}; choose warp or torch_ref")
+    if name not in RENDERERS:
+        raise KeyError(f"render: unknown renderer {name!r}; choose one of {sorted(RENDERERS)}")
+    return RENDERERS[name](normalize, t_min, eps)
 
 
 def sample_depths(num_rays: int, num_samples: int, near_m: float, far_m: float, perturb: bool,

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from kernels.camera import POSTER_H, POSTER_NX, POSTER_NY, POSTER_W, POSTER_Z0
+from irmcl_warp.sim.camera import POSTER_CELLS, POSTER_M
+
+POSTER_W, POSTER_H, POSTER_Z0 = POSTER_M
+POSTER_NX, POSTER_NY = POSTER_CELLS
 
 NO_HIT = 1.0e30
 

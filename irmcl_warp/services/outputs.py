@@ -72,7 +72,7 @@ SECTIONS = {
     "slam": ("data", "sim", "slam", "device"),
     "train": ("data", "sim", "model", "render", "train", "device"),
     "synthesis": ("data", "sim", "model", "render", "train", "mapping", "raycast", "device"),
-    "localize": ("data", "sim", "model", "render", "train", "mapping", "raycast", "mcl", "device"),
+    "localize": ("data", "sim", "model", "render", "train", "mapping", "raycast", "mcl", "localize", "device"),
     "globloc": ("data", "sim", "globloc", "device"),
 }
 

@@ -17,6 +17,8 @@ from irmcl_warp.geometry import compose
 from kernels import SIM
 
 WALL_HEIGHT_M, FURNITURE_HEIGHT_M, PERSON_HEIGHT_M = 2.5, 0.8, 1.7
+POSTER_M = (0.8, 0.6, 1.2)  # a poster's width, height and the height of its lower edge (m)
+POSTER_CELLS = (8, 6)  # its pattern's cells across and up
 
 
 @dataclass
@@ -71,7 +73,7 @@ class Camera:
                  cam_height_m: float = 1.0, T_base_cam=(0.15, 0.0, 0.0), device: str = "auto"):
         self.T_base_cam = np.asarray(T_base_cam, np.float64)
         self.kernel = SIM.build("camera", segments=segments, heights=look.heights, colours=look.colours,
-                                posters=look.posters, width=width, height=height, hfov_rad=np.radians(hfov_deg),
+                                posters=look.posters, poster_m=POSTER_M, poster_cells=POSTER_CELLS, width=width, height=height, hfov_rad=np.radians(hfov_deg),
                                 cam_height_m=cam_height_m, wall_height_m=WALL_HEIGHT_M, device=device)
 
     @property

@@ -17,6 +17,7 @@ from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_relations, read_tum, resolve
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.io.rosbag import read_bag_extrinsic
+from irmcl_warp.services.cli import guard
 
 
 def mounting(cfg, metrics: dict) -> np.ndarray:
@@ -52,4 +53,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    guard(main)
