@@ -24,7 +24,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from eval.timing import time_per_call
+from eval.timing import repeated, time_per_call
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
@@ -62,14 +62,14 @@ def _sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
-def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) -> dict:
+def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
     pf.init_uniform()
     u = (0.01, 0.05, -0.01)
     sync = lambda: _sync(device)  # noqa: E731
-    step_s = time_per_call(lambda: pf.step(u, measured), sync, steps)
+    step = repeated(lambda: pf.step(u, measured), sync, steps, repeats)  # median and spread of ``repeats``
     parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
         "motion": lambda: pf.motion(pf.particles, u, seed=1),
         "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
@@ -79,8 +79,9 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0) 
         "read back": lambda: pf.weights.summary(),
     }
     part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
-    return {"method": variant, "particles": n, "step_ms": 1e3 * step_s, "weighting_ms": part_ms["weighting"],
-            "parts_ms": part_ms}
+    return {"method": variant, "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
+            "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
+            "weighting_ms": part_ms["weighting"], "parts_ms": part_ms}
 
 
 def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
@@ -124,7 +125,7 @@ def run_mcl_bench(a) -> list[dict]:
     rows = []
     for n in a.particles:
         for v in a.variants:
-            rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured))
+            rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats))
             print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
@@ -136,10 +137,12 @@ def run_mcl_bench(a) -> list[dict]:
     name = torch.cuda.get_device_name() if device.startswith("cuda") else platform.processor() or "cpu"
     src = a.nog or "simulator walls (5 cm)"
     print(f"\nMCL step on {name} ({device}), NOG {src} {nog.shape}, 32 beams x 256 samples, far {far} m")
-    print("| method | particles | full step (ms) | weighting (ms) | x faster than torch (full step vs its weighting) |")
+    print("| method | particles | full step (ms): median of repeats [min-max] | weighting (ms) | x faster than torch "
+          "(full step vs its weighting) |")
     print("|---|---|---|---|---|")
     for r in rows:
-        step = f"{r['step_ms']:.3f}" if r["step_ms"] is not None else "-"
+        step = (f"{r['step_ms']:.3f} [{r['step_ms_min']:.3f}-{r['step_ms_max']:.3f}]" if r["step_ms"] is not None
+                else "-")
         sp = f"{r['speedup_vs_torch']:.0f}" if "speedup_vs_torch" in r else "-"
         print(f"| {r['method']} | {r['particles']:,} | {step} | {r['weighting_ms']:.3f} | {sp} |")
     print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
@@ -161,4 +164,5 @@ def add_parser(sub) -> None:
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
     p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--repeats", type=int, default=5, help="timings of --steps steps each; the table shows their median")
     p.add_argument("--out", default="outputs/bench")

@@ -36,6 +36,7 @@ from irmcl_warp.config import register
 from irmcl_warp.globloc.run import scenario_folder
 from irmcl_warp.mcl.stage import run_folder as localize_folder
 from irmcl_warp.nof.folders import synthesis_folder, train_folder
+from irmcl_warp.pipeline import run_folder as pipeline_folder
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.outputs import SECTIONS, stage_complete
 from irmcl_warp.slam.stage import run_tag as slam_tag
@@ -65,7 +66,7 @@ def folder(module: str, cfg) -> str:
     """The output folder of a job, relative to outputs/ (and to results/<group>/): the stage's own name for it."""
     names = {"irmcl_warp.train": train_folder, "eval.synthesis": synthesis_folder,
              "irmcl_warp.localize": localize_folder, "irmcl_warp.slam": lambda c: slam_tag(c.slam, c.data),
-             "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": lambda c: "pipeline"}
+             "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": pipeline_folder}
     if module not in names:
         raise ValueError(f"no output folder rule for {module}")
     return f"{cfg.exp}/{names[module](cfg)}"
@@ -114,7 +115,7 @@ SWEEPS = (
     + [Sweep("ablation", module, ["+exp=fr079", "train=fast"], {"render": ["warp", "torch_ref"]}, gpu=True)
        for module in ("irmcl_warp.train", "eval.synthesis")]
     # the end-to-end pipeline on the simulator and on the fr079 bag
-    + [Sweep("pipeline", "irmcl_warp.pipeline", []),
+    + [Sweep("pipeline", "irmcl_warp.pipeline", [], {"pipeline.sim_path_seed": list(range(1, 11))}),
        Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "slam.num_particles=30", "mcl.num_particles=100000",
                                                  "mcl.num_samples=256", "pipeline.run_s=null"], gpu=True)]
 )

@@ -15,3 +15,11 @@ def time_per_call(fn, sync, steps: int, warmup: int = 2) -> float:
         fn()
     sync()
     return (time.perf_counter() - t0) / steps
+
+
+def repeated(fn, sync, steps: int, repeats: int, warmup: int = 2) -> dict:
+    """Seconds per call over ``repeats`` separate timings of ``steps`` calls each: median, min, max, all."""
+    import statistics
+
+    times = [time_per_call(fn, sync, steps, warmup if r == 0 else 0) for r in range(repeats)]
+    return {"median": statistics.median(times), "min": min(times), "max": max(times), "all": times}

@@ -33,7 +33,7 @@ from irmcl_warp.mcl.track import follow
 from irmcl_warp.nof.stage import run_train, train_dir
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
-from irmcl_warp.pipeline_report import write_report
+from irmcl_warp.pipeline_report import failure_note, write_report
 from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
 from irmcl_warp.services.metrics import localization_metrics
@@ -49,6 +49,17 @@ def with_overrides(cfg, **dotted):
     for key, value in dotted.items():
         OmegaConf.update(new, key, value, merge=False)
     return new
+
+
+def _cm(v) -> str:
+    return "-" if v is None else f"{v:.1f} cm"
+
+
+def run_folder(cfg) -> str:
+    """``pipeline``, and for the simulator's second drive its path seed (``pipeline-path3``): the drives share
+    the mapping log's SLAM and NOF, each has its own localization."""
+    second_drive = cfg.data.format == "sim" and cfg.pipeline.path is None
+    return "pipeline" + (f"-path{cfg.pipeline.sim_path_seed}" if second_drive else "")
 
 
 def run_stage(name: str, out: Path, cfg, inputs, run, timing: dict) -> Path:
@@ -132,7 +143,7 @@ def stage_summary(out: Path) -> dict:
 def run_pipeline(cfg) -> Path:
     started, device, timing = time.time(), pick_device(cfg.device), {}
     cfg = with_overrides(cfg, **{"data.train_poses_path": None})
-    out = stage_dir(cfg, "pipeline")
+    out = stage_dir(cfg, run_folder(cfg))
     # 1. SLAM over the mapping log
     slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam, cfg.data)), cfg, recorded_inputs(cfg),
                          lambda: run_slam(cfg), timing)
@@ -179,13 +190,15 @@ def run_pipeline(cfg) -> Path:
         gt_map = compose(inverse(T_gt_map), log2.ground_truth[idx])  # the second log's truth in the map frame
         metrics["T_groundtruth_map"] = T_gt_map.tolist()
         metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
+        metrics["failure"] = failure_note(log2.stamps[idx], est, gt_map, metrics["localization"])
     write_report(out, cfg, metrics, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
     write_json(out / "metrics.json", metrics)
     write_manifest(out, cfg, inputs, device, started)
     loc = metrics.get("localization")
     print(f"pipeline: NOF trained on {len(scans)} SLAM-posed scans, {len(idx)} scans localized"
-          + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {loc['location_rmse_cm']:.1f} cm"
+          + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {_cm(loc['location_rmse_cm'])}"
              if loc and loc["converged"] else "; did not converge" if loc else "; no ground truth to score")
+          + (f"\n{metrics['failure']}" if metrics.get("failure") else "")
           + f" -> {out / 'report.md'}")
     return out
 

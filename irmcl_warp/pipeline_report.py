@@ -53,6 +53,24 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
     save_figure(fig, path)
 
 
+def failure_note(stamps, est, gt_map, loc: dict) -> str | None:
+    """None where the localization succeeded, else a plain sentence: whether it ever converged, when and
+    where it was last more than 0.3 m off, and how far off it ended."""
+    if loc is None or loc["success"]:
+        return None
+    t = np.asarray(stamps) - stamps[0]
+    ok = np.all(np.isfinite(gt_map), axis=1)
+    err = np.full(len(t), np.nan)
+    err[ok] = np.hypot(*(est[ok, :2] - gt_map[ok, :2]).T)
+    off = np.flatnonzero(err > 0.3)
+    last = off[-1] if len(off) else int(np.nanargmax(err))
+    how = (f"converged after {loc['time_to_converge_s']:.1f} s but did not stay within 0.3 m" if loc["converged"]
+           else "never converged")
+    return (f"Localization FAILED: it {how}; {err[last]:.2f} m off at {t[last]:.1f} s (estimate "
+            f"({est[last, 0]:.2f}, {est[last, 1]:.2f}) m, truth ({gt_map[last, 0]:.2f}, {gt_map[last, 1]:.2f}) m), "
+            f"{err[ok][-1]:.2f} m off at the end ({t[ok][-1]:.1f} s).")
+
+
 def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, est, gt_map, particles) -> Path:
     """``metrics``: the pipeline's, with the SLAM and NOF stages' figures (pipeline.stage_summary)."""
     plot_map(out / "map.png", slam_map, slam_poses, est, gt_map, particles)
@@ -78,6 +96,8 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
     if slam["relations_m"] is not None:
         lines.append(f"Relations metric: {slam['relations_m']:.3f} m.")
     lines += ["", "## Localization (global, from a uniform start)", ""]
+    if metrics.get("failure"):
+        lines += [f"**{metrics['failure']}**", ""]
     if loc is None:
         lines.append("The localized log has no ground truth: the estimate is in map.png, not scored.")
     else:

@@ -18,7 +18,18 @@ if os.environ.get("IRMCL_DATA"):
 HAVE_DATA = (data_root() / "README.md").is_file()
 
 
+def _cuda() -> bool:
+    import warp as wp
+
+    wp.config.quiet = True
+    return wp.is_cuda_available()
+
+
 def pytest_collection_modifyitems(config, items):
+    gpu = [item for item in items if "gpu" in item.keywords]
+    if gpu and not _cuda():  # marker gpu: CUDA-only checks, run on a lent GPU (eval/gpu/tests.sh), never in CI
+        for item in gpu:
+            item.add_marker(pytest.mark.skip(reason="needs a CUDA device (eval/gpu/tests.sh runs these on a GPU)"))
     if HAVE_DATA:
         return
     if os.environ.get("IRMCL_REQUIRE_DATA") == "1":

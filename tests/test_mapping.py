@@ -5,6 +5,7 @@ import warp as wp
 from irmcl_warp.mapping import OccupancyGrid, load_map, save_map
 from irmcl_warp.reference.mapping import integrate
 from kernels import MAPPING
+from tests.devices import DEVICE
 
 SETTINGS = dict(l_occ=0.85, l_free=-0.4, l_min=-4.0, l_max=4.0, max_range_m=3.0)
 
@@ -15,9 +16,9 @@ def test_logodds_kernel_matches_numpy_twin(rng):
     angles = np.linspace(-2, 2, 21).astype(np.float32)
     ranges = rng.uniform(0.05, 4.0, (6, 21)).astype(np.float32)
     ranges[rng.random((6, 21)) < 0.1] = np.nan
-    got = wp.zeros((H, W), dtype=wp.float32, device="cpu")
-    MAPPING.build("logodds", **SETTINGS).integrate(got, origin, res, wp.array(poses, dtype=wp.vec3, device="cpu"),
-                                                    wp.array(ranges, device="cpu"), wp.array(angles, device="cpu"))
+    got = wp.zeros((H, W), dtype=wp.float32, device=DEVICE)
+    MAPPING.build("logodds", **SETTINGS).integrate(got, origin, res, wp.array(poses, dtype=wp.vec3, device=DEVICE),
+                                                    wp.array(ranges, device=DEVICE), wp.array(angles, device=DEVICE))
     want = integrate(np.zeros((H, W), np.float32), origin, res, poses, ranges, angles, **SETTINGS)
     assert np.mean(np.abs(got.numpy() - want) < 1e-5) > 0.995, f"seed {rng.seed}"
 

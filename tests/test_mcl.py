@@ -16,6 +16,7 @@ from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.sim import simulate
 from kernels import SIM
 from kernels.motion import odometry_step
+from tests.devices import DEVICE
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -25,11 +26,11 @@ def _world_and_map(duration_s=30.0, res=0.1, extra=()):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("config", overrides=[f"sim.duration_s={duration_s}", *extra])
-    log, world = simulate(cfg.sim, "cpu")
+    log, world = simulate(cfg.sim, DEVICE)
     lo = world.segments.reshape(-1, 2).min(0) - 1.0
     hi = world.segments.reshape(-1, 2).max(0) + 1.0
     shape = tuple(np.ceil((hi - lo) / res).astype(int)[::-1])
-    walls = SIM.build("rasterize", device="cpu")(world.segments, tuple(lo), res, shape) > 0
+    walls = SIM.build("rasterize", device=DEVICE)(world.segments, tuple(lo), res, shape) > 0
     nog = NOG(binary_dilation(walls).astype(np.float32), (float(lo[0] + res / 2), float(lo[1] + res / 2)), res)
     nog.walls = walls.astype(np.float32)  # the thin rasterised walls, for the grid baselines
     return log, nog
@@ -39,8 +40,8 @@ def _filter(nog, cfg, log, weighting=None):
     """The filter on the stand-in NOG (its zero nodes: free space), weighted by ``weighting`` when given,
     else by IR-MCL's nog_raymarch on the NOG; 10 m far bound."""
     if weighting is None:
-        return build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, "cpu", WeightingMaps(nog=nog))
-    return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, "cpu")
+        return build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, WeightingMaps(nog=nog))
+    return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, DEVICE)
 
 
 @pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
@@ -52,7 +53,7 @@ def test_pose_tracking_stays_within_a_bound(weighting):
     if weighting == "likelihood_field":  # the grid baseline on the same walls (cells: corner origin)
         corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
         lf = WEIGHTING.build("likelihood_field", occupancy=nog.walls, origin_xy=corner,
-                             resolution_m=nog.resolution_m, max_range_m=20.0, device="cpu")
+                             resolution_m=nog.resolution_m, max_range_m=20.0, device=DEVICE)
     pf = _filter(nog, MCLConfig(num_particles=1000, num_samples=128, seed=3), log, lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
     errors, neffs = [], []
@@ -108,7 +109,7 @@ def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_pat
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=sim_office", "device=cpu", "sim.duration_s=60",
+        cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", "sim.duration_s=60",
                                            "mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.num_starts=2",
                                            "localize.run_s=15", "mcl.num_particles=500", "mcl.map_resolution_m=0.1"])
     out = run_localize(cfg)
@@ -129,7 +130,7 @@ def test_recovery_injects_only_when_the_likelihood_drops():
     pf = _filter(nog, cfg, log)
     probabilities = []
     for level in [-1.0] * 10 + [-0.5] * 5 + [-6.0] * 3:
-        pf.log_lik.assign(wp.array(np.full(64, level, np.float32), dtype=wp.float32, device="cpu"))
+        pf.log_lik.assign(wp.array(np.full(64, level, np.float32), dtype=wp.float32, device=DEVICE))
         probabilities.append(pf.recovery_probability())
     assert max(probabilities[:15]) == 0.0 and probabilities[-1] > 0.5
     off = _filter(nog, MCLConfig(num_particles=64, num_samples=32), log)
@@ -169,7 +170,7 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
 def _sim_cfg(*overrides):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=["+exp=sim_office", "device=cpu", "sim.duration_s=60",
+        return compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", "sim.duration_s=60",
                                             "mcl.map_resolution_m=0.1", *overrides])
 
 
@@ -181,14 +182,14 @@ def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     cfg = _sim_cfg("mcl.weighting=likelihood_field")
-    view, maps, image = build_maps(cfg, "cpu")
-    lf = make_weighting(cfg.mcl, 20.0, "cpu", maps, 1, 32)
+    view, maps, image = build_maps(cfg, DEVICE)
+    lf = make_weighting(cfg.mcl, 20.0, DEVICE, maps, 1, 32)
     unknown = image == 0.5
     assert unknown.mean() > 0.05  # the training scans leave parts of the office unseen
     dist = lf.grid.numpy()
     assert dist[unknown].max() > 0.5 and np.median(dist[unknown]) > 0.0
     cfg = _sim_cfg("mcl.weighting=beam_model")
-    beam = make_weighting(cfg.mcl, 20.0, "cpu", build_maps(cfg, "cpu")[1], 1, 32)
+    beam = make_weighting(cfg.mcl, 20.0, DEVICE, build_maps(cfg, DEVICE)[1], 1, 32)
     assert np.all(beam.grid.numpy()[unknown] == 1.0)
     assert np.all(view.occupancy[unknown] == 1.0)  # and no particle starts there
 
@@ -232,7 +233,7 @@ def test_reduce_keeps_the_heaviest_particles_and_their_weights():
     pf = _filter(nog, MCLConfig(num_particles=400, num_samples=32), log)
     pf.init_uniform()
     before, log_w = pf.particles.numpy().copy(), np.random.default_rng(0).normal(0, 3, 400).astype(np.float32)
-    pf.log_w.assign(wp.array(log_w, dtype=wp.float32, device="cpu"))
+    pf.log_w.assign(wp.array(log_w, dtype=wp.float32, device=DEVICE))
     pf.reduce(50)
     best = np.argsort(-log_w)[:50]
     assert pf.num_particles == 50 and np.allclose(pf.particles.numpy(), before[best])

@@ -12,6 +12,7 @@ from irmcl_warp.reference.resample import (effective_sample_size, low_variance_i
 from kernels import MOTION, RESAMPLE
 from kernels.motion import odometry_step
 from kernels.resample import ParticleWeights
+from tests.devices import DEVICE
 
 ALPHAS = (0.1, 0.02, 0.08, 0.01)
 
@@ -25,27 +26,27 @@ def test_odometry_step_decomposes_a_motion():
 def test_motion_kernel_statistics_match_the_twin(rng):
     n, step = 40000, (0.3, 0.8, -0.2)
     start = np.tile(np.array([[1.0, -2.0, 0.4]], np.float32), (n, 1))
-    p = wp.array(start, dtype=wp.vec3, device="cpu")
-    MOTION.build("odometry", alphas=ALPHAS, device="cpu")(p, step, seed=int(rng.integers(1 << 30)))
+    p = wp.array(start, dtype=wp.vec3, device=DEVICE)
+    MOTION.build("odometry", alphas=ALPHAS, device=DEVICE)(p, step, seed=int(rng.integers(1 << 30)))
     ours = p.numpy().astype(np.float64)
     twin = sample_odometry(start.astype(np.float64), step, ALPHAS, rng)
     assert np.allclose(ours.mean(0), twin.mean(0), atol=0.01), f"seed {rng.seed}"
     assert np.allclose(np.cov(ours.T), np.cov(twin.T), atol=2e-3, rtol=0.1), f"seed {rng.seed}"
     # noiseless odometry moves every particle exactly
-    q = wp.array(start[:3], dtype=wp.vec3, device="cpu")
-    MOTION.build("odometry", alphas=(0, 0, 0, 0), device="cpu")(q, step, seed=1)
+    q = wp.array(start[:3], dtype=wp.vec3, device=DEVICE)
+    MOTION.build("odometry", alphas=(0, 0, 0, 0), device=DEVICE)(q, step, seed=1)
     x = 1.0 + 0.8 * np.cos(0.7)
     assert np.allclose(q.numpy()[0], [x, -2.0 + 0.8 * np.sin(0.7), 0.5], atol=1e-5)
     with pytest.raises(ValueError, match="4 non-negative alphas"):
-        MOTION.build("odometry", alphas=(0.1, 0.1), device="cpu")
+        MOTION.build("odometry", alphas=(0.1, 0.1), device=DEVICE)
 
 
 def _weights(rng, n):
     log_w = rng.normal(0, 2, n).astype(np.float32)
     particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(np.float32)
-    pw = wp.array(particles, dtype=wp.vec3, device="cpu")
-    weights = ParticleWeights(n, device="cpu")
-    weights.update(wp.array(log_w, dtype=wp.float32, device="cpu"), pw)
+    pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
+    weights = ParticleWeights(n, device=DEVICE)
+    weights.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), pw)
     return log_w, particles, pw, weights
 
 
@@ -57,17 +58,17 @@ def test_neff_and_mean_match_the_twin(rng):
     assert spread == pytest.approx(weighted_spread(particles, log_w), rel=1e-3)
     # far from the origin the centred sums keep the spread of a tight cluster
     tight = np.column_stack([rng.normal(0, 0.05, (500, 2)) + [300.0, -250.0], np.zeros(500)]).astype(np.float32)
-    far = ParticleWeights(500, device="cpu", centre=(299.0, -251.0))
-    far.update(wp.array(log_w, dtype=wp.float32, device="cpu"), wp.array(tight, dtype=wp.vec3, device="cpu"))
+    far = ParticleWeights(500, device=DEVICE, centre=(299.0, -251.0))
+    far.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), wp.array(tight, dtype=wp.vec3, device=DEVICE))
     assert far.summary()[2] == pytest.approx(weighted_spread(tight, log_w), rel=1e-2)
 
 
 def test_low_variance_keeps_each_particle_floor_or_ceil_of_its_share(rng):
     n = 1000
     log_w, particles, pw, weights = _weights(rng, n)
-    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
+    dst = wp.zeros(n, dtype=wp.vec3, device=DEVICE)
     offset = float(rng.uniform())
-    RESAMPLE.build("low_variance", device="cpu")(weights.cdf, pw, dst, offset)
+    RESAMPLE.build("low_variance", device=DEVICE)(weights.cdf, pw, dst, offset)
     out = dst.numpy()
     # map drawn particles back to their index (positions are unique)
     index = {tuple(p): i for i, p in enumerate(particles)}
@@ -83,11 +84,11 @@ def test_multinomial_draws_follow_the_weights(rng):
     n = 4000
     log_w = np.log(np.where(np.arange(n) < n // 4, 3.0, 1.0)).astype(np.float32)  # first quarter: 3x weight
     particles = np.stack([np.arange(n), np.zeros(n), np.zeros(n)], -1).astype(np.float32)
-    pw = wp.array(particles, dtype=wp.vec3, device="cpu")
-    weights = ParticleWeights(n, device="cpu")
-    weights.update(wp.array(log_w, dtype=wp.float32, device="cpu"), pw)
-    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
-    RESAMPLE.build("multinomial", device="cpu")(weights.cdf, pw, dst, float(rng.uniform()))
+    pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
+    weights = ParticleWeights(n, device=DEVICE)
+    weights.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), pw)
+    dst = wp.zeros(n, dtype=wp.vec3, device=DEVICE)
+    RESAMPLE.build("multinomial", device=DEVICE)(weights.cdf, pw, dst, float(rng.uniform()))
     share_first = (dst.numpy()[:, 0] < n // 4).mean()
     twin_share = (multinomial_indices(log_w, rng) < n // 4).mean()
     assert abs(share_first - 0.5) < 0.03 and abs(twin_share - 0.5) < 0.03, f"seed {rng.seed}"
@@ -102,14 +103,14 @@ def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
     log_w = rng.normal(0, 1, n)
     particles[800:, :2] += 20.0  # a far-off tail ...
     log_w[800:] -= 30.0  # ... of the lightest particles
-    est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device="cpu")
-    ours = est(wp.array(particles.astype(np.float32), dtype=wp.vec3, device="cpu"),
-               wp.array(log_w.astype(np.float32), dtype=wp.float32, device="cpu"))
+    est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
+    ours = est(wp.array(particles.astype(np.float32), dtype=wp.vec3, device=DEVICE),
+               wp.array(log_w.astype(np.float32), dtype=wp.float32, device=DEVICE))
     twin = top_share_mean(particles.astype(np.float32), log_w.astype(np.float32), 0.8)
     assert np.allclose(ours, twin, atol=1e-4), f"seed {rng.seed}"
     assert abs(ours[0] - 2.0) < 0.05 and abs(abs(ours[2]) - 3.1) < 0.1  # yaw near +-pi: circular mean
     with pytest.raises(ValueError, match="share must lie"):
-        ESTIMATE.build("top_share", num_particles=10, share=0.0, device="cpu")
+        ESTIMATE.build("top_share", num_particles=10, share=0.0, device=DEVICE)
 
 
 def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
@@ -123,24 +124,24 @@ def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
     particles = np.where(which[:, None], a, b) + rng.normal(0, 1, (n, 3)) * [0.15, 0.15, 0.05]
     log_w = np.where(which, np.log(0.6), np.log(0.4)) + rng.normal(0, 0.1, n)
     bounds = (-6.0, -2.0, 5.0, 6.0)
-    est = ESTIMATE.build("best_cluster", num_particles=n, bounds=bounds, cell_m=0.5, yaw_bins=8, device="cpu")
+    est = ESTIMATE.build("best_cluster", num_particles=n, bounds=bounds, cell_m=0.5, yaw_bins=8, device=DEVICE)
     p32, w32 = particles.astype(np.float32), log_w.astype(np.float32)
-    ours = est(wp.array(p32, dtype=wp.vec3, device="cpu"), wp.array(w32, dtype=wp.float32, device="cpu"))
+    ours = est(wp.array(p32, dtype=wp.vec3, device=DEVICE), wp.array(w32, dtype=wp.float32, device=DEVICE))
     twin = best_cluster_mean(p32, w32, bounds, 0.5, 8)
     assert np.allclose(ours, twin, atol=1e-4), f"seed {rng.seed}: {ours} vs {twin}"
     assert np.hypot(*(ours[:2] - a[:2])) < 0.1 and abs(ours[2] - a[2]) < 0.05, f"seed {rng.seed}: {ours}"
     assert np.hypot(*(weighted_mean(particles, log_w)[:2] - a[:2])) > 1.0  # the plain mean is lost between them
     with pytest.raises(ValueError, match="do not make a histogram"):
-        ESTIMATE.build("best_cluster", num_particles=n, bounds=(0, 0, -1, 1), device="cpu")
+        ESTIMATE.build("best_cluster", num_particles=n, bounds=(0, 0, -1, 1), device=DEVICE)
 
 
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     n = 300
     log_w, particles, pw, weights = _weights(rng, n)
     neff = effective_sample_size(log_w)
-    lw = wp.array(log_w, dtype=wp.float32, device="cpu")
-    dst = wp.zeros(n, dtype=wp.vec3, device="cpu")
-    resample = RESAMPLE.build("low_variance", device="cpu")
+    lw = wp.array(log_w, dtype=wp.float32, device=DEVICE)
+    dst = wp.zeros(n, dtype=wp.vec3, device=DEVICE)
+    resample = RESAMPLE.build("low_variance", device=DEVICE)
     resample(weights.cdf, pw, dst, 0.3, weights.sums, neff * 0.99, lw)  # N_eff above the limit: keep
     assert np.array_equal(dst.numpy(), particles) and np.array_equal(lw.numpy(), log_w)
     resample(weights.cdf, pw, dst, 0.3, weights.sums, neff * 1.01, lw)  # below: draw, weights reset

@@ -10,6 +10,7 @@ from irmcl_warp.sim import simulate
 from irmcl_warp.sim.trajectory import noisy_odometry
 from irmcl_warp.sim.world import office
 from kernels import SIM
+from tests.devices import DEVICE
 
 
 def small_sim(**over):
@@ -21,7 +22,7 @@ def test_lidar_kernel_matches_twin_without_noise(rng):
     world = office(int(rng.integers(1000)), 16.0, 10.0)
     poses = np.c_[rng.uniform(1, 15, 10), rng.uniform(4.5, 5.5, 10), rng.uniform(-np.pi, np.pi, 10)]
     angles = np.linspace(-2.0, 2.0, 31)
-    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=12.0, device="cpu")
+    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=12.0, device=DEVICE)
     got, want = lidar.scan(poses, seed=0), lidar_ranges(world.segments, poses, angles, 12.0)
     assert np.array_equal(np.isnan(got), np.isnan(want)), f"seed {rng.seed}"
     np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], atol=1e-4)
@@ -30,7 +31,7 @@ def test_lidar_kernel_matches_twin_without_noise(rng):
 def test_lidar_noise_and_dropout_statistics():
     seg = np.array([[5.0, -50, 5.0, 50]])  # a wall 5 m ahead
     lidar = SIM.build("segment_lidar", segments=seg, angles_rad=np.zeros(2000), max_range_m=20.0, noise_std_m=0.05,
-                      dropout_prob=0.1, device="cpu")
+                      dropout_prob=0.1, device=DEVICE)
     r = lidar.scan(np.zeros((1, 3)), seed=3)[0]
     valid = r[np.isfinite(r)]
     assert 0.08 < np.isnan(r).mean() < 0.12
@@ -43,7 +44,7 @@ def test_lidar_noise_and_dropout_statistics():
 def test_rasterize_matches_twin(rng, on_lattice):
     world = office(int(rng.integers(1000)), 12.0, 8.0)
     origin = (-0.5, -0.5) if on_lattice else (-0.5 + 0.013, -0.5 + 0.027)
-    got = SIM.build("rasterize", device="cpu")(world.segments, origin, 0.1, (90, 130))
+    got = SIM.build("rasterize", device=DEVICE)(world.segments, origin, 0.1, (90, 130))
     want = rasterize(world.segments, origin, 0.1, (90, 130))
     assert np.mean(got == want) > 0.999
     # every wall is drawn, the outer ones included (on the lattice they lie on cell borders)
@@ -54,11 +55,11 @@ def test_rasterize_matches_twin(rng, on_lattice):
 
 
 def test_simulation_is_deterministic_and_odometry_noise_follows_alphas():
-    a, _ = simulate(small_sim(seed=5), device="cpu")
-    b, _ = simulate(small_sim(seed=5), device="cpu")
+    a, _ = simulate(small_sim(seed=5), device=DEVICE)
+    b, _ = simulate(small_sim(seed=5), device=DEVICE)
     np.testing.assert_array_equal(a.ranges_m, b.ranges_m)
     np.testing.assert_array_equal(a.odom, b.odom)
-    c, _ = simulate(small_sim(seed=6), device="cpu")
+    c, _ = simulate(small_sim(seed=6), device=DEVICE)
     assert not np.array_equal(a.ground_truth[:5], c.ground_truth[:5]) or not np.array_equal(a.ranges_m, c.ranges_m)
     exact = noisy_odometry(a.ground_truth, [0, 0, 0, 0], np.random.default_rng(0))
     np.testing.assert_allclose(relative(exact[:-1], exact[1:]), relative(a.ground_truth[:-1], a.ground_truth[1:]),
@@ -69,7 +70,7 @@ def test_simulation_is_deterministic_and_odometry_noise_follows_alphas():
 
 @pytest.mark.parametrize("version", [1, 2])
 def test_simulated_log_roundtrips_through_a_bag(tmp_path, version):
-    log, _ = simulate(small_sim(seed=2, duration_s=6.0), device="cpu")
+    log, _ = simulate(small_sim(seed=2, duration_s=6.0), device=DEVICE)
     path = write_bag(log, tmp_path / ("sim.bag" if version == 1 else "sim_ros2"), version=version)
     back = read_bag(path)
     np.testing.assert_allclose(back.stamps, log.stamps, atol=1e-9)

@@ -19,6 +19,7 @@ from irmcl_warp.slam import RBPF
 from irmcl_warp.slam.rbpf import fit_gaussian
 from kernels import SLAM
 from kernels.slam import ParticleMaps
+from tests.devices import DEVICE
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -28,7 +29,7 @@ def _sim(duration_s=20.0, **extra):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose("config", overrides=[f"sim.duration_s={duration_s}", "sim.width_m=14", "sim.height_m=10",
                                            *[f"{k}={v}" for k, v in extra.items()]])
-    return simulate(cfg.sim, "cpu")[0]
+    return simulate(cfg.sim, DEVICE)[0]
 
 
 def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
@@ -37,16 +38,16 @@ def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
 
 def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None,
                     line="bresenham", free_space=True):
-    maps = ParticleMaps(P, shape, origin, res, device="cpu")
+    maps = ParticleMaps(P, shape, origin, res, device=DEVICE)
     ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
-    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, free_space=free_space, device="cpu")
-    angles = wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu")
+    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, free_space=free_space, device=DEVICE)
+    angles = wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE)
     for k in scans:
         poses = np.tile(log.ground_truth[k], (P, 1))
         if jitter:
             poses = poses + rng.normal(0, jitter, poses.shape)
-        integ(maps, wp.array(poses.astype(np.float32), dtype=wp.vec3, device="cpu"), log.T_base_laser,
-              wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"), angles)
+        integ(maps, wp.array(poses.astype(np.float32), dtype=wp.vec3, device=DEVICE), log.T_base_laser,
+              wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE), angles)
         for p in range(P):
             twin.integrate(ref[p], poses[p].astype(np.float32), log.T_base_laser, log.ranges_m[k],
                            log.info.angles_rad, 8.0, origin, res, line=line, free_space=free_space)
@@ -81,12 +82,12 @@ def test_score_matches_twin_and_peaks_at_the_true_pose(rng, free_check):
     far = np.array([[0.25, 0.0, 0.0], [0.0, -0.25, 0.0], [0.0, 0.0, 0.2]])
     cands = true + np.concatenate([np.zeros((1, 3)), far, rng.normal(0, [0.1, 0.1, 0.05], (5, 3))])
     scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2),
-                        free_check=free_check, device="cpu")
-    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device="cpu")
-    score = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
-    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device="cpu")
-    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device="cpu"),
-           wp.array(log.info.angles_rad, dtype=wp.float32, device="cpu"), score, loglik)
+                        free_check=free_check, device=DEVICE)
+    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
+           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
     want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
                                 log.info.angles_rad, 8.0, (-1.0, -1.0), 0.1, free_delta=0.1 * np.sqrt(2),
                                 free_check=free_check) for c in cands])
@@ -99,8 +100,8 @@ def test_score_matches_twin_and_peaks_at_the_true_pose(rng, free_check):
 def test_motion_kernel_noise_follows_the_gmapping_model(rng):
     n, delta = 40000, np.array([0.4, 0.05, 0.2])
     start = np.array([1.0, -2.0, 0.7])
-    poses = wp.array(np.tile(start, (n, 1)).astype(np.float32), dtype=wp.vec3, device="cpu")
-    SLAM.build("motion", device="cpu")(poses, delta, seed=int(rng.integers(1 << 30)))
+    poses = wp.array(np.tile(start, (n, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    SLAM.build("motion", device=DEVICE)(poses, delta, seed=int(rng.integers(1 << 30)))
     from irmcl_warp.geometry import relative
 
     steps = relative(np.tile(start, (n, 1)), poses.numpy().astype(np.float64))
@@ -113,7 +114,7 @@ def _matcher(log, P=4, proposal="gmapping_code", **kw):
     cfg = SlamConfig(num_particles=P, proposal=proposal, resolution_m=0.05, map_margin_m=2.0, **kw)
     lo = log.ground_truth[:, :2].min(0) - 12.0
     shape = tuple((np.ceil((log.ground_truth[:, :2].max(0) + 12.0 - lo) / 0.05).astype(int) + 1)[::-1])
-    rbpf = RBPF(cfg, shape, lo, log.T_base_laser, log.info.angles_rad, 8.0, device="cpu")
+    rbpf = RBPF(cfg, shape, lo, log.T_base_laser, log.info.angles_rad, 8.0, device=DEVICE)
     return rbpf
 
 
@@ -122,7 +123,7 @@ def test_scan_matcher_recovers_a_known_offset():
     rbpf = _matcher(log)
     rbpf.start(log.ground_truth[0], log.ranges_m[0])
     for k in (5, 10):  # the map from three true poses
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device="cpu"))
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
         rbpf._set_ranges(log.ranges_m[k])
         rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
     k = 20
@@ -179,7 +180,7 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=60",
+        cfg = compose("config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=60",
                                            "slam.num_particles=10"])
     out = run_slam(cfg)
     m = json.loads((out / "metrics.json").read_text())
@@ -197,7 +198,7 @@ def test_device_hill_climbing_matches_the_host_twin(rng):
     rbpf = _matcher(log, P=6)
     rbpf.start(log.ground_truth[0], log.ranges_m[0])
     for k in (5, 10):
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (6, 1)).astype(np.float32), dtype=wp.vec3, device="cpu"))
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (6, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
         rbpf._set_ranges(log.ranges_m[k])
         rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
     rbpf._set_ranges(log.ranges_m[20])
@@ -211,7 +212,7 @@ def test_device_hill_climbing_matches_the_host_twin(rng):
 
 def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
     P, shape = 7, (5, 6)
-    maps = ParticleMaps(P, shape, (0.0, 0.0), 0.1, device="cpu")
+    maps = ParticleMaps(P, shape, (0.0, 0.0), 0.1, device=DEVICE)
     before = rng.uniform(0, 1, (P, *shape, 4)).astype(np.float32)
     maps.cells.assign(before)
     parents = np.sort(rng.integers(0, P, P))
@@ -230,7 +231,7 @@ def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", "device=cpu", "sim.duration_s=20", "slam.num_particles=4"])
+        cfg = compose("config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=20", "slam.num_particles=4"])
     real = stage.load_stream
 
     def jumping(cfg):

@@ -11,6 +11,7 @@ from irmcl_warp.nog import NOG, evaluate_grid
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.reference.weighting import nog_log_weights, nog_render
 from kernels import WEIGHTING
+from tests.devices import DEVICE
 
 
 def _wall_nog(x_wall=2.0, res=0.05):
@@ -22,9 +23,9 @@ def _wall_nog(x_wall=2.0, res=0.05):
 def test_pose_two_metres_before_a_wall_renders_two_metres():
     nog = _wall_nog()
     w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=1, num_samples=256, near_m=0.0,
-                        far_m=10.0, device="cpu")
-    particles = wp.array(np.array([[0.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device="cpu")
-    angles = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device="cpu")
+                        far_m=10.0, device=DEVICE)
+    particles = wp.array(np.array([[0.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device=DEVICE)
+    angles = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device=DEVICE)
     r = w.render(particles, (0.0, 0.0, 0.0), angles).numpy()[0, 0]
     assert abs(r - 2.0) <= 0.5 * nog.resolution_m
 
@@ -57,11 +58,11 @@ def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below):
     measured = rng.uniform(0.5, 6.0, B).astype(np.float32)
     measured[3] = np.nan
     w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=P, num_beams=B, num_samples=128, near_m=0.02,
-                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, device="cpu")
-    pw = wp.array(particles, dtype=wp.vec3, device="cpu")
-    aw = wp.array(angles, dtype=wp.float32, device="cpu")
-    logw = wp.zeros(P, dtype=wp.float32, device="cpu")
-    w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device="cpu"), logw)
+                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, device=DEVICE)
+    pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
+    aw = wp.array(angles, dtype=wp.float32, device=DEVICE)
+    logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
+    w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device=DEVICE), logw)
     ours = w.rendered.numpy()
     twin = nog_render(occ, nog.origin_xy, nog.resolution_m, particles, T_bl, angles, 128, 0.02, 12.0, t_min,
                       empty_below)
@@ -70,19 +71,19 @@ def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below):
     assert (twin > 0.1).mean() > 0.15  # the case has walls to hit
     twin_logw = nog_log_weights(ours.astype(np.float64), measured.astype(np.float64), 0.5)
     assert np.allclose(logw.numpy(), twin_logw, rtol=1e-4, atol=1e-4), f"seed {rng.seed}"
-    w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device="cpu"), logw)  # the per-particle sums were reset
+    w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device=DEVICE), logw)  # the per-particle sums were reset
     assert np.allclose(logw.numpy(), twin_logw, rtol=1e-4, atol=1e-4)
 
 
 def test_beam_count_mismatch_is_a_clear_error():
-    w = WEIGHTING.build("nog_raymarch", nog=_wall_nog(), num_particles=2, num_beams=32, device="cpu")
-    p = wp.zeros(2, dtype=wp.vec3, device="cpu")
+    w = WEIGHTING.build("nog_raymarch", nog=_wall_nog(), num_particles=2, num_beams=32, device=DEVICE)
+    p = wp.zeros(2, dtype=wp.vec3, device=DEVICE)
     with pytest.raises(ValueError, match="31 measured ranges / 31 angles, built for 32 beams"):
-        w(p, (0, 0, 0), wp.zeros(31, dtype=wp.float32, device="cpu"), wp.zeros(31, dtype=wp.float32, device="cpu"),
-          wp.zeros(2, dtype=wp.float32, device="cpu"))
+        w(p, (0, 0, 0), wp.zeros(31, dtype=wp.float32, device=DEVICE), wp.zeros(31, dtype=wp.float32, device=DEVICE),
+          wp.zeros(2, dtype=wp.float32, device=DEVICE))
     with pytest.raises(ValueError, match="NOG is empty"):
         WEIGHTING.build("nog_raymarch", nog=NOG(np.zeros((0, 0), np.float32), (0, 0), 0.05), num_particles=1,
-                        num_beams=1, device="cpu")
+                        num_beams=1, device=DEVICE)
 
 
 class _Disc(torch.nn.Module):
@@ -130,23 +131,23 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     angles = np.linspace(-np.pi, np.pi, 24, endpoint=False).astype(np.float32)
     from kernels import RAYCAST
 
-    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=20.0, device="cpu")
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=20.0, device=DEVICE)
     # +half a cell: end points inside the wall cell, not on its border (where float32 and float64 floor differ)
     measured = (caster.cast_numpy(true[None], angles)[0] + 0.05).astype(np.float32)
     measured[5] = np.nan
     particles = np.vstack([true, true + [0.5, 0.0, 0.0], true + [0.0, 0.0, 0.3],
                            np.column_stack([rng.uniform(1, 7, 20), rng.uniform(1, 5, 20), rng.uniform(-3, 3, 20)])]).astype(np.float32)
-    lf = WEIGHTING.build("likelihood_field", occupancy=occ, origin_xy=origin, resolution_m=res, device="cpu")
-    out = wp.zeros(len(particles), dtype=wp.float32, device="cpu")
-    lf(wp.array(particles, dtype=wp.vec3, device="cpu"), (0, 0, 0), wp.array(angles, dtype=wp.float32, device="cpu"),
-       wp.array(measured, dtype=wp.float32, device="cpu"), out)
+    lf = WEIGHTING.build("likelihood_field", occupancy=occ, origin_xy=origin, resolution_m=res, device=DEVICE)
+    out = wp.zeros(len(particles), dtype=wp.float32, device=DEVICE)
+    lf(wp.array(particles, dtype=wp.vec3, device=DEVICE), (0, 0, 0), wp.array(angles, dtype=wp.float32, device=DEVICE),
+       wp.array(measured, dtype=wp.float32, device=DEVICE), out)
     ours = out.numpy()
     twin = likelihood_field_log_weights(distance_to_occupied(occ, res, 0.65), origin, res, particles.astype(np.float64),
                                         (0, 0, 0), angles, measured, 0.95, 0.05, 0.2, 30.0, 2.0)
     assert np.allclose(ours, twin, rtol=1e-4, atol=1e-3), f"seed {rng.seed}"
     assert ours[0] > ours[1] and ours[0] > ours[2] and ours[0] >= ours[3:].max()
     with pytest.raises(ValueError, match="map is empty"):
-        WEIGHTING.build("likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device="cpu")
+        WEIGHTING.build("likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device=DEVICE)
 
 
 def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
@@ -159,15 +160,15 @@ def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
     origin, res = (0.0, 0.0), 0.1
     true = np.array([2.0, 2.0, 0.3])
     angles = np.linspace(-np.pi, np.pi, 12, endpoint=False).astype(np.float32)
-    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device="cpu")
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE)
     measured = (caster.cast_numpy(true[None], angles)[0] + rng.normal(0, 0.02, len(angles))).astype(np.float32)
     measured[4] = np.nan
     particles = np.vstack([true, true + [0.4, 0.0, 0.0], true + [0.0, 0.0, 0.25],
                            np.column_stack([rng.uniform(1, 4, 6), rng.uniform(1, 3, 6), rng.uniform(-3, 3, 6)])]).astype(np.float32)
-    bm = WEIGHTING.build("beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device="cpu")
-    out = wp.zeros(len(particles), dtype=wp.float32, device="cpu")
-    bm(wp.array(particles, dtype=wp.vec3, device="cpu"), (0, 0, 0), wp.array(angles, dtype=wp.float32, device="cpu"),
-       wp.array(measured, dtype=wp.float32, device="cpu"), out)
+    bm = WEIGHTING.build("beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE)
+    out = wp.zeros(len(particles), dtype=wp.float32, device=DEVICE)
+    bm(wp.array(particles, dtype=wp.vec3, device=DEVICE), (0, 0, 0), wp.array(angles, dtype=wp.float32, device=DEVICE),
+       wp.array(measured, dtype=wp.float32, device=DEVICE), out)
     twin = beam_model_log_weights(occ, origin, res, particles.astype(np.float32), (0, 0, 0), angles, measured,
                                   0.95, 0.1, 0.05, 0.05, 0.2, 0.1, 8.0, 0.5)
     assert np.allclose(out.numpy(), twin, rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
@@ -211,10 +212,10 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     measured[1] = np.nan
     T_bl = (0.1, 0.0, 0.05)
     w = WEIGHTING.build("nof_direct", model=model, num_particles=P, num_beams=B, num_samples=S, near_m=0.02,
-                        far_m=6.0, sigma_m=0.5, chunk_rays=8, device="cpu")
-    logw = wp.zeros(P, dtype=wp.float32, device="cpu")
-    w(wp.array(particles, dtype=wp.vec3, device="cpu"), T_bl, wp.array(angles, dtype=wp.float32, device="cpu"),
-      wp.array(measured, dtype=wp.float32, device="cpu"), logw)
+                        far_m=6.0, sigma_m=0.5, chunk_rays=8, device=DEVICE)
+    logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
+    w(wp.array(particles, dtype=wp.vec3, device=DEVICE), T_bl, wp.array(angles, dtype=wp.float32, device=DEVICE),
+      wp.array(measured, dtype=wp.float32, device=DEVICE), logw)
     # twin: the same points, the MLP, composite_torch, the Gaussian on the mean L1 error
     yaw = particles[:, 2:3].astype(np.float64) + T_bl[2] + angles[None, :]
     c, s = np.cos(particles[:, 2]), np.sin(particles[:, 2])
@@ -231,8 +232,8 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
             return (xy[:, 0] > 2.0).float()
 
     wall = WEIGHTING.build("nof_direct", model=Wall(), num_particles=2, num_beams=1, num_samples=256, near_m=0.0,
-                           far_m=10.0, device="cpu")
-    two = wp.array(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device="cpu")
-    lw = wp.zeros(2, dtype=wp.float32, device="cpu")
-    wall(two, (0, 0, 0), wp.zeros(1, dtype=wp.float32, device="cpu"), wp.array([2.0], dtype=wp.float32, device="cpu"), lw)
+                           far_m=10.0, device=DEVICE)
+    two = wp.array(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device=DEVICE)
+    lw = wp.zeros(2, dtype=wp.float32, device=DEVICE)
+    wall(two, (0, 0, 0), wp.zeros(1, dtype=wp.float32, device=DEVICE), wp.array([2.0], dtype=wp.float32, device=DEVICE), lw)
     assert lw.numpy()[0] > -0.01 > lw.numpy()[1]  # 2 m before the wall: right; 1 m before: 1 m off
