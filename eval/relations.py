@@ -12,7 +12,7 @@ from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.config import register
 from irmcl_warp.io import load_log, read_relations, resolve
 from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
-from irmcl_warp.services.cli import run_stage
+from irmcl_warp.services.cli import run_entry
 
 
 def run_relations(cfg):
@@ -41,7 +41,7 @@ register()
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg) -> None:
-    run_stage(run_relations, cfg)
+    run_entry(run_relations, cfg)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from irmcl_warp.mapping import build_map, save_map
 from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
 from irmcl_warp.types import LaserLog
 from kernels import pick_device
-from irmcl_warp.services.cli import run_stage
+from irmcl_warp.services.cli import run_entry
 
 
 def path_length_m(poses: np.ndarray) -> float:
@@ -73,7 +73,7 @@ register()
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg) -> None:
-    run_stage(run_inspect, cfg)
+    run_entry(run_inspect, cfg)
 
 
 if __name__ == "__main__":

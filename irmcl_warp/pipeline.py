@@ -40,7 +40,7 @@ from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.services.outputs import SECTIONS, file_digest, stage_complete, stage_dir, write_json, write_manifest
 from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
 from kernels import pick_device
-from irmcl_warp.services.cli import run_stage
+from irmcl_warp.services.cli import run_entry
 
 
 def with_overrides(cfg, **dotted):
@@ -208,7 +208,7 @@ register()
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="pipeline")
 def main(cfg) -> None:
-    run_stage(run_pipeline, cfg)
+    run_entry(run_pipeline, cfg)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 the user as one line on stderr and exit status 2; anything else keeps its traceback. ``IRMCL_TRACEBACK=1``
 shows the traceback of expected errors too.
 
-Every ``python -m ...`` entry calls its stage through ``run_stage`` (Hydra entries) or wraps its ``main`` in
+Every ``python -m ...`` entry calls its stage through ``run_entry`` (Hydra entries) or wraps its ``main`` in
 ``guard`` (argparse entries).
 """
 
@@ -27,7 +27,7 @@ def _fail(e: BaseException) -> None:
     sys.exit(2)
 
 
-def run_stage(run, cfg):
+def run_entry(run, cfg):
     """``run(cfg)`` after the settings are checked; an expected error becomes one line and exit status 2."""
     try:
         validate(cfg)

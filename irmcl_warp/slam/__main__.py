@@ -4,14 +4,14 @@ import hydra
 
 from irmcl_warp.config import register
 from irmcl_warp.slam.stage import run_slam
-from irmcl_warp.services.cli import run_stage
+from irmcl_warp.services.cli import run_entry
 
 register()
 
 
 @hydra.main(version_base="1.3", config_path="../../conf", config_name="config")
 def main(cfg) -> None:
-    run_stage(run_slam, cfg)
+    run_entry(run_slam, cfg)
 
 
 if __name__ == "__main__":
