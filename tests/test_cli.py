@@ -86,3 +86,16 @@ def test_data_tests_skip_without_the_data_and_fail_when_ci_requires_it(tmp_path)
     assert free.returncode == 0 and " skipped" in free.stdout and "failed" not in free.stdout, free.stdout[-2000:]
     required = _run(args, REPO, IRMCL_DATA=missing, IRMCL_REQUIRE_DATA="1")
     assert required.returncode == 1 and "shared data is missing" in required.stdout, required.stdout[-2000:]
+
+
+@pytest.mark.parametrize("entry", ["irmcl_warp.slam", "irmcl_warp.train", "irmcl_warp.localize", "irmcl_warp.globloc",
+                                   "irmcl_warp.inspect", "irmcl_warp.pipeline", "eval.synthesis", "eval.relations"])
+def test_every_hydra_entry_point_starts_and_checks_its_settings(tmp_path, entry):
+    _one_clean_line(_run([entry, "mcl.num_particles=0"], tmp_path), "mcl.num_particles=0", ">= 1")
+
+
+def test_argparse_entry_points_report_bad_input_without_a_traceback(tmp_path):
+    _one_clean_line(_run(["eval.bench", "mcl", "--nog", str(tmp_path / "none.npz"), "--out", str(tmp_path)], tmp_path),
+                    "none.npz")
+    kept = _run(["eval.keep", str(tmp_path / "not-a-run"), "--results", str(tmp_path / "results")], tmp_path)
+    assert kept.returncode != 0 and "not a finished stage folder" in kept.stderr and "Traceback" not in kept.stderr
