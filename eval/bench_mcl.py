@@ -40,18 +40,18 @@ VARIANTS = {"warp": dict(t_min=0.0, empty_below=0.0), "warp+et": dict(t_min=1e-3
             "warp+et+skip": dict(t_min=1e-3, empty_below=0.01)}
 
 
-def simulator_nog(resolution_m: float = 0.05) -> NOG:
+def simulator_nog(resolution_m: float = 0.05, device: str = "cpu") -> NOG:
     from hydra import compose, initialize_config_dir
 
 
     register()
     with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
         cfg = compose("config", overrides=["sim.duration_s=1"])
-    _, world = simulate(cfg.sim, "cpu")
+    _, world = simulate(cfg.sim, device)
     lo = world.segments.reshape(-1, 2).min(0) - 1.0
     hi = world.segments.reshape(-1, 2).max(0) + 1.0
     shape = tuple(np.ceil((hi - lo) / resolution_m).astype(int)[::-1])
-    walls = SIM.build("rasterize", device="cpu")(world.segments, tuple(lo), resolution_m, shape) > 0
+    walls = SIM.build("rasterize", device=device)(world.segments, tuple(lo), resolution_m, shape) > 0
     return NOG(walls.astype(np.float32), (float(lo[0] + resolution_m / 2), float(lo[1] + resolution_m / 2)),
                resolution_m)
 
@@ -119,7 +119,7 @@ def measured_scan(nog, far, device, seed=0):
 
 def run_mcl_bench(a) -> list[dict]:
     device = pick_device(a.device or "auto")
-    nog = NOG.load(Path(a.nog)) if a.nog else simulator_nog()
+    nog = NOG.load(Path(a.nog)) if a.nog else simulator_nog(device=device)
     far = a.far
     angles, measured = measured_scan(nog, far, device)
     rows = []

@@ -7,12 +7,15 @@ import torch
 
 from irmcl_warp.nof.render import make_renderer, sample_depths
 from irmcl_warp.reference.render import composite_torch, termination_weights
+from tests.devices import DEVICE
+
+DEV = torch.device(DEVICE)  # the tensors live where the kernel runs (Warp follows them)
 
 
 def test_hand_computed_weights_and_range():
-    p = torch.tensor([[0.4, 0.3, 0.8]], dtype=torch.float64)
-    z = torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64)
-    assert torch.allclose(termination_weights(p), torch.tensor([[0.4, 0.18, 0.336]], dtype=torch.float64))
+    p = torch.tensor([[0.4, 0.3, 0.8]], dtype=torch.float64, device=DEV)
+    z = torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64, device=DEV)
+    assert torch.allclose(termination_weights(p).cpu(), torch.tensor([[0.4, 0.18, 0.336]], dtype=torch.float64))
     for name in ("warp", "torch_ref"):
         r, w = make_renderer(name, normalize=False)(p, z)
         assert r.item() == pytest.approx(0.4 * 1 + 0.18 * 2 + 0.336 * 3)
@@ -25,7 +28,7 @@ def _random_beams(rng, R=64, N=48, dtype=torch.float32):
     p = torch.from_numpy(rng.uniform(0.0, 1.0, (R, N)) ** 3).to(dtype)  # mostly free, some walls
     p[:, -1] = torch.from_numpy(rng.uniform(0.0, 1.0, R)).to(dtype)
     z = sample_depths(R, N, 0.02, 20.0, perturb=True, generator=torch.Generator().manual_seed(rng.seed)).to(dtype)
-    return p, z
+    return p.to(DEV), z.to(DEV)
 
 
 @pytest.mark.parametrize("normalize", [True, False])
@@ -37,7 +40,7 @@ def test_warp_matches_torch_twin(rng, normalize, t_min):
     r_t, w_t = composite_torch(p_t, z, normalize=normalize, t_min=t_min)
     assert torch.allclose(r_w, r_t, atol=1e-5, rtol=1e-5), f"seed {rng.seed}"
     assert torch.allclose(w_w, w_t, atol=1e-5), f"seed {rng.seed}"
-    g_r, g_w = torch.randn(len(p)), torch.randn(len(p))
+    g_r, g_w = torch.randn(len(p), device=DEV), torch.randn(len(p), device=DEV)
     (r_w * g_r + w_w * g_w).sum().backward()
     (r_t * g_r + w_t * g_w).sum().backward()
     scale = p_t.grad.abs().max().item()
@@ -56,13 +59,13 @@ def test_warp_backward_passes_gradcheck_in_float64(rng, normalize):
 
 def test_opaque_wall_renders_its_depth():
     """A beam that meets a fully occupied sample ends there: range = that sample's depth."""
-    z = torch.linspace(0.02, 10.0, 100).expand(3, 100).contiguous()
-    p = torch.zeros(3, 100)
+    z = torch.linspace(0.02, 10.0, 100, device=DEV).expand(3, 100).contiguous()
+    p = torch.zeros(3, 100, device=DEV)
     for i, k in enumerate((10, 50, 99)):
         p[i, k:] = 1.0
     r, w = make_renderer("warp")(p, z)
     assert torch.allclose(r, z[0, [10, 50, 99]], atol=1e-5)
-    assert torch.allclose(w, torch.ones(3))
+    assert torch.allclose(w, torch.ones(3, device=DEV))
 
 
 def test_sample_depths_stay_in_their_bins(rng):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -211,6 +213,7 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     measured = rng.uniform(1, 5, B).astype(np.float32)
     measured[1] = np.nan
     T_bl = (0.1, 0.0, 0.05)
+    twin_model = copy.deepcopy(model)  # nof_direct moves its model to the device it runs on
     w = WEIGHTING.build("nof_direct", model=model, num_particles=P, num_beams=B, num_samples=S, near_m=0.02,
                         far_m=6.0, sigma_m=0.5, chunk_rays=8, device=DEVICE)
     logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
@@ -223,7 +226,7 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     z = np.linspace(0.02, 6.0, S)
     pts = o[:, None, None, :] + np.stack([np.cos(yaw), np.sin(yaw)], -1)[:, :, None, :] * z[:, None]
     with torch.no_grad():
-        occ = model(torch.tensor(pts.reshape(-1, 2), dtype=torch.float32)).reshape(P * B, S)
+        occ = twin_model(torch.tensor(pts.reshape(-1, 2), dtype=torch.float32)).reshape(P * B, S)
         r = composite_torch(occ.double(), torch.tensor(z).expand(P * B, S))[0].numpy().reshape(P, B)
     assert np.allclose(logw.numpy(), nog_log_weights(r, measured.astype(np.float64), 0.5), atol=1e-4), f"seed {rng.seed}"
 
