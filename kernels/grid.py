@@ -36,3 +36,14 @@ def inv_abs(d: float) -> float:
     if d == 0.0:
         return BIG
     return 1.0 / wp.abs(d)
+
+
+@wp.func
+def walk_start(g: wp.vec2, d: wp.vec2):
+    """The state of an exact cell walk (Amanatides & Woo) of a ray from g (grid units) along d: the cell
+    (ix, iy), the step per axis (sx, sy), the ray parameter of the next cell boundary per axis (t_max_x,
+    t_max_y) and the parameter between boundaries per axis (dx, dy)."""
+    ix = int(wp.floor(g[0]))
+    iy = int(wp.floor(g[1]))
+    return (ix, iy, step_sign(d[0]), step_sign(d[1]), first_boundary(g[0], d[0], ix), first_boundary(g[1], d[1], iy),
+            inv_abs(d[0]), inv_abs(d[1]))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import warp as wp
 
 from kernels.registry import MAPPING
-from kernels.grid import first_boundary, inside, inv_abs, step_sign
+from kernels.grid import inside, walk_start
 
 
 @wp.func
@@ -34,14 +34,7 @@ def integrate_kernel(logodds: wp.array2d(dtype=wp.float32), origin: wp.vec2, res
     d = wp.vec2(wp.cos(a), wp.sin(a))
     g = (wp.vec2(pose[0], pose[1]) - origin) / res
     length = wp.min(r, max_range) / res
-    ix = int(wp.floor(g[0]))
-    iy = int(wp.floor(g[1]))
-    sx = step_sign(d[0])
-    sy = step_sign(d[1])
-    t_max_x = first_boundary(g[0], d[0], ix)
-    t_max_y = first_boundary(g[1], d[1], iy)
-    dx = inv_abs(d[0])
-    dy = inv_abs(d[1])
+    ix, iy, sx, sy, t_max_x, t_max_y, dx, dy = walk_start(g, d)
     for _ in range(int(2.0 * length) + 4):
         t_exit = wp.min(t_max_x, t_max_y)
         if t_exit >= length:

@@ -16,21 +16,14 @@ import numpy as np
 import warp as wp
 
 from kernels.registry import RAYCAST, pick_device
-from kernels.grid import first_boundary, inside, inv_abs, step_sign
+from kernels.grid import inside, walk_start
 
 
 @wp.func
 def dda_range(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2,
               max_range: float, occ_threshold: float) -> float:
     g = (start - origin) / res
-    ix = int(wp.floor(g[0]))
-    iy = int(wp.floor(g[1]))
-    sx = step_sign(d[0])
-    sy = step_sign(d[1])
-    t_max_x = first_boundary(g[0], d[0], ix)
-    t_max_y = first_boundary(g[1], d[1], iy)
-    dx = inv_abs(d[0])
-    dy = inv_abs(d[1])
+    ix, iy, sx, sy, t_max_x, t_max_y, dx, dy = walk_start(g, d)
     t = float(0.0)
     max_steps = int(2.0 * max_range / res) + 4
     for _ in range(max_steps):
