@@ -237,11 +237,17 @@ class GlobLocConfig:
 
 @dataclass
 class LocalizeConfig:
-    """The localize stage's experiment protocol (IR-MCL Sec. IV): where the runs start, for how long, how."""
+    """The localize stage: the benchmark protocol (IR-MCL Sec. IV: starts spread over a log with ground truth,
+    scored), or with ``map_path`` a run of your own log in your own map (no ground truth needed)."""
     mode: str = "global"  # global (uniform over the free space) | tracking (from a noisy ground-truth pose)
     tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # tracking: initial spread (m, m, rad)
     num_starts: int = 10  # start times spread evenly over the sequence
-    run_s: float = 60.0  # how long each start is followed
+    run_s: Optional[float] = 60.0  # how long each start is followed (map_path: None = to the end of the log)
+    map_path: Optional[str] = None  # your map (ROS map_server YAML + PGM/PNG, or .npz): one run of data.* in it
+    nof_path: Optional[str] = None  # map_path with mcl.weighting=nog_raymarch|nof_direct: your trained nof.pt
+    initial_pose: Optional[List[float]] = None  # map_path: [x, y, yaw] in the map (RViz's "2D pose estimate"), spread
+    #                                             tracking_std; None: global localization from a uniform start
+    start_s: float = 0.0  # map_path: localize from this far into the log
     kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
     reduce_after_s: float = 20.0  # IR-MCL's code keeps the mcl.reduce_to heaviest particles 20 s into a global run
 

@@ -75,21 +75,58 @@ def _read_pgm(path: Path) -> np.ndarray:
     return np.frombuffer(pixels[:W * H], dtype=np.uint8).reshape(H, W)
 
 
+def _read_image(path: Path) -> np.ndarray:
+    """8-bit grey pixels of a map image: binary PGM, or PNG (colour averaged to grey, as map_server)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the map image named by the map YAML is missing")
+    if path.suffix.lower() in (".pgm", ".pnm"):
+        return _read_pgm(path)
+    import matplotlib.image
+
+    try:
+        img = matplotlib.image.imread(path)
+    except (OSError, ValueError, SyntaxError) as e:
+        raise ValueError(f"{path}: not a readable map image ({e})") from e
+    img = np.asarray(img, np.float64)
+    if img.ndim == 3:
+        img = img[..., :3].mean(-1)
+    return np.round(img * 255.0 if img.max() <= 1.0 else img).astype(np.uint8)
+
+
 def load_map(path) -> OccupancyGrid:
-    """Load ``.npz`` (exact) or a map_server ``.yaml`` (+ its PGM; occupancy from the pixel values)."""
+    """Load ``.npz`` (exact) or a map_server ``.yaml`` (+ its PGM or PNG; trinary: occupied above
+    occupied_thresh, free below free_thresh, unknown between; ``negate`` flips the pixel scale). A rotated
+    origin (yaw) is refused: the grids here are axis-aligned."""
     path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such map file (a map_server .yaml or a .npz)")
     if path.suffix == ".npz":
         with np.load(path) as z:
             return OccupancyGrid(z["logodds"], tuple(z["origin_xy"].tolist()), float(z["resolution_m"]))
     from omegaconf import OmegaConf
 
-    meta = OmegaConf.to_container(OmegaConf.load(path))
+    try:
+        meta = OmegaConf.to_container(OmegaConf.load(path))
+    except Exception as e:  # the YAML parser's errors have many types
+        raise ValueError(f"{path}: not a map_server YAML ({type(e).__name__}: {e})") from e
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path}: not a map_server YAML (expected keys image, resolution, origin)")
     for key in ("image", "resolution", "origin"):
         if key not in meta:
             raise ValueError(f"{path}: map YAML lacks {key!r}")
-    img = _read_pgm(path.parent / meta["image"])[::-1].astype(np.float64)
+    origin, res = meta["origin"], meta["resolution"]
+    if not (isinstance(origin, list) and len(origin) in (2, 3) and all(isinstance(v, (int, float)) for v in origin)):
+        raise ValueError(f"{path}: origin must be [x, y, yaw], found {origin!r}")
+    if len(origin) == 3 and abs(origin[2]) > 1e-9:
+        raise ValueError(f"{path}: origin yaw {origin[2]} is not supported (rotate the image into the map frame)")
+    if not (isinstance(res, (int, float)) and res > 0):
+        raise ValueError(f"{path}: resolution must be a positive number of metres per pixel, found {res!r}")
+    occ_t, free_t = meta.get("occupied_thresh", OCCUPIED_THRESH), meta.get("free_thresh", FREE_THRESH)
+    if not 0 <= free_t < occ_t <= 1:
+        raise ValueError(f"{path}: expected 0 <= free_thresh < occupied_thresh <= 1, found {free_t}, {occ_t}")
+    img = _read_image(path.parent / meta["image"])[::-1].astype(np.float64)
     p = (255.0 - img) / 255.0 if not meta.get("negate", 0) else img / 255.0
     logodds = np.zeros(p.shape, dtype=np.float32)
-    logodds[p > meta.get("occupied_thresh", OCCUPIED_THRESH)] = 4.0
-    logodds[p < meta.get("free_thresh", FREE_THRESH)] = -4.0
-    return OccupancyGrid(logodds, (float(meta["origin"][0]), float(meta["origin"][1])), float(meta["resolution"]))
+    logodds[p > occ_t] = 4.0
+    logodds[p < free_t] = -4.0
+    return OccupancyGrid(logodds, (float(origin[0]), float(origin[1])), float(res))

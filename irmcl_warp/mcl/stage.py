@@ -28,6 +28,7 @@ from irmcl_warp.config import MCLConfig
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
+from irmcl_warp.mcl.own_map import run_in_map
 from irmcl_warp.mcl.track import follow
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.nof.folders import train_folder
@@ -110,6 +111,11 @@ def start_indices(t: np.ndarray, starts: np.ndarray, k: int, loc) -> np.ndarray:
 
 
 def run_localize(cfg) -> Path:
+    if cfg.localize.map_path:  # your own log in your own map (no ground truth needed)
+        return run_in_map(cfg)
+    if cfg.localize.run_s is None:
+        raise ValueError("localize.run_s=null (to the end of the log) needs localize.map_path; the benchmark "
+                         "protocol follows each start for localize.run_s seconds")
     started, device = time.time(), pick_device(cfg.device)
     m, loc, far = cfg.mcl, cfg.localize, far_bound_m(cfg)
     out = stage_dir(cfg, run_folder(cfg))

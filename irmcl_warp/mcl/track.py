@@ -15,11 +15,12 @@ def moved(odom_step, min_trans: float, min_rot: float) -> bool:
     return abs(trans) > min_trans or abs(rot1 + rot2) > min_rot
 
 
-def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None) -> np.ndarray:
+def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised. As
     IR-MCL's code, the filter weighs and resamples only after the odometry moved (``m.update_min_*``), and
     keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). A jump in
-    ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero."""
+    ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero. ``watch(j, pf)``, when given,
+    sees the filter after every scan (plots, animations)."""
     est = np.empty((len(idx), 3))
     last_odom, t_start, pose = log.odom[idx[0]], log.stamps[idx[0]], None
     reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
@@ -34,4 +35,6 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
                 pf.reduce(m.reduce_to)
                 reduce_pending = False
         est[j] = pose
+        if watch is not None:
+            watch(j, pf)
     return est

@@ -51,3 +51,68 @@ def plot_error_axis(ax, stamps, est, gt, converged_s=None, kidnap_s=None) -> Non
     ax.set_xlabel("time since start (s)")
     ax.set_ylabel("position error (m)")
     ax.legend(fontsize=8)
+
+
+def _map_axes(ax, image: np.ndarray, extent) -> None:
+    ax.imshow(1 - image, cmap="gray", vmin=0, vmax=1, origin="lower", extent=extent)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def plot_own_map(path: Path, image, extent, stamps, est, particles, spread_m, gt=None) -> None:
+    """Left: the map with the estimated trajectory (and the ground truth where known) and the final
+    particles; right: the particles' spread over time (how sure the filter is, with or without ground truth)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(14, 5.5), gridspec_kw={"width_ratios": [2.2, 1]})
+    _map_axes(ax, image, extent)
+    keep = np.random.default_rng(0).permutation(len(particles))[:3000]
+    ax.plot(particles[keep, 0], particles[keep, 1], ".", color="tab:blue", ms=1, alpha=0.5, label="particles (end)")
+    ax.plot(est[:, 0], est[:, 1], "-", color="tab:red", lw=1, label="estimate")
+    if gt is not None:
+        ok = np.all(np.isfinite(gt), axis=1)
+        ax.plot(gt[ok, 0], gt[ok, 1], "-", color="tab:green", lw=1, label="ground truth")
+    ax.legend(loc="upper right", fontsize=8, markerscale=2)
+    t = np.asarray(stamps) - stamps[0]
+    bx.semilogy(t, np.maximum(spread_m, 1e-3), "-", color="tab:blue", lw=1)
+    bx.axhline(0.3, color="gray", lw=0.8, label="0.3 m")
+    bx.set_xlabel("time since start (s)")
+    bx.set_ylabel("particle spread (m)")
+    bx.legend(fontsize=8)
+    save_figure(fig, path)
+
+
+def animate_particles(path: Path, image, extent, frames, stamps, est, fps: int = 8) -> None:
+    """A GIF of the particles on the map (``frames``: [(t since start, xy [n, 2])]) with the estimate so far;
+    written to a temporary file and renamed, as every output."""
+    import os
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    t = np.asarray(stamps) - stamps[0]
+    fig, ax = plt.subplots(figsize=(7, 5))
+    _map_axes(ax, image, extent)
+    dots, = ax.plot([], [], ".", color="tab:blue", ms=1.5, alpha=0.6)
+    line, = ax.plot([], [], "-", color="tab:red", lw=1)
+    title = ax.set_title("")
+
+    def draw(k):
+        tk, xy = frames[k]
+        dots.set_data(xy[:, 0], xy[:, 1])
+        upto = t <= tk
+        line.set_data(est[upto, 0], est[upto, 1])
+        title.set_text(f"{tk:.1f} s: {len(xy)} particles shown, estimate in red")
+        return dots, line, title
+
+    tmp = Path(path).with_name(f".{Path(path).name}.tmp.gif")
+    FuncAnimation(fig, draw, frames=len(frames), blit=False).save(tmp, writer=PillowWriter(fps=fps), dpi=80)
+    plt.close(fig)
+    os.replace(tmp, path)

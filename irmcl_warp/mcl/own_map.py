@@ -1,0 +1,143 @@
+"""The localize stage on your own log and map (``localize.map_path``): no ground truth needed.
+
+    python -m irmcl_warp.localize data=bag data.path=run.bag localize.map_path=map.yaml mcl.weighting=likelihood_field
+    python -m irmcl_warp.localize ... localize.initial_pose=[2.0,1.5,0.3]         # track from a pose, as RViz's
+    python -m irmcl_warp.localize ... mcl.weighting=nog_raymarch localize.nof_path=nof.pt   # IR-MCL on your NOF
+
+The map is a ROS map_server YAML (+ PGM or PNG) or a ``.npz`` grid (what the slam stage writes); the filter
+starts uniform over its free cells, or around ``localize.initial_pose`` with ``localize.tracking_std``. One
+run over ``localize.start_s`` .. ``+ run_s`` (None: to the end). Writes outputs/<exp>/<run>/: trajectory.tum,
+spread.csv (the particles' spread and N_eff over time), run.png (the map, the trajectory, the final particles,
+the spread over time), particles.gif (the particles on the map as the run goes on) and metrics.json (scored
+against ground truth only where the log has some).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.io import resolve, write_tum
+from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mcl.track import follow
+from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.nog import bake_nog
+from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp.services.plots import animate_particles, plot_own_map
+from kernels import pick_device
+
+FRAMES = 60  # animation frames over the run
+
+
+def user_file(path: str) -> Path:
+    """A file the user names: as given (absolute or from the working directory), else under the data root."""
+    p = Path(path).expanduser()
+    return p if p.exists() else resolve(path)
+
+
+def map_inputs(map_file: Path) -> list[Path]:
+    """The map file and, for a YAML, its image (both decide whether a run is up to date)."""
+    if map_file.suffix != ".npz":
+        from omegaconf import OmegaConf  # the YAML's image name; load_map has checked the file already
+
+        image = OmegaConf.load(map_file).get("image")
+        return [map_file] + ([map_file.parent / image] if image else [])
+    return [map_file]
+
+
+def own_map_folder(cfg) -> str:
+    m, loc = cfg.mcl, cfg.localize
+    n = f"{m.num_particles // 1000}k" if m.num_particles % 1000 == 0 else str(m.num_particles)
+    start = "pose" if loc.initial_pose is not None else "global"
+    return f"localize-{m.weighting}-{start}-{n}-in-{Path(loc.map_path).stem}"
+
+
+def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
+    m, loc = cfg.mcl, cfg.localize
+    if m.weighting not in NOF_WEIGHTINGS:  # AMCL's models: unknown stops the beam model, is free for the field
+        unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
+        occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
+        return WeightingMaps(occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=grid.resolution_m)
+    if not loc.nof_path:
+        raise ValueError(f"mcl.weighting={m.weighting} reads a trained NOF: set localize.nof_path=<nof.pt>")
+    ckpt = user_file(loc.nof_path)
+    torch_device = "cuda" if device.startswith("cuda") else "cpu"
+    if m.weighting == "nof_direct":
+        return WeightingMaps(model=load_nof(ckpt, torch_device)[0])
+    H, W = grid.shape
+    x0, y0 = grid.origin_xy
+    bounds = (x0, y0, x0 + W * grid.resolution_m, y0 + H * grid.resolution_m)
+    return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=stage_dir(cfg, "nog"), device=torch_device))
+
+
+def run_in_map(cfg) -> Path:
+    started, device = time.time(), pick_device(cfg.device)
+    m, loc = cfg.mcl, cfg.localize
+    map_file = user_file(loc.map_path)
+    grid = load_map(map_file)
+    inputs = recorded_inputs(cfg) + map_inputs(map_file) + ([user_file(loc.nof_path)] if loc.nof_path else [])
+    out = stage_dir(cfg, own_map_folder(cfg))
+    if up_to_date(out, cfg, inputs, "localize"):
+        return out
+    log = load_stream(cfg)
+    far = far_bound_m(cfg, log.info.range_max_m)
+    view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
+    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, weighting_maps(cfg, grid, far, device))
+    pf.rng = np.random.default_rng(m.seed)
+    if loc.initial_pose is not None:
+        pose = np.asarray(list(loc.initial_pose), np.float64)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"localize.initial_pose={list(loc.initial_pose)}: expected [x, y, yaw] in the map")
+        pf.init_gaussian(pose, list(loc.tracking_std))
+    else:
+        pf.init_uniform()
+    t = log.stamps - log.stamps[0]
+    end = np.inf if loc.run_s is None else loc.start_s + loc.run_s
+    idx = np.flatnonzero((t >= loc.start_s) & (t <= end))
+    if len(idx) < 2:
+        raise ValueError(f"localize.start_s={loc.start_s}, run_s={loc.run_s}: {len(idx)} scans of a {t[-1]:.0f} s "
+                         f"log ({log.source}) in the window")
+    every = max(1, len(idx) // FRAMES)
+    spread, frames = np.zeros((len(idx), 2)), []
+    keep = np.random.default_rng(0)
+
+    def watch(j, f):
+        spread[j] = f.spread, f.num_particles
+        if j % every == 0 or j == len(idx) - 1:
+            p = f.particles.numpy()
+            frames.append((float(t[idx[j]]), p[keep.permutation(len(p))[:1500], :2]))
+
+    first = pf.particles.numpy()
+    frames.append((float(t[idx[0]]), first[keep.permutation(len(first))[:1500], :2]))  # the start, before any scan
+    t_run = time.perf_counter()
+    est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch)
+    ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
+    stamps = log.stamps[idx]
+    write_tum(out / "trajectory.tum", stamps, est)
+    atomic_write_bytes(out / "spread.csv", ("stamp,spread_m,particles\n" + "".join(
+        f"{s:.6f},{a:.4f},{int(n)}\n" for s, (a, n) in zip(stamps, spread))).encode())
+    settled = np.flatnonzero(spread[:, 0] < 0.3)
+    metrics = {"log": str(log.source), "map": str(map_file), "weighting": m.weighting, "device": device,
+               "start": "initial pose" if loc.initial_pose is not None else "global", "scans": int(len(idx)),
+               "duration_s": float(stamps[-1] - stamps[0]), "ms_per_scan": ms_per_scan,
+               "final_spread_m": float(spread[-1, 0]),
+               "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None}
+    gt = log.ground_truth[idx] if log.ground_truth is not None else None
+    if gt is not None and np.isfinite(gt).all(1).sum() >= 2:  # scored only where the log has ground truth
+        metrics["localization"] = localization_metrics(stamps, est, gt)
+    image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
+    extent = (grid.origin_xy[0], grid.origin_xy[0] + grid.shape[1] * grid.resolution_m,
+              grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)
+    plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt)
+    animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
+    write_json(out / "metrics.json", metrics)
+    write_manifest(out, cfg, inputs, device, started)
+    print(f"{log.source}: {len(idx)} scans localized in {map_file} ({metrics['start']} start); particle spread "
+          f"{metrics['final_spread_m']:.2f} m at the end -> {out}")
+    return out
