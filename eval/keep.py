@@ -6,7 +6,7 @@ synthesis, ``mcl``, ``slam``, ``globloc``, ``pipeline``) as ``{"runs": {folder: 
 That is all the tables, claims and plots read (eval/collect.py); trajectories, manifests and N_eff traces
 stay in ``outputs/``. Files a document shows are kept beside the JSON: the map of a SLAM run
 (``results/slam/maps/<exp>/<folder>.png``) when asked (``--maps``), the pipeline's report and figures
-(``results/pipeline/<exp>/``).
+(``results/pipeline/<exp>/<run>/``).
 
 Runs made before a setting existed lack it in their recorded config; ``migrate`` fills it with the value
 they ran with and renames keys that were renamed since (each rule says why), so every kept run reads the
@@ -97,8 +97,8 @@ def keep(runs: list[Path], results: Path, maps: bool = False) -> list[Path]:
         if group == "pipeline":
             for name in ("report.md", "map.png", "error.png"):
                 if (run / name).is_file():
-                    (results / "pipeline" / exp).mkdir(parents=True, exist_ok=True)
-                    shutil.copyfile(run / name, results / "pipeline" / exp / name)
+                    (results / "pipeline" / exp / run.name).mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(run / name, results / "pipeline" / exp / run.name / name)
     for path, doc in by_file.items():
         doc["runs"] = dict(sorted(doc["runs"].items()))
         atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())

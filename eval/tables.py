@@ -206,21 +206,51 @@ def slam_table(runs: dict) -> str:
 
 
 def pipeline_table(runs: dict) -> str:
-    """One row per pipeline run: SLAM, NOF and global localization of the second log, time per stage."""
+    """One row per pipeline run (SLAM, NOF and global localization of the second log, time per stage), and
+    for an experiment run over several second drives a row of their medians [min-max] (RMSE over the
+    successful ones: converged and under IR-MCL's 0.3 m)."""
+    import numpy as np
+
     lines = ["| run | device | SLAM: processed scans, ATE (odometry) | NOF: validation MAE | localized scans | "
              "converged after | RMSE (cm / deg) | time: slam / train / nog / localize (s) |",
              "|---|---|---|---|---|---|---|---|"]
-    for (exp, _), m in sorted(runs.items()):
+    by_exp = {}
+    for (exp, folder), m in sorted(runs.items(), key=lambda kv: (kv[0][0], kv[1].config.get("pipeline", {}).get(
+            "sim_path_seed", 0))):
+        by_exp.setdefault(exp, []).append(m)
         sl, nof, lo, t = m.get("slam", {}), m.get("nof", {}), m.get("localization"), m["timing"]
         took = " / ".join("skipped" if t.get(k, {}).get("skipped") else _f(t.get(k, {}).get("s"), "{:.0f}")
                           for k in ("slam", "train", "nog", "localize"))
         conv = (f"{lo['time_to_converge_s']:.1f} s" if lo["converged"] else "no") if lo else "no ground truth"
         rmse = f"{_f(lo['location_rmse_cm'])} / {_f(lo['yaw_rmse_deg'], '{:.2f}')}" if lo else "-"
-        dev = "H100" if str(m["device"]).startswith("cuda") else "2-core CPU" if m["device"] == "cpu" else m["device"]
-        lines.append(f"| {exp} | {dev} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
+        if lo and not lo["success"]:
+            rmse += " (failed)"
+        seed = m.config.get("pipeline", {}).get("sim_path_seed") if folder != "pipeline" else None
+        name = exp + (f" (path seed {seed})" if seed is not None else "")
+        lines.append(f"| {name} | {_device(m['device'])} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
                      f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
                      f"{m['localized_scans']} | {conv} | {rmse} | {took} |")
+    for exp, ms in by_exp.items():
+        scored = [m["localization"] for m in ms if m.get("localization")]
+        if len(ms) < 2 or not scored:
+            continue
+        ok = [lo for lo in scored if lo["success"]]
+
+        def spread(values, fmt):
+            v = [x for x in values if x is not None]
+            return f"{fmt.format(np.median(v))} [{fmt.format(min(v))}-{fmt.format(max(v))}]" if v else "-"
+
+        total = [sum(t["s"] for t in m["timing"].values()) for m in ms]
+        lines.append(f"| **{exp}: median of {len(ms)} second drives** | {_device(ms[0]['device'])} | | | | "
+                     f"{len(ok)}/{len(scored)} succeeded; converged after "
+                     f"{spread([lo['time_to_converge_s'] for lo in ok], '{:.1f}')} s | "
+                     f"{spread([lo['location_rmse_cm'] for lo in ok], '{:.1f}')} cm | "
+                     f"all stages {spread(total, '{:.0f}')} s |")
     return "\n".join(lines)
+
+
+def _device(d) -> str:
+    return "H100" if str(d).startswith("cuda") else "2-core CPU" if d == "cpu" else str(d)
 
 
 def globloc_table(runs: dict) -> str:

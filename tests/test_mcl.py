@@ -224,6 +224,7 @@ def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):
                    "mcl.num_particles=100")
     with pytest.raises(ValueError, match="kidnap_at_s=12.0 must lie inside the run"):
         run_localize(cfg)
+    assert not list((tmp_path / "outputs").glob("*/localize-*"))  # a failed stage leaves no empty folder behind
 
 
 def test_reduce_keeps_the_heaviest_particles_and_their_weights():

@@ -14,6 +14,7 @@ from irmcl_warp.nof.model import NOF
 
 def atomic_torch_save(obj, path: Path) -> None:
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".partial")
     torch.save(obj, tmp)
     os.replace(tmp, path)

@@ -62,9 +62,9 @@ def _git_sha() -> str:
 
 
 def stage_dir(cfg, stage: str, root="outputs") -> Path:
-    out = Path(root) / cfg.exp / stage
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    """``outputs/<exp>/<stage>``; not created here: the first file written makes it, so a stage that fails
+    before writing anything leaves no empty folder behind."""
+    return Path(root) / cfg.exp / stage
 
 
 # the config sections each stage reads: a change elsewhere (say mcl.* for a SLAM run) leaves it finished
