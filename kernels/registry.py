@@ -7,7 +7,17 @@ import os
 
 import warp as wp
 
-wp.config.quiet = os.environ.get("IRMCL_WARP_VERBOSE", "0") != "1"
+
+def _quiet() -> None:
+    """Warp's start-up banner and module-load lines only with IRMCL_WARP_VERBOSE=1 (Warp 1.19 reads
+    ``log_level``; older releases ``quiet``)."""
+    verbose = os.environ.get("IRMCL_WARP_VERBOSE", "0") == "1"
+    wp.config.quiet = not verbose
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_INFO if verbose else wp.LOG_WARNING
+
+
+_quiet()
 
 
 class Registry:
@@ -37,7 +47,7 @@ _initialised = False
 def init_warp() -> None:
     global _initialised
     if not _initialised:
-        wp.config.quiet = os.environ.get("IRMCL_WARP_VERBOSE", "0") != "1"
+        _quiet()
         wp.init()
         _initialised = True
 

@@ -83,3 +83,18 @@ def test_map_files_are_read_right_or_refused(world, tmp_path):
     (tmp_path / "png.yaml").write_text(text.replace("office.pgm", "office.png"))
     again = load_map(tmp_path / "png.yaml")
     assert np.array_equal(np.sign(again.logodds), np.sign(grid.logodds)) and again.origin_xy == grid.origin_xy
+
+
+def test_ground_truth_of_the_log_is_scored_after_alignment(world, tmp_path, monkeypatch):
+    """A log with ground truth (the simulator) in a map of its own frame: scored after a rigid alignment, since
+    a user's map need not share the ground truth's frame."""
+    d, map_yaml, _, truth, _ = world
+    monkeypatch.chdir(tmp_path)
+    register()
+    sim = [f"sim.{k}={v}" for k, v in SMALL.items()]
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["device=cpu", f"localize.map_path={map_yaml}", "localize.run_s=null",
+                                           "mcl.weighting=likelihood_field", "mcl.num_particles=500", *sim,
+                                           f"localize.initial_pose=[{truth[0, 0]},{truth[0, 1]},{truth[0, 2]}]"])
+    m = json.loads((run_localize(cfg) / "metrics.json").read_text())
+    assert m["aligned_to_ground_truth"]["poses"] == len(truth) and m["aligned_to_ground_truth"]["ate_rmse_m"] < 0.1

@@ -8,8 +8,8 @@ The map is a ROS map_server YAML (+ PGM or PNG) or a ``.npz`` grid (what the sla
 starts uniform over its free cells, or around ``localize.initial_pose`` with ``localize.tracking_std``. One
 run over ``localize.start_s`` .. ``+ run_s`` (None: to the end). Writes outputs/<exp>/<run>/: trajectory.tum,
 spread.csv (the particles' spread and N_eff over time), run.png (the map, the trajectory, the final particles,
-the spread over time), particles.gif (the particles on the map as the run goes on) and metrics.json (scored
-against ground truth only where the log has some).
+the spread over time), particles.gif (the particles on the map as the run goes on) and metrics.json (where
+the log has ground truth, the trajectory error after a rigid alignment to it: your map need not share its frame).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
@@ -26,7 +27,7 @@ from irmcl_warp.mcl.track import follow
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
-from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.metrics import aligned_error
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.services.plots import animate_particles, plot_own_map
@@ -128,13 +129,16 @@ def run_in_map(cfg) -> Path:
                "duration_s": float(stamps[-1] - stamps[0]), "ms_per_scan": ms_per_scan,
                "final_spread_m": float(spread[-1, 0]),
                "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None}
-    gt = log.ground_truth[idx] if log.ground_truth is not None else None
-    if gt is not None and np.isfinite(gt).all(1).sum() >= 2:  # scored only where the log has ground truth
-        metrics["localization"] = localization_metrics(stamps, est, gt)
+    gt, gt_in_map = log.ground_truth[idx] if log.ground_truth is not None else None, None
+    if gt is not None and np.isfinite(gt).all(1).sum() >= 3:
+        # a map of your own need not share the ground truth's frame (a SLAM map starts where its drive did):
+        # the estimate is scored after a rigid alignment to the ground truth, as evo's --align
+        metrics["aligned_to_ground_truth"] = aligned_error(est, gt)
+        gt_in_map = compose(inverse(align_rigid(est, gt)), gt)  # drawn in the map
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     extent = (grid.origin_xy[0], grid.origin_xy[0] + grid.shape[1] * grid.resolution_m,
               grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)
-    plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt)
+    plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt_in_map)
     animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
     write_json(out / "metrics.json", metrics)
     write_manifest(out, cfg, inputs, device, started)
