@@ -2,7 +2,8 @@
 to a localized robot, every artifact made by a command.
 
 1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam-<tag>/ (map, trajectory.tum)
-2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/pipeline/slam_poses.tum
+2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/pipeline-training-poses/
+             slam_poses.tum (one file for the mapping log, whichever second drive is localized)
 3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train-<preset>/nof.pt
 4. nog       the NOF baked into a neural occupancy grid over the SLAM map (cached by checkpoint digest)
 5. localize  global MCL with the NOG over the second log (``pipeline.*``; the simulator's second session,
@@ -148,16 +149,17 @@ def run_pipeline(cfg) -> Path:
     slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam, cfg.data)), cfg, recorded_inputs(cfg),
                          lambda: run_slam(cfg), timing)
     log = load_stream(cfg)
-    # 2. the SLAM poses: the NOF's training poses
+    # 2. the SLAM poses: the NOF's training poses, one file for the mapping log whatever drive is localized
     scans, poses = slam_poses(slam_dir, log, cfg.pipeline.train_every_scan)
-    tmp = out / "slam_poses.tum.new"
+    posed = stage_dir(cfg, "pipeline-training-poses") / "slam_poses.tum"
+    tmp = posed.with_name("slam_poses.tum.new")
     write_tum(tmp, log.stamps[scans], poses)
-    if (out / "slam_poses.tum").is_file() and file_digest(tmp) == file_digest(out / "slam_poses.tum"):
+    if posed.is_file() and file_digest(tmp) == file_digest(posed):
         tmp.unlink()  # unchanged: keep the file (and the caches keyed on its mtime)
     else:
-        tmp.replace(out / "slam_poses.tum")
+        tmp.replace(posed)
     # 3. the NOF, trained on those (interleaved train / val / test over the posed scans)
-    cfg_train = with_overrides(cfg, **{"data.train_poses_path": str((out / "slam_poses.tum").resolve()),
+    cfg_train = with_overrides(cfg, **{"data.train_poses_path": str(posed.resolve()),
                                        "data.splits_path": None})
     train_out = run_stage("train", train_dir(cfg_train), cfg_train, recorded_inputs(cfg_train),
                           lambda: run_train(cfg_train), timing)

@@ -28,7 +28,7 @@ def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):
     m = json.loads((out / "metrics.json").read_text())
     # SLAM beat its odometry, and the NOF was trained on the SLAM poses of the processed scans
     assert m["slam"]["ate_rmse_m"] < 0.5 * m["slam"]["odometry_ate_rmse_m"], m["slam"]
-    stamps, poses = read_tum(out / "slam_poses.tum")
+    stamps, poses = read_tum(out.parent / "pipeline-training-poses" / "slam_poses.tum")
     assert len(stamps) == m["training_scans"] == 200  # every scan, posed by SLAM (40 s at 5 Hz)
     # the simulator's odometry starts at zero, so the map frame sits at the first true pose
     first = simulate(cfg.sim, "cpu")[0].ground_truth[0]
@@ -49,3 +49,16 @@ def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):
     run_pipeline(cfg)
     said = capsys.readouterr().out
     assert "[slam] up to date" in said and "[train] redoing" in said
+    # another second drive through the same office: the map and the NOF are the mapping log's, reused
+    other = run_pipeline(_with(cfg, "pipeline.sim_path_seed", 2))
+    said = capsys.readouterr().out
+    assert other.name == "pipeline-path2" and other != out and (other / "localization.tum").is_file()
+    assert "[slam] up to date" in said and "[train] up to date" in said
+
+
+def _with(cfg, key, value):
+    from omegaconf import OmegaConf
+
+    new = OmegaConf.create(OmegaConf.to_container(cfg))
+    OmegaConf.update(new, key, value, merge=False)
+    return new
