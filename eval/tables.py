@@ -245,7 +245,7 @@ def pipeline_table(runs: dict) -> str:
                      f"{len(ok)}/{len(scored)} succeeded; converged after "
                      f"{spread([lo['time_to_converge_s'] for lo in ok], '{:.1f}')} s | "
                      f"{spread([lo['location_rmse_cm'] for lo in ok], '{:.1f}')} cm | "
-                     f"all stages {spread(total, '{:.0f}')} s |")
+                     f"time of the stages each run ran (finished ones are reused): {spread(total, '{:.0f}')} s |")
     return "\n".join(lines)
 
 
