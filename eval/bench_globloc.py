@@ -17,7 +17,7 @@ import numpy as np
 
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import register
-from irmcl_warp.geometry import compose
+from irmcl_warp.geometry import compose as compose_se2
 from irmcl_warp.globloc.database import build_database, describe, keyframe_indices
 from irmcl_warp.globloc.gist import Gist
 from irmcl_warp.globloc.run import Hypotheses, grid_of, laser_angles, make_stream, world_of
@@ -40,7 +40,7 @@ def add_parser(sub) -> None:
 
 
 def run_globloc_bench(a) -> dict:
-    from hydra import compose, initialize_config_dir
+    from hydra import compose, initialize_config_dir  # lazy: only this bench composes a config
 
 
     register()
@@ -67,7 +67,7 @@ def run_globloc_bench(a) -> dict:
     import warp as wp
 
 
-    cams = compose(mapping[kf][: a.render_batch], camera.T_base_cam)
+    cams = compose_se2(mapping[kf][: a.render_batch], camera.T_base_cam)
     camera.kernel.render(cams, on_device=True)
     wp.synchronize_device(device)
     t = time.perf_counter()

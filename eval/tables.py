@@ -8,9 +8,7 @@ blocks of README.md (between ``<!-- table:<name> -->`` and ``<!-- /table:<name> 
 from __future__ import annotations
 
 import argparse
-import json
 import re
-from pathlib import Path
 
 from eval.claims import claims, reproduction_markdown
 from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, collect_globloc, collect_localization,

@@ -30,7 +30,7 @@ from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import load_log, read_tum, write_tum
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
-from irmcl_warp.mcl.track import follow
+from irmcl_warp.mcl.track import follow, window
 from irmcl_warp.nof.stage import run_train, train_dir
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
@@ -109,13 +109,7 @@ def second_log(cfg):
 def localize_second_log(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(scan indices, estimates [n, 3], final particles) of global MCL over ``log`` in the SLAM map frame,
     with the filter every MCL user builds (services.filters.build_filter) and IR-MCL's protocol."""
-    pc = cfg.pipeline
-    t = log.stamps - log.stamps[0]
-    end = np.inf if pc.run_s is None else pc.start_s + pc.run_s
-    idx = np.flatnonzero((t >= pc.start_s) & (t <= end))
-    if len(idx) < 2:
-        raise ValueError(f"pipeline.start_s={pc.start_s}, run_s={pc.run_s}: {len(idx)} scans of a {t[-1]:.0f} s "
-                         f"log in the window")
+    idx = window(log, cfg.pipeline.start_s, cfg.pipeline.run_s, "pipeline")
     view = free_space_view(slam_map.probability, slam_map.origin_xy, slam_map.resolution_m, slam_map.known)
     m = OmegaConf.merge(cfg.mcl, {"weighting": "nog_raymarch"})  # the pipeline localizes with the NOG it baked
     pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg), device, WeightingMaps(nog=nog))

@@ -13,7 +13,6 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from irmcl_warp.config import SimConfig, register
-from irmcl_warp.geometry import compose as se2
 from irmcl_warp.io import read_tum, write_bag
 from irmcl_warp.mapping import build_map, save_map
 from irmcl_warp.mapping.mapio import load_map

@@ -23,7 +23,7 @@ from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
-from irmcl_warp.mcl.track import follow
+from irmcl_warp.mcl.track import follow, window
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
@@ -99,11 +99,7 @@ def run_in_map(cfg) -> Path:
     else:
         pf.init_uniform()
     t = log.stamps - log.stamps[0]
-    end = np.inf if loc.run_s is None else loc.start_s + loc.run_s
-    idx = np.flatnonzero((t >= loc.start_s) & (t <= end))
-    if len(idx) < 2:
-        raise ValueError(f"localize.start_s={loc.start_s}, run_s={loc.run_s}: {len(idx)} scans of a {t[-1]:.0f} s "
-                         f"log ({log.source}) in the window")
+    idx = window(log, loc.start_s, loc.run_s, "localize")
     every = max(1, len(idx) // FRAMES)
     spread, frames = np.zeros((len(idx), 2)), []
     keep = np.random.default_rng(0)

@@ -9,6 +9,18 @@ from irmcl_warp.types import LaserLog
 from kernels.motion import odometry_step
 
 
+def window(log: LaserLog, start_s: float, run_s: float | None, section: str) -> np.ndarray:
+    """Indices of the scans from ``start_s`` for ``run_s`` seconds (None: to the end), times counted from the
+    log's first scan; ``section`` names the settings in the error for an empty window."""
+    t = log.stamps - log.stamps[0]
+    end = np.inf if run_s is None else start_s + run_s
+    idx = np.flatnonzero((t >= start_s) & (t <= end))
+    if len(idx) < 2:
+        raise ValueError(f"{section}.start_s={start_s}, run_s={run_s}: {len(idx)} scans of a {t[-1]:.0f} s log "
+                         f"({log.source}) in the window")
+    return idx
+
+
 def moved(odom_step, min_trans: float, min_rot: float) -> bool:
     """Has the robot moved enough since the last update (AMCL's update_min_d / update_min_a)?"""
     rot1, trans, rot2 = odom_step
