@@ -100,9 +100,16 @@ def keep(runs: list[Path], results: Path, maps: bool = False) -> list[Path]:
                     (results / "pipeline" / exp / run.name).mkdir(parents=True, exist_ok=True)
                     shutil.copyfile(run / name, results / "pipeline" / exp / run.name / name)
     for path, doc in by_file.items():
-        doc["runs"] = dict(sorted(doc["runs"].items()))
-        atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+        write_kept(path, doc)
     return sorted(by_file)
+
+
+def write_kept(path: Path, doc: dict) -> None:
+    """One results file: its header, then one compact line per run (small, and a diff names the runs)."""
+    runs = dict(sorted(doc["runs"].items()))
+    lines = [f" {json.dumps(k)}: {json.dumps(v, sort_keys=True, separators=(',', ':'))}" for k, v in runs.items()]
+    head = json.dumps({k: v for k, v in doc.items() if k != "runs"}, sort_keys=True)[:-1]
+    atomic_write_bytes(path, (head + ', "runs": {\n' + ",\n".join(lines) + "\n}}\n").encode())
 
 
 def main(argv=None) -> None:
