@@ -3,12 +3,13 @@ against its Kümmerle et al. 2009 relations; prints a table, writes outputs/<exp
 
 from __future__ import annotations
 
+import sys
 import time
 
 import hydra
 import numpy as np
 
-from irmcl_warp.services.metrics import relations_error
+from irmcl_warp.services.metrics import coverage_warning, relations_error
 from irmcl_warp.config import register
 from irmcl_warp.io import load_log, read_relations, resolve
 from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
@@ -29,6 +30,9 @@ def run_relations(cfg):
     write_json(out / "metrics.json", metrics)
     write_manifest(out, cfg, [resolve(cfg.data.path), resolve(cfg.data.relations_path)], "cpu", started)
     print(f"{cfg.data.name}: relations metric (Kümmerle et al. 2009)")
+    for name, m in metrics.items():
+        if shout := coverage_warning(m, f"{cfg.data.name} {name} ({cfg.data.relations_path})"):
+            print(shout, file=sys.stderr)
     print(f"{'poses':<14}{'used':>6}{'trans m':>10}{'± std':>8}{'rot deg':>9}{'± std':>8}")
     for name, m in metrics.items():
         print(f"{name:<14}{m['relations_used']:>6}{m['trans_abs_mean_m']:>10.3f}{m['trans_abs_std_m']:>8.3f}"

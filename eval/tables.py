@@ -15,6 +15,7 @@ from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, col
                           collect_pipeline, collect_slam, collect_synthesis, localize_cell, slam_variant)
 from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.services.metrics import FULL_COVERAGE
 from irmcl_warp.services.cli import guard
 
 # GMapping references (facts cited, scored with the relations metric, mean translational error):
@@ -192,6 +193,10 @@ def slam_table(runs: dict) -> str:
             wall = np.array([r["wall_time_s"] for r in rows])
             conv = f"{t[ok].mean():.3f} +- {t_std[ok].mean():.3f}" if ok.any() else "-"
             method = f"{key[2]} + {key[3]}" + (f" ({key[5]})" if key[5] else "")
+            counts = min(((r["relations"]["relations_used"], r["relations"]["relations_used"] + r["relations"][
+                "relations_unmatched"]) for r in rows), key=lambda c: c[0] / max(c[1], 1))
+            if counts[0] < FULL_COVERAGE * counts[1]:  # never print a score on a part of the relations as the log's
+                method += f" [scored on {counts[0]} of {counts[1]} relations]"
             dev = "H100" if str(key[6]).startswith("cuda") else key[6]
             lines.append(f"| {ds} | {method} | {key[4]} | {ok.sum()}/{len(rows)} | {conv} | "
                          f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {dev} |" if ok.any() else

@@ -38,3 +38,20 @@ def test_never_converging_and_diverging_filters():
     assert localization_metrics(t, late, gt)["success"] is False
     with pytest.raises(ValueError, match="fewer than two"):
         localization_metrics(t[:1], gt[:1], gt[:1])
+
+
+def test_a_relations_score_on_few_matched_relations_is_shouted():
+    """Scored on a part of the relations (keyframe ground truth, an offset clock), the figure is not the log's
+    error: the share is recorded and a loud warning names it."""
+    from irmcl_warp.io.groundtruth import Relations
+    from irmcl_warp.services.metrics import coverage_warning, relations_error
+
+    stamps = np.arange(10.0)
+    poses = np.column_stack([stamps, np.zeros(10), np.zeros(10)])
+    t1 = np.arange(0.0, 20.0, 2.0)  # half the relations start at stamps no pose has
+    rel = Relations(t1, t1 + 1.0, np.tile([1.0, 0.0, 0.0], (10, 1)))
+    r = relations_error(stamps, poses, rel)
+    assert (r["relations_used"], r["relations_unmatched"]) == (5, 5) and r["relations_matched_share"] == 0.5
+    assert "only 5 of 10 relations (50 %)" in coverage_warning(r, "x")
+    full = relations_error(stamps, poses, Relations(stamps[:9], stamps[1:], np.tile([1.0, 0.0, 0.0], (9, 1))))
+    assert full["relations_matched_share"] == 1.0 and coverage_warning(full, "x") is None

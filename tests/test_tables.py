@@ -104,7 +104,8 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     def run(seed, err, std=0.05):
         return {"dataset": "intel", "proposal": "paper", "resample": "selective", "particles": 30, "seed": seed,
                 "device": "cuda:0", "wall_time_s": 10.0 + seed,
-                "relations": {"trans_abs_mean_m": err, "trans_abs_std_m": std, "rot_abs_mean_deg": 2.0}}
+                "relations": {"trans_abs_mean_m": err, "trans_abs_std_m": std, "rot_abs_mean_deg": 2.0,
+                              "relations_used": 100, "relations_unmatched": 0}}
 
     def config(seed):
         return {"slam": {**dataclasses.asdict(SlamConfig()), "seed": seed}, "data": {"name": "intel"}}
@@ -114,9 +115,14 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     _run(tmp_path, "gmapping_intel", "slam-9", {**run(9, 0.0), "relations": "not scored: no relations file"},
          config(9))  # left out
     _run(tmp_path, "gmapping_intel", "slam-dda", run(4, 0.05), {**config(4), "slam": {**config(4)["slam"], "line": "dda"}})
+    partial = {**run(5, 0.04), "particles": 60}  # scored on a fifth of the relations: the table says so
+    partial["relations"] = {**partial["relations"], "relations_used": 20, "relations_unmatched": 80}
+    _run(tmp_path, "gmapping_intel", "slam-partial", partial, {**config(5), "slam": {**config(5)["slam"], "num_particles": 60}})
     lines = slam_table(collect_slam(results=tmp_path / "none", outputs=tmp_path)).splitlines()
     ours = [l for l in lines if "paper + selective" in l]
     assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |",
+                    "| intel | paper + selective [scored on 20 of 100 relations] | 60 | 1/1 | 0.040 +- 0.050 | 2.00 | "
+                    "0.040 | 15-15 s | H100 |",
                     "| intel | paper + selective (dda) | 30 | 1/1 | 0.050 +- 0.050 | 2.00 | 0.050 | 14-14 s | H100 |"]
     assert any("*released C++, derived/intel.fileorder*" in l and "10/10" in l for l in lines)
 

@@ -9,6 +9,20 @@ from irmcl_warp.geometry import align_rigid, compose, relative, wrap_angle
 from irmcl_warp.types import match_stamps
 
 
+FULL_COVERAGE = 0.9  # a relations score on a smaller share of the relations is shouted, never printed bare
+
+
+def coverage_warning(rel: dict, what: str) -> str | None:
+    """A loud sentence when ``rel`` (a relations_error result) scored few of the relations: the figure is
+    then not the log's error but that of the matched part."""
+    used, unmatched = rel["relations_used"], rel["relations_unmatched"]
+    share = used / max(used + unmatched, 1)
+    if share >= FULL_COVERAGE:
+        return None
+    return (f"WARNING: {what}: only {used} of {used + unmatched} relations ({100 * share:.0f} %) match a pose by stamp; "
+            f"the figure is the error of those, not of the whole log")
+
+
 def relations_error(stamps, poses, relations, tol_s: float = 1e-4) -> dict:
     """The metric of Kümmerle et al. 2009 (Auton. Robots 27(4), eq. 2): for every relation (t1, t2, d*),
     compare the estimated motion d = x(t1)^-1 x(t2) with d*. Translational error = ||t(d* ^-1 d)||
@@ -26,6 +40,7 @@ def relations_error(stamps, poses, relations, tol_s: float = 1e-4) -> dict:
     e_r = np.degrees(np.abs(wrap_angle(est[:, 2] - gt[:, 2])))
     return {
         "relations_used": int(ok.sum()), "relations_unmatched": int((~ok).sum()),
+        "relations_matched_share": float(ok.mean()),
         "trans_abs_mean_m": float(e_t.mean()), "trans_abs_std_m": float(e_t.std()),
         "trans_sq_mean_m2": float((e_t ** 2).mean()), "trans_sq_std_m2": float((e_t ** 2).std()),
         "rot_abs_mean_deg": float(e_r.mean()), "rot_abs_std_deg": float(e_r.std()),

@@ -14,6 +14,7 @@ differs from the first is an error (the readers' data.beam_policy can reject or 
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -30,7 +31,7 @@ from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
 from irmcl_warp.mapping.grid import OccupancyGrid
 from irmcl_warp.mapping.mapio import save_map
 from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
-from irmcl_warp.services.metrics import aligned_error, relations_error
+from irmcl_warp.services.metrics import aligned_error, coverage_warning, relations_error
 from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
 from kernels import SLAM, pick_device
@@ -174,6 +175,9 @@ def run_slam(cfg) -> Path:
             metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]}
             metrics["relations"] = relations_error(stamps, compose(every, log.T_base_laser), rel)
             metrics["relations_odometry"] = relations_error(stamps, compose(log.odom, log.T_base_laser), rel)
+            shout = coverage_warning(metrics["relations"], f"{cfg.data.name} ({cfg.data.relations_path})")
+            if shout:
+                print(shout, file=sys.stderr)
         except FileNotFoundError as e:
             metrics["relations"] = f"not scored: {e}"
     if log.ground_truth is not None:
