@@ -14,8 +14,10 @@ from pathlib import Path
 from omegaconf import OmegaConf
 
 from eval.keep import read_run, stage_of
-from irmcl_warp.mcl.stage import run_tag as localize_run_tag
-from irmcl_warp.slam.stage import run_tag as slam_run_tag
+from irmcl_warp.mcl.folders import resolution_tag
+from irmcl_warp.mcl.stage import cell_tag, run_tag as localize_run_tag
+from irmcl_warp.nof.folders import run_name as nof_run_name
+from irmcl_warp.slam.stage import variant_suffix as slam_variant_suffix
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS, OUTPUTS = REPO / "results", REPO / "outputs"
@@ -62,9 +64,8 @@ def collect(group: str, stages: tuple[str, ...], results: Path = RESULTS, output
 
 
 def run_name(run: Run) -> str:
-    """A NOF run's preset, plus the renderer when it is not Warp (nof.folders.run_name, from its config)."""
-    c = run.config
-    return c["train"]["name"] + ("" if c["render"]["name"] == "warp" else f"-{c['render']['name']}")
+    """A NOF run's preset, plus the renderer when it is not Warp, from its config (as the stage names it)."""
+    return nof_run_name(OmegaConf.create(run.config))
 
 
 def collect_synthesis(**where) -> dict:
@@ -95,10 +96,8 @@ def collect_globloc(**where) -> dict:
 def slam_variant(run: Run) -> str:
     """The ablation settings of a SLAM run that differ from the defaults ("" for none): ``freecheck, dda``,
     from its settings and data config (as the slam stage names its folder)."""
-    s = run.config["slam"]
-    tag = slam_run_tag(OmegaConf.create(s), OmegaConf.create(run.config.get("data", {})))
-    base = f"slam-{s['proposal']}-{s['resample']}-{s['num_particles']}p-seed{s['seed']}"
-    return ", ".join(re.split(r"-(?=[a-z])", tag[len(base):])[1:])
+    suffix = slam_variant_suffix(OmegaConf.create(run.config["slam"]), OmegaConf.create(run.config.get("data", {})))
+    return ", ".join(re.split(r"-(?=[a-z])", suffix)[1:])
 
 
 def localize_cell(run: Run) -> dict:
@@ -106,8 +105,5 @@ def localize_cell(run: Run) -> dict:
     mode, map resolution as the stage names it ("5", "2.5" cm), and ``extra``: what its run tag adds beyond
     the cell (kidnapping, recovery, ablation settings; "" for a run of the paper's cells)."""
     st = OmegaConf.create(run["settings"])
-    res = st.map_resolution_m * 100
-    res = str(round(res)) if abs(res - round(res)) < 1e-6 else f"{res:g}"
-    n = f"{st.num_particles // 1000}k" if st.num_particles % 1000 == 0 else str(st.num_particles)
-    base = f"localize-{st.weighting}-{st.mode}-{n}-{res}cm"
-    return {"weighting": st.weighting, "mode": st.mode, "res": res, "extra": localize_run_tag(st, st)[len(base):]}
+    return {"weighting": st.weighting, "mode": st.mode, "res": resolution_tag(st.map_resolution_m),
+            "extra": localize_run_tag(st, st)[len(cell_tag(st, st)):]}

@@ -50,7 +50,6 @@ class ParticleFilter:
         H, W = free_space.shape
         lo = np.asarray(free_space.origin_xy, float)
         self.bounds = (lo[0], lo[1], lo[0] + (W - 1) * free_space.resolution_m, lo[1] + (H - 1) * free_space.resolution_m)
-        self.weighting = None
         self._allocate(N)
         self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
         self.measured = wp.zeros(B, dtype=wp.float32, device=d)

@@ -23,10 +23,11 @@ from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mcl.folders import particles_tag
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
-from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import aligned_error
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
@@ -54,17 +55,14 @@ def map_inputs(map_file: Path) -> list[Path]:
 
 def own_map_folder(cfg) -> str:
     m, loc = cfg.mcl, cfg.localize
-    n = f"{m.num_particles // 1000}k" if m.num_particles % 1000 == 0 else str(m.num_particles)
     start = "pose" if loc.initial_pose is not None else "global"
-    return f"localize-{m.weighting}-{start}-{n}-in-{Path(loc.map_path).stem}"
+    return f"localize-{m.weighting}-{start}-{particles_tag(m.num_particles)}-in-{Path(loc.map_path).stem}"
 
 
 def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
     m, loc = cfg.mcl, cfg.localize
-    if m.weighting not in NOF_WEIGHTINGS:  # AMCL's models: unknown stops the beam model, is free for the field
-        unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
-        occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
-        return WeightingMaps(occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=grid.resolution_m)
+    if m.weighting not in NOF_WEIGHTINGS:
+        return grid_maps(grid, m.weighting)
     if not loc.nof_path:
         raise ValueError(f"mcl.weighting={m.weighting} reads a trained NOF: set localize.nof_path=<nof.pt>")
     ckpt = user_file(loc.nof_path)

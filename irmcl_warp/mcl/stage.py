@@ -28,6 +28,7 @@ from irmcl_warp.config import MCLConfig
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
+from irmcl_warp.mcl.folders import particles_tag, resolution_tag
 from irmcl_warp.mcl.own_map import run_in_map
 from irmcl_warp.mcl.track import follow
 from irmcl_warp.nof.checkpoint import load_nof
@@ -35,7 +36,7 @@ from irmcl_warp.nof.folders import train_folder
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams, recorded_inputs
-from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view
+from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.services.plots import plot_run
@@ -52,11 +53,7 @@ def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
     free_view = free_space_view(grid.probability, grid.origin_xy, res, grid.known)
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     if m.weighting not in NOF_WEIGHTINGS:
-        # unknown cells stop the beam model's rays (AMCL's map_calc_range), but they are no obstacle for the
-        # likelihood field, whose distance map counts occupied cells only (as AMCL's)
-        unknown_as = 0.0 if m.weighting == "likelihood_field" else 1.0
-        occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
-        return free_view, WeightingMaps(occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=res), image
+        return free_view, grid_maps(grid, m.weighting), image
     (ckpt,) = nof_inputs(cfg)
     if not ckpt.is_file():
         raise FileNotFoundError(f"{ckpt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
@@ -71,13 +68,16 @@ ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin"
                  "resample": "", "estimate": "", "sigma_m": "sigma"}
 
 
+def cell_tag(m, loc) -> str:
+    """The part of a run's folder name that is a cell of the paper's tables (``m``: the mcl section, ``loc``:
+    the localize protocol): ``localize-nog_raymarch-global-100k-5cm``."""
+    return f"localize-{m.weighting}-{loc.mode}-{particles_tag(m.num_particles)}-{resolution_tag(m.map_resolution_m)}cm"
+
+
 def run_tag(m, loc) -> str:
-    """Output folder name of a localization run (``m``: the mcl section, ``loc``: the localize protocol):
-    what differs between the paper's table cells, then each ablation setting that differs from its default
-    (``-beams16``, ``-tmin0``, ``-multinomial``)."""
-    n = f"{m.num_particles // 1000}k" if m.num_particles % 1000 == 0 else str(m.num_particles)
-    res = m.map_resolution_m * 100
-    tag = f"localize-{m.weighting}-{loc.mode}-{n}-{round(res) if abs(res - round(res)) < 1e-6 else f'{res:g}'}cm"
+    """Output folder name of a localization run: its ``cell_tag``, then kidnapping, recovery and each
+    ablation setting that differs from its default (``-beams16``, ``-tmin0``, ``-multinomial``)."""
+    tag = cell_tag(m, loc)
     tag += f"-kidnap{loc.kidnap_at_s:g}s" if loc.kidnap_at_s > 0 else ""
     tag += "-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else ""
     defaults = MCLConfig()

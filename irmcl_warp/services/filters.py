@@ -48,6 +48,15 @@ class WeightingMaps:
     resolution_m: float | None = None
 
 
+def grid_maps(grid, weighting: str) -> WeightingMaps:
+    """What AMCL's grid models read from an occupancy grid: unknown cells stop the beam model's rays (AMCL's
+    map_calc_range), but are no obstacle for the likelihood field, whose distance map counts occupied cells
+    only (as AMCL's)."""
+    unknown_as = 0.0 if weighting == "likelihood_field" else 1.0
+    occupancy = np.where(grid.known, grid.probability, unknown_as).astype(np.float32)
+    return WeightingMaps(occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=grid.resolution_m)
+
+
 def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_particles: int, num_beams: int):
     """The WEIGHTING entry ``mcl.weighting`` for ``num_particles`` x ``num_beams``."""
     w = mcl.weighting

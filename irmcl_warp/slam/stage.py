@@ -44,10 +44,15 @@ ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": ""
 
 
 def run_tag(s, data=None) -> str:
-    """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then each ablation setting
-    that differs from its default (``-nofreecheck``, ``-bresenham``, ``-plstep0.01``) and each beam geometry
-    override of ``data`` (``-fov3.13287``, ``-amin-1.56643``, ``-offset0_0_0``)."""
-    tag = f"slam-{s.proposal}-{s.resample}-{s.num_particles}p-seed{s.seed}"
+    """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then its ``variant_suffix``."""
+    return f"slam-{s.proposal}-{s.resample}-{s.num_particles}p-seed{s.seed}" + variant_suffix(s, data)
+
+
+def variant_suffix(s, data=None) -> str:
+    """Each ablation setting that differs from its default (``-nofreecheck``, ``-bresenham``,
+    ``-plstep0.01``) and each beam geometry override of ``data`` (``-fov3.13287``, ``-amin-1.56643``,
+    ``-offset0_0_0``); "" for a run at the defaults."""
+    tag = ""
     defaults = SlamConfig()
     for key, short in ABLATION_TAGS.items():
         v = s.get(key, getattr(defaults, key)) if hasattr(s, "get") else getattr(s, key, getattr(defaults, key))
