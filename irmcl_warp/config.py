@@ -291,7 +291,8 @@ class ConfigError(ValueError):
     """A setting outside what its key allows, or a key no schema declares."""
 
 
-# choices of the string settings (a typo is an error, not a silent fallback)
+# choices of the string settings (a typo is an error, not a silent fallback); the registries and strategy tables
+# that implement them sit above this module, so tests/test_config.py holds the two in agreement
 CHOICES = {
     "data.format": ("sim", "carmen", "bag"), "data.beam_policy": ("error", "reject", "resample"),
     "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
@@ -302,7 +303,7 @@ CHOICES = {
     "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"),
     "globloc.scan2map": ("paper", "likelihood_field"), "globloc.cluster_space": ("pose", "index"),
 }
-# numeric settings: (lowest, highest, what) with None for no bound; lowest is exclusive where the name says "> "
+# numeric settings: (lowest, highest), None for no bound; a lowest written "> x" is exclusive
 RANGES = {
     "data.far_m": ("> 0", None), "data.max_speed_mps": ("> 0", None), "data.max_step_m": ("> 0", None),
     "data.no_return_m": ("> 0", None), "data.fov_rad": ("> 0", 6.2832),

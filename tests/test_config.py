@@ -64,3 +64,21 @@ def test_paper_recipe_is_the_authors_script():
 def test_block_experiments_hold_out_the_time_block():
     cfg = _compose(["+exp=fr079_block"])
     assert cfg.data.split == "block" and cfg.exp == "fr079_block" and cfg.data.name == "fr079"
+
+
+def test_config_choices_are_what_the_code_implements():
+    """config.CHOICES (checked before a stage runs) names exactly the registry entries and strategies the
+    stages choose from, so a new kernel or strategy cannot be refused, nor a removed one accepted."""
+    import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct)
+    from irmcl_warp.config import CHOICES
+    from irmcl_warp.mcl.filter import ESTIMATORS
+    from irmcl_warp.nof.beams import SPLITS
+    from irmcl_warp.nof.render import RENDERERS
+    from irmcl_warp.slam.rbpf import RBPF
+    from kernels import MAPPING, RAYCAST, RESAMPLE, WEIGHTING
+
+    implemented = {"mcl.weighting": WEIGHTING.names(), "mcl.estimate": ESTIMATORS, "mcl.resample": RESAMPLE.names(),
+                   "render.name": RENDERERS, "raycast.name": RAYCAST.names(), "mapping.kernel": MAPPING.names(),
+                   "data.split": SPLITS, "slam.proposal": RBPF.PROPOSALS}
+    for key, names in implemented.items():
+        assert sorted(CHOICES[key]) == sorted(names), key

@@ -63,12 +63,13 @@ class History:
 
 
 class RBPF:
+    PROPOSALS = {"paper": "propose_paper", "gmapping_code": "propose_match", "odometry": "propose_odometry"}
+
     def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float,
                  device: str = "auto"):
-        proposals = {"paper": self.propose_paper, "gmapping_code": self.propose_match, "odometry": self.propose_odometry}
-        if cfg.proposal not in proposals:
-            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {sorted(proposals)}")
-        self.propose = proposals[cfg.proposal]  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
+        if cfg.proposal not in self.PROPOSALS:
+            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {sorted(self.PROPOSALS)}")
+        self.propose = getattr(self, self.PROPOSALS[cfg.proposal])  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
         if cfg.resample not in ("selective", "always"):
             raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
         self.cfg, self.device = cfg, pick_device(device)
