@@ -10,11 +10,14 @@ from __future__ import annotations
 import argparse
 import re
 
+from omegaconf import OmegaConf
+
 from eval.claims import claims, reproduction_markdown
 from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, collect_globloc, collect_localization,
                           collect_pipeline, collect_slam, collect_synthesis, localize_cell, slam_variant)
 from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.pipeline import run_folder as pipeline_run_folder
 from irmcl_warp.services.metrics import FULL_COVERAGE
 from irmcl_warp.services.cli import guard
 
@@ -228,7 +231,8 @@ def pipeline_table(runs: dict) -> str:
         rmse = f"{_f(lo['location_rmse_cm'])} / {_f(lo['yaw_rmse_deg'], '{:.2f}')}" if lo else "-"
         if lo and not lo["success"]:
             rmse += " (failed)"
-        seed = m.config.get("pipeline", {}).get("sim_path_seed") if folder != "pipeline" else None
+        cfg = OmegaConf.create(m.config)  # one of several second drives: as the pipeline names its run folders
+        seed = cfg.pipeline.sim_path_seed if pipeline_run_folder(cfg) != "pipeline" else None
         name = exp + (f" (path seed {seed})" if seed is not None else "")
         lines.append(f"| {name} | {_device(m['device'])} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
                      f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
