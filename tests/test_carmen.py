@@ -107,9 +107,9 @@ def test_beam_count_mismatch_policies(tmp_path):
     p = _write(tmp_path, text)
     with pytest.raises(LogFormatError, match=r"line 11: scan has 3 beams, the log's scans have 6"):
         read_carmen(p)
-    with pytest.warns(LogDefectWarning, match="scans_rejected_beam_count: 1"):
+    with pytest.warns(LogDefectWarning, match="scans_rejected_beam_geometry: 1"):
         assert len(read_carmen(p, beam_policy="reject")) == 4
-    with pytest.warns(LogDefectWarning, match="scans_resampled_beam_count: 1"):
+    with pytest.warns(LogDefectWarning, match="scans_resampled_beam_geometry: 1"):
         log = read_carmen(p, beam_policy="resample")
     assert len(log) == 5 and log.ranges_m.shape == (5, 6)
 

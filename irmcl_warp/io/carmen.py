@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.geometry import compose, inverse
-from irmcl_warp.io.beams import BeamPolicy, harmonise_beams, mask_ranges
+from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams, mask_ranges
 from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
 from irmcl_warp.io.errors import LogFormatError, warn_defects
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
@@ -82,9 +82,17 @@ def _need(path, line_no, tokens, count, what):
         raise LogFormatError(path, f"line {line_no}", f"{what}: expected at least {count} fields, found {len(tokens)}")
 
 
+def _count(path, n_line, token, what) -> int:
+    """A count field: a non-negative integer (``3.5`` or ``-5`` is an error, not 3 or an index)."""
+    v = _floats(path, n_line, [token], what)[0]
+    if v < 0 or v != int(v) or v > 1e6:
+        raise LogFormatError(path, f"line {n_line}", f"{what}: expected a whole number from 0 to 1e6, found {token!r}")
+    return int(v)
+
+
 def _parse_flaser(path, n_line, tok):
     _need(path, n_line, tok, 2, "FLASER")
-    n = int(_floats(path, n_line, tok[1:2], "FLASER beam count")[0])
+    n = _count(path, n_line, tok[1], "FLASER beam count")
     _need(path, n_line, tok, 2 + n + 7, f"FLASER with {n} beams (n ranges, 6 pose values, timestamp)")
     ranges = _floats(path, n_line, tok[2:2 + n], "FLASER ranges")
     tail = _floats(path, n_line, tok[2 + n:2 + n + 7], "FLASER poses/timestamp")
@@ -94,10 +102,10 @@ def _parse_flaser(path, n_line, tok):
 def _parse_robotlaser(path, n_line, tok):
     _need(path, n_line, tok, 9, "ROBOTLASER1 header")
     head = _floats(path, n_line, tok[1:9], "ROBOTLASER1 header")
-    n = int(head[7])
+    n = _count(path, n_line, tok[8], "ROBOTLASER1 beam count")
     _need(path, n_line, tok, 10 + n, f"ROBOTLASER1 with {n} ranges")
     ranges = _floats(path, n_line, tok[9:9 + n], "ROBOTLASER1 ranges")
-    m = int(_floats(path, n_line, tok[9 + n:10 + n], "ROBOTLASER1 remission count")[0])
+    m = _count(path, n_line, tok[9 + n], "ROBOTLASER1 remission count")
     i = 10 + n + m
     _need(path, n_line, tok, i + 12, f"ROBOTLASER1 with {n} ranges and {m} remissions")
     tail = _floats(path, n_line, tok[i:i + 12], "ROBOTLASER1 poses/timestamp")
@@ -149,15 +157,14 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
         raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {dict(c.skipped) or 'none'})")
     report = DefectReport()
     report.add("truncated_last_line", int(c.truncated_last_line), "unfinished last line dropped")
-    ranges, kept = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
-                                   beam_policy, report)
+    geometries = [_geometry(path, s, fov_rad) for s in c.scans]
+    ranges, kept, common = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
+                                           beam_policy, report, geometries)
     scans = [c.scans[i] for i in kept]
     first = scans[0]
-    n_beams = ranges.shape[1]
-    fov = fov_rad if fov_rad is not None else (first.fov if first.fov is not None else np.pi)
-    start = first.start_angle if first.start_angle is not None else -fov / 2
     ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.max_range, report)
-    info = LaserInfo(n_beams, float(start), float(fov / max(n_beams - 1, 1)), 0.0, float(no_return), float(no_return))
+    info = LaserInfo(common.num_beams, common.angle_min_rad, common.angle_increment_rad, 0.0, float(no_return),
+                     float(no_return))
     stamps = np.array([s.stamp for s in scans])
     odom = np.array([s.odom for s in scans])
     # the extrinsic is what separates the laser pose from the robot pose on the same line
@@ -174,6 +181,19 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
                    "ODOM steps moving against their own forward velocity")
     warn_defects(path, report)
     return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
+
+
+def _geometry(path, scan: _Scan, fov_rad):
+    """A scan line's beam geometry: ROBOTLASER1 records its start angle and field of view (``fov_rad``
+    overrides the latter); FLASER records neither and spans ``fov_rad`` (default pi) centred ahead."""
+    n = len(scan.ranges)
+    where = f"line {scan.line}"
+    if scan.start_angle is None or fov_rad is not None:
+        fov = np.pi if fov_rad is None else float(fov_rad)
+        start = -fov / 2 if scan.start_angle is None else scan.start_angle
+        return check_geometry(path, where, n, start, fov / max(n - 1, 1))
+    max_range = 1.0 if scan.max_range == 0 else scan.max_range  # 0: "not recorded" in some converters
+    return check_geometry(path, where, n, scan.start_angle, scan.fov / max(n - 1, 1), 0.0, max_range)
 
 
 def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:

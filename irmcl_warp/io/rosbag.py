@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.geometry import interpolate_poses
-from irmcl_warp.io.beams import BeamPolicy, harmonise_beams
+from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams
 from irmcl_warp.io.defects import (count_stamps_backwards, count_velocity_contradictions, repair_reversing,
                                    scan_defects)
 from irmcl_warp.io.errors import LogFormatError, warn_defects
@@ -94,8 +94,24 @@ def _stamp(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _yaw(q) -> float:
-    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+class _Quaternions:
+    """Checks every orientation read: a quaternion that is not finite or has (almost) no length names no
+    rotation and is an error; one that is off unit length is normalised and counted."""
+
+    def __init__(self):
+        self.unnormalised = 0
+
+    def yaw(self, q, path, where) -> float:
+        v = np.array([q.x, q.y, q.z, q.w], np.float64)
+        norm = float(np.linalg.norm(v)) if np.all(np.isfinite(v)) else float("nan")
+        if not norm > 1e-6:
+            raise LogFormatError(path, where, f"quaternion ({q.x}, {q.y}, {q.z}, {q.w}) is no rotation: expected "
+                                 f"unit length")
+        if abs(norm - 1.0) > 1e-3:
+            self.unnormalised += 1
+        x, y, z, w = v / norm if abs(norm - 1.0) > 1e-6 else v  # unit to float precision: read as written
+        return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
 
 
 @dataclass
@@ -104,6 +120,11 @@ class _Streams:
     odom: list  # (stamp, seq, x, y, yaw, v)
     tf: list  # (stamp, parent, child, x, y, yaw)
     tf_static: list  # (parent, child, x, y, yaw)
+    path: Path = Path()
+    quats: _Quaternions = None
+
+    def yaw(self, q, where) -> float:
+        return self.quats.yaw(q, self.path, where)
 
 
 def _pick_topic(path, conns, msgtype, wanted):
@@ -120,7 +141,7 @@ def _pick_topic(path, conns, msgtype, wanted):
 def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, str | None]:
     from rosbags.highlevel import AnyReader
 
-    s = _Streams([], [], [], [])
+    s = _Streams([], [], [], [], path, _Quaternions())
     try:
         reader = AnyReader([path])
         reader.open()
@@ -159,11 +180,12 @@ def _collect(s: _Streams, conn, msg, scan_topic, odom_topic, k):
     elif conn.topic == odom_topic:
         p = msg.pose.pose
         s.odom.append((_stamp(msg.header), getattr(msg.header, "seq", k), p.position.x, p.position.y,
-                       _yaw(p.orientation), msg.twist.twist.linear.x))
+                       s.yaw(p.orientation, f"message {k} on {conn.topic}"), msg.twist.twist.linear.x))
     elif conn.msgtype == TF:
         for t in msg.transforms:
             tr, q = t.transform.translation, t.transform.rotation
-            row = (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"), tr.x, tr.y, _yaw(q))
+            row = (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"), tr.x, tr.y,
+                   s.yaw(q, f"message {k} on {conn.topic}"))
             if conn.topic == "/tf_static":
                 s.tf_static.append(row)
             else:
@@ -190,23 +212,33 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     if not s.scans:
         raise LogFormatError(path, None, f"topic {scan_topic} holds no messages")
     report = DefectReport()
+    report.add("quaternions_not_unit", s.quats.unnormalised, "orientations off unit length by > 1e-3, normalised")
     stamps_read = np.array([r[0] for r in s.scans])
     rec = _recording_order(stamps_read, [r[1] for r in s.scans])
     report.add("scans_stamps_backwards", count_stamps_backwards(stamps_read[rec]),
                "scans stamped earlier than the scan recorded before them (header.seq order)")
     order = np.argsort(stamps_read, kind="stable")
     scans = [s.scans[i] for i in order]
-    ranges, kept = harmonise_beams(path, [r[2] for r in scans], [f"message {r[8]} on {scan_topic}" for r in scans],
-                                   beam_policy, report)
+    where = [f"message {r[8]} on {scan_topic}" for r in scans]
+    geometries = [check_geometry(path, w, len(r[2]), r[3], r[4], r[5], r[6]) for w, r in zip(where, scans)]
+    ranges, kept, common = harmonise_beams(path, [r[2] for r in scans], where, beam_policy, report, geometries)
     scans = [scans[i] for i in kept]
     first = scans[0]
-    rmin, rmax = float(first[5]), float(first[6])
+    # each scan's own limits mask its own beams (drivers write range_max for "no echo" too)
+    rmin = np.array([float(r[5]) for r in scans])[:, None]
+    rmax = np.array([float(r[6]) for r in scans])[:, None]
+    report.add("scans_with_other_range_limits", int(np.sum((rmin != rmin[0]) | (rmax != rmax[0]))),
+               f"scans whose range_min/range_max differ from the first scan's {rmin[0, 0]:g}/{rmax[0, 0]:g} m")
     finite = np.isfinite(ranges)
-    beyond = float(np.max(ranges[finite])) if finite.any() else rmax
-    bad = ~finite | (ranges < rmin) | (ranges >= rmax)  # drivers write range_max for "no echo" too
-    report.add("beams_below_range_min", int(np.sum(finite & (ranges < rmin) & (ranges != 0))), "beams below range_min, masked")
+    beyond = float(np.max(ranges[finite])) if finite.any() else float(rmax.max())
+    with np.errstate(invalid="ignore"):
+        bad = ~finite | (ranges < rmin) | (ranges >= rmax)
+        report.add("beams_below_range_min", int(np.sum(finite & (ranges < rmin) & (ranges != 0))),
+                   "beams below range_min, masked")
     ranges = np.where(bad, np.nan, ranges).astype(np.float32)
-    info = LaserInfo(ranges.shape[1], float(first[3]), float(first[4]), rmin, rmax, max(beyond, rmax))
+    rmin0, rmax0 = float(np.median(rmin)), float(np.median(rmax))
+    info = LaserInfo(common.num_beams, common.angle_min_rad, common.angle_increment_rad, rmin0, rmax0,
+                     max(beyond, rmax0))
     stamps = np.array([r[0] for r in scans])
     laser_frame = first[7].lstrip("/")
     T_base_laser, base = _extrinsic(s.tf_static, laser_frame, base_frame, report)
@@ -360,7 +392,7 @@ def read_bag_extrinsic(path, laser_frame: str = "laser", base_frame: str | None 
     try:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic == "/tf_static"]
-            s = _Streams([], [], [], [])
+            s = _Streams([], [], [], [], path, _Quaternions())
             for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
                 _collect(s, conn, reader.deserialize(raw, conn.msgtype), None, None, k)
     except Exception as e:
