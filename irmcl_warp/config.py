@@ -21,7 +21,11 @@ class DataConfig:
     format: str = MISSING  # sim | carmen | bag
     path: Optional[str] = None  # scans + odometry
     laser_frame_path: Optional[str] = None  # a bag whose /tf_static gives base->laser (CARMEN logs carry none)
-    ground_truth_path: Optional[str] = None  # matched CSV, or a GMapping-corrected CARMEN log
+    ground_truth_path: Optional[str] = None  # matched CSV, TUM trajectory (.tum), or a GMapping-corrected CARMEN log
+    ground_truth_time_offset_s: Optional[float] = None  # added to the ground truth's stamps to reach the log's clock
+    ground_truth_max_gap_s: Optional[float] = None  # dense ground truth: SE(2)-interpolated at the scans between
+    #                                                 poses at most this far apart; None: keyframes, matched by stamp
+    ground_truth_tolerance_s: float = 1e-4  # keyframes: a pose stamped this close to a scan is that scan's
     relations_path: Optional[str] = None  # Kümmerle et al. 2009 relations
     relation_stamps_path: Optional[str] = None  # g2o file whose laser stamps stand in for synthetic log stamps
     splits_path: Optional[str] = None  # benchmark split ids (stamps)
@@ -307,6 +311,7 @@ CHOICES = {
 RANGES = {
     "data.far_m": ("> 0", None), "data.max_speed_mps": ("> 0", None), "data.max_step_m": ("> 0", None),
     "data.no_return_m": ("> 0", None), "data.fov_rad": ("> 0", 6.2832),
+    "data.ground_truth_max_gap_s": ("> 0", None), "data.ground_truth_tolerance_s": (0, 1.0),
     "sim.rate_hz": ("> 0", None), "sim.num_beams": (1, None), "sim.max_range_m": ("> 0", None),
     "sim.speed_mps": ("> 0", None), "sim.width_m": ("> 0", None), "sim.height_m": ("> 0", None),
     "sim.dropout_prob": (0, 1), "sim.range_noise_std_m": (0, None),

@@ -7,17 +7,20 @@ ground-truth poses by stamp, and the laser extrinsic from a bag when the log has
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from irmcl_warp.geometry import interpolate_se2
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
+from irmcl_warp.io.clock import estimate_clock_offset
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
 from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum, write_tum
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
-__all__ = ["GEOMETRY_FIELDS", "LogDefectWarning", "LogFormatError", "apply_laser_geometry", "data_root", "load_log",
+__all__ = ["GEOMETRY_FIELDS", "GroundTruthMatch", "apply_ground_truth", "attach_ground_truth", "check_ground_truth", "LogDefectWarning", "LogFormatError", "apply_laser_geometry", "data_root", "load_log",
            "read_bag", "read_carmen", "read_log",
            "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
            "write_bag", "write_tum"]
@@ -46,13 +49,80 @@ def read_ground_truth(path) -> tuple[np.ndarray, np.ndarray]:
     return read_tum(path) if path.suffix == ".tum" else read_carmen_poses(path)
 
 
-def attach_ground_truth(log: LaserLog, stamps, poses) -> int:
-    """Set ``log.ground_truth`` from poses matched by stamp; returns how many scans got one."""
-    idx = match_stamps(stamps, log.stamps)
-    gt = np.full((len(log), 3), np.nan)
-    gt[idx >= 0] = np.asarray(poses)[idx[idx >= 0]]
+GT_MIN_SHARE = 0.9  # ground truth matching fewer of its poses (or of the scans it spans) is refused
+
+
+@dataclass(frozen=True)
+class GroundTruthMatch:
+    """How ground truth met a log. Keyframes: ``share`` = poses that matched a scan, of the poses inside the
+    log's time span. Interpolated: ``share`` = scans that got a pose, of the scans inside the truth's span."""
+
+    mode: str  # "keyframes" | "interpolated"
+    scans_posed: int
+    considered: int
+    share: float
+
+
+def attach_ground_truth(log: LaserLog, stamps, poses, *, offset_s: float = 0.0, max_gap_s: float | None = None,
+                        tol_s: float = 1e-4) -> GroundTruthMatch:
+    """Set ``log.ground_truth`` (NaN where unknown) from poses whose stamps plus ``offset_s`` are the log's
+    clock: matched by stamp within ``tol_s`` (keyframes), or SE(2)-interpolated at every scan between two
+    poses at most ``max_gap_s`` apart (a dense trajectory)."""
+    t = np.asarray(stamps, np.float64) + float(offset_s)
+    poses = np.asarray(poses, np.float64)
+    if max_gap_s is None:
+        scan = match_stamps(log.stamps, t, tol_s)  # each pose poses the one scan nearest to it, if near enough
+        gt = np.full((len(log), 3), np.nan)
+        gt[scan[scan >= 0]] = poses[scan >= 0]
+        inside = (t >= log.stamps.min() - tol_s) & (t <= log.stamps.max() + tol_s)
+        matched = int(np.sum(scan[inside] >= 0))
+        considered = int(inside.sum())
+        mode = "keyframes"
+    else:
+        gt = interpolate_se2(t, poses, log.stamps, max_gap_s, tol_s)
+        considered = int(np.sum((log.stamps >= t[0]) & (log.stamps <= t[-1])))
+        matched = int(np.isfinite(gt[:, 0]).sum())
+        mode = "interpolated"
     log.ground_truth = gt
-    return int((idx >= 0).sum())
+    return GroundTruthMatch(mode, int(np.isfinite(gt[:, 0]).sum()), considered, matched / max(considered, 1))
+
+
+def check_ground_truth(path, log: LaserLog, stamps, poses, match: GroundTruthMatch, offset_set: bool) -> None:
+    """Refuse ground truth that meets too little of the log, saying why and what to set: when no offset was
+    set, the clock offset found from the robot's turns (io.clock) is named with the setting that applies it."""
+    if match.share >= GT_MIN_SHARE and match.scans_posed > 0:
+        return
+    t = np.asarray(stamps, np.float64)
+    if match.considered == 0:
+        what = (f"none of its {len(t)} poses lies in the log's time span ({log.stamps.min():.3f} to "
+                f"{log.stamps.max():.3f} s; its own stamps run from {t.min():.3f} to {t.max():.3f} s)")
+    elif match.mode == "keyframes":
+        what = f"{match.scans_posed} of the {match.considered} poses in the log's time span match a scan by stamp"
+    else:
+        what = f"{match.scans_posed} of the {match.considered} scans in its time span get a pose"
+    msg = f"ground truth for {log.source or 'the log'} is refused: {what} ({100 * match.share:.0f} %, at least " \
+          f"{100 * GT_MIN_SHARE:.0f} % needed)"
+    if not offset_set and len(stamps) > 2 and len(log) > 2:
+        c = estimate_clock_offset(log.stamps, log.odom, stamps, poses)
+        if c.convincing:
+            msg += (f". Its clock appears offset from the log's by {c.offset_s:+.3f} s (its turns then agree with "
+                    f"the odometry's to {c.yaw_increment_error_deg:.2f} deg per step, {c.contrast:.2f} of the "
+                    f"disagreement a few seconds off): set data.ground_truth_time_offset_s={c.offset_s:.3f}")
+        else:
+            msg += ". No clock offset lines its turns up with the odometry's either"
+    hint = ("; for a dense trajectory set data.ground_truth_max_gap_s (interpolate between poses), for keyframes "
+            "whose stamps jitter data.ground_truth_tolerance_s")
+    raise LogFormatError(path, None, msg + hint)
+
+
+def apply_ground_truth(log: LaserLog, path, d) -> GroundTruthMatch:
+    """Read the ground truth at ``path`` and attach it as ``d`` (a data config) says, or refuse it."""
+    stamps, poses = read_ground_truth(path)
+    offset = d.get("ground_truth_time_offset_s")
+    match = attach_ground_truth(log, stamps, poses, offset_s=offset or 0.0, max_gap_s=d.get("ground_truth_max_gap_s"),
+                                tol_s=d.get("ground_truth_tolerance_s", 1e-4))
+    check_ground_truth(path, log, stamps, poses, match, offset is not None)
+    return match
 
 
 def load_log(cfg) -> LaserLog:
@@ -105,5 +175,5 @@ def read_log(cfg) -> LaserLog:
     if d.laser_frame_path:
         log.T_base_laser = read_bag_extrinsic(resolve(d.laser_frame_path), base_frame=d.base_frame)
     if d.ground_truth_path:
-        attach_ground_truth(log, *read_ground_truth(resolve(d.ground_truth_path)))
+        apply_ground_truth(log, resolve(d.ground_truth_path), d)
     return log

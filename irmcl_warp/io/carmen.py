@@ -14,8 +14,8 @@ FLASER scans span 180 deg with angle_increment = pi / (n - 1), as the bags of th
 
 from __future__ import annotations
 
-import gzip
-import zlib
+import re
+import warnings
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +25,8 @@ import numpy as np
 from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams, mask_ranges
 from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
-from irmcl_warp.io.errors import LogFormatError, warn_defects
+from irmcl_warp.io.errors import LogDefectWarning, LogFormatError, check_pose_stamps, warn_defects
+from irmcl_warp.io.text import check_comment, parse_floats, read_lines
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
 
 
@@ -49,34 +50,6 @@ class CarmenContents:
     truncated_last_line: bool = False
 
 
-def open_text(path: Path):
-    """Open plain or gzip text; gzip is recognised by its magic bytes, not the file name."""
-    with open(path, "rb") as f:
-        magic = f.read(2)
-    if magic == b"\x1f\x8b":
-        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
-    return open(path, "rt", encoding="utf-8", errors="replace")
-
-
-def _floats(path, line_no, tokens, what):
-    try:
-        values = np.array(tokens, dtype=np.float64)
-    except ValueError:
-        bad = next(t for t in tokens if not _is_float(t))
-        raise LogFormatError(path, f"line {line_no}", f"{what}: expected a number, found {bad!r}") from None
-    if not np.all(np.isfinite(values)):
-        raise LogFormatError(path, f"line {line_no}", f"{what}: NaN or infinite value")
-    return values
-
-
-def _is_float(t):
-    try:
-        float(t)
-        return True
-    except ValueError:
-        return False
-
-
 def _need(path, line_no, tokens, count, what):
     if len(tokens) < count:
         raise LogFormatError(path, f"line {line_no}", f"{what}: expected at least {count} fields, found {len(tokens)}")
@@ -84,68 +57,99 @@ def _need(path, line_no, tokens, count, what):
 
 def _count(path, n_line, token, what) -> int:
     """A count field: a non-negative integer (``3.5`` or ``-5`` is an error, not 3 or an index)."""
-    v = _floats(path, n_line, [token], what)[0]
+    v = parse_floats(path, n_line, [token], what)[0]
     if v < 0 or v != int(v) or v > 1e6:
         raise LogFormatError(path, f"line {n_line}", f"{what}: expected a whole number from 0 to 1e6, found {token!r}")
     return int(v)
 
 
+def _exact(path, n_line, tok, count, what):
+    """A record ends with its timestamp, optionally followed by ``host logger_timestamp``: any other count
+    means a line merged with the next or split from its end."""
+    if len(tok) not in (count, count + 2):
+        raise LogFormatError(path, f"line {n_line}", f"{what}: expected {count} fields (or {count + 2} with host and "
+                             f"logger timestamp), found {len(tok)}")
+    if len(tok) == count + 2:
+        parse_floats(path, n_line, tok[-1:], f"{what} logger timestamp")
+
+
 def _parse_flaser(path, n_line, tok):
     _need(path, n_line, tok, 2, "FLASER")
     n = _count(path, n_line, tok[1], "FLASER beam count")
-    _need(path, n_line, tok, 2 + n + 7, f"FLASER with {n} beams (n ranges, 6 pose values, timestamp)")
-    ranges = _floats(path, n_line, tok[2:2 + n], "FLASER ranges")
-    tail = _floats(path, n_line, tok[2 + n:2 + n + 7], "FLASER poses/timestamp")
+    _exact(path, n_line, tok, 2 + n + 7, f"FLASER with {n} beams (n ranges, 6 pose values, timestamp)")
+    ranges = parse_floats(path, n_line, tok[2:2 + n], "FLASER ranges")
+    tail = parse_floats(path, n_line, tok[2 + n:2 + n + 7], "FLASER poses/timestamp")
     return _Scan(n_line, tail[6], ranges, tuple(tail[3:6]), tuple(tail[0:3]))
 
 
 def _parse_robotlaser(path, n_line, tok):
     _need(path, n_line, tok, 9, "ROBOTLASER1 header")
-    head = _floats(path, n_line, tok[1:9], "ROBOTLASER1 header")
+    head = parse_floats(path, n_line, tok[1:9], "ROBOTLASER1 header")
     n = _count(path, n_line, tok[8], "ROBOTLASER1 beam count")
     _need(path, n_line, tok, 10 + n, f"ROBOTLASER1 with {n} ranges")
-    ranges = _floats(path, n_line, tok[9:9 + n], "ROBOTLASER1 ranges")
+    ranges = parse_floats(path, n_line, tok[9:9 + n], "ROBOTLASER1 ranges")
     m = _count(path, n_line, tok[9 + n], "ROBOTLASER1 remission count")
     i = 10 + n + m
-    _need(path, n_line, tok, i + 12, f"ROBOTLASER1 with {n} ranges and {m} remissions")
-    tail = _floats(path, n_line, tok[i:i + 12], "ROBOTLASER1 poses/timestamp")
+    _exact(path, n_line, tok, i + 12, f"ROBOTLASER1 with {n} ranges and {m} remissions")
+    tail = parse_floats(path, n_line, tok[i:i + 12], "ROBOTLASER1 poses/timestamp")
     return _Scan(n_line, tail[11], ranges, tuple(tail[3:6]), tuple(tail[0:3]),
                  start_angle=head[1], fov=head[2], max_range=head[4])
+
+
+READ_RECORDS = ("FLASER", "ROBOTLASER1", "ODOM")
+RECORD_NAME = re.compile(r"[A-Z][A-Z0-9_\-]{1,39}")
+# the records CARMEN's logger and GMapping write besides the ones read here: skipped without a word
+KNOWN_RECORDS = {"PARAM", "SYNC", "TRUEPOS", "NEFF", "RLASER", "LASER3", "LASER4", "RAWLASER1", "RAWLASER2",
+                 "RAWLASER3", "RAWLASER4", "ROBOTLASER2", "GPSNMEAGGA", "GPSNMEARMC", "SONAR", "BUMPER", "SCANMARK",
+                 "POSITIONLASER", "IMU", "VECTORMOVE", "ROBOTVELOCITY", "FOLLOW-TRAJECTORY", "BASEVELOCITY"}
 
 
 def parse_carmen(path) -> CarmenContents:
     """Parse a CARMEN log into raw records; raises :class:`LogFormatError` naming the line."""
     path = Path(path)
     out = CarmenContents()
-    try:
-        with open_text(path) as f:
-            lines = f.readlines()
-    except (EOFError, OSError, zlib.error) as e:
-        raise LogFormatError(path, None, f"cannot read (truncated or corrupt gzip?): {e}") from e
-    last = len(lines)
-    for n_line, line in enumerate(lines, start=1):
+    lines, cut = read_lines(path)
+    if cut:  # a log cut off while it was written: its unfinished last line may hold a cut number; dropped, loudly
+        lines = lines[:-1]
+        out.truncated_last_line = True
+    for n_line, line in lines:
         tok = line.split()
-        if not tok or tok[0].startswith("#"):
+        if not tok:
+            continue
+        if tok[0].startswith("#"):
+            check_comment(path, n_line, line)
             continue
         kind = tok[0]
-        try:
-            if kind == "FLASER":
-                out.scans.append(_parse_flaser(path, n_line, tok))
-            elif kind == "ROBOTLASER1":
-                out.scans.append(_parse_robotlaser(path, n_line, tok))
-            elif kind == "ODOM":
-                _need(path, n_line, tok, 8, "ODOM")
-                v = _floats(path, n_line, tok[1:8], "ODOM")
-                out.odom_lines.append((v[6], v[0], v[1], v[2], v[3]))
-            else:
-                out.skipped[kind] += 1
-        except LogFormatError:
-            # a log cut off while it was written: drop its unfinished last line, loudly
-            if n_line == last and not line.endswith("\n"):
-                out.truncated_last_line = True
-                continue
-            raise
+        if kind == "FLASER":
+            out.scans.append(_parse_flaser(path, n_line, tok))
+        elif kind == "ROBOTLASER1":
+            out.scans.append(_parse_robotlaser(path, n_line, tok))
+        elif kind == "ODOM":
+            _exact(path, n_line, tok, 8, "ODOM")
+            v = parse_floats(path, n_line, tok[1:8], "ODOM")
+            out.odom_lines.append((v[6], v[0], v[1], v[2], v[3]))
+        elif not RECORD_NAME.fullmatch(kind):
+            raise LogFormatError(path, f"line {n_line}", f"expected a record name (FLASER, ODOM, ...), found "
+                                 f"{kind[:40]!r}: a line broken in two?")
+        else:
+            merged = next((t for t in tok[1:] if any(name in t for name in READ_RECORDS)), None)
+            if merged is not None:
+                raise LogFormatError(path, f"line {n_line}", f"{kind} line holds {merged[:40]!r}: two records on one "
+                                     f"line (a lost line break)?")
+            out.skipped[kind] += 1
     return out
+
+
+def _unknown(skipped: Counter) -> Counter:
+    return Counter({k: n for k, n in skipped.items() if k not in KNOWN_RECORDS})
+
+
+def _kinds(skipped: Counter, most: int = 5) -> str:
+    """The commonest first words of the skipped lines, capped: a binary file is not listed line by line."""
+    if not skipped:
+        return "none"
+    top = ", ".join(f"{k!r} x{n}" for k, n in skipped.most_common(most))
+    return top + (f" and {len(skipped) - most} other kinds" if len(skipped) > most else "")
 
 
 def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None = None,
@@ -154,9 +158,11 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
     path = Path(path)
     c = parse_carmen(path)
     if not c.scans:
-        raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {dict(c.skipped) or 'none'})")
+        raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
     report = DefectReport()
     report.add("truncated_last_line", int(c.truncated_last_line), "unfinished last line dropped")
+    unknown = _unknown(c.skipped)
+    report.add("unknown_records", sum(unknown.values()), f"lines of unknown kinds skipped ({_kinds(unknown)})")
     geometries = [_geometry(path, s, fov_rad) for s in c.scans]
     ranges, kept, common = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
                                            beam_policy, report, geometries)
@@ -201,5 +207,10 @@ def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:
     for the GMapping-corrected logs these are the corrected poses."""
     c = parse_carmen(path)
     if not c.scans:
-        raise LogFormatError(path, None, "no FLASER or ROBOTLASER1 lines")
-    return np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans])
+        raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
+    if c.truncated_last_line:
+        warnings.warn(f"{path}: unfinished last line dropped", LogDefectWarning, stacklevel=2)
+    if unknown := _unknown(c.skipped):
+        warnings.warn(f"{path}: lines of unknown kinds skipped ({_kinds(unknown)})", LogDefectWarning, stacklevel=2)
+    return check_pose_stamps(path, np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans]),
+                             [s.line for s in c.scans])

@@ -4,6 +4,8 @@ g2o files (VERTEX_SE2 + ROBOTLASER1). All matching across files is by stamp."""
 from __future__ import annotations
 
 import json
+import re
+import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,8 +13,30 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.io.atomic import atomic_write_bytes
-from irmcl_warp.io.carmen import _floats, _parse_robotlaser, open_text
-from irmcl_warp.io.errors import LogFormatError
+from irmcl_warp.io.carmen import _count, _parse_robotlaser
+from irmcl_warp.io.errors import LogDefectWarning, LogFormatError, check_pose_stamps
+from irmcl_warp.io.text import check_comment, decode_lines, parse_floats, read_lines
+
+MAX_PLAUSIBLE_MOTION_M = 1.0e4  # a relation or pose farther than this is corrupt
+MAX_SPLIT_STEP_BACK_S = 1.0  # split stamps follow the log's time; intel's logger steps back by < 0.13 s
+
+
+def _content_lines(path, numbered=None):
+    """Numbered lines of a text file, comments and blank lines left out; an unfinished last line (the file
+    was cut off while written, and its last number may be cut too) dropped with a warning."""
+    lines, cut = read_lines(path) if numbered is None else numbered
+    if cut:
+        warnings.warn(f"{path}: unfinished last line {lines[-1][0]} dropped (the file ends without a newline: "
+                      f"cut off while written?)", LogDefectWarning, stacklevel=3)
+        lines = lines[:-1]
+    out = []
+    for n, ln in lines:
+        ln = ln.strip()
+        if ln.startswith("#"):
+            check_comment(path, n, ln)
+        elif ln:
+            out.append((n, ln))
+    return out
 
 
 def read_matched_csv(path) -> tuple[np.ndarray, np.ndarray]:
@@ -21,26 +45,35 @@ def read_matched_csv(path) -> tuple[np.ndarray, np.ndarray]:
     Columns ``bag_scan_index,ipc_stamp,x,y,theta``; lines starting with '#' are comments.
     """
     path = Path(path)
-    rows, header_seen = [], False
-    with open_text(path) as f:
-        for n_line, line in enumerate(f, start=1):
-            line = line.strip()
-            if not line or line.startswith("#"):
-                continue
-            if not header_seen:
-                cols = [c.strip() for c in line.split(",")]
-                if cols[:5] != ["bag_scan_index", "ipc_stamp", "x", "y", "theta"]:
-                    raise LogFormatError(path, f"line {n_line}", f"expected header bag_scan_index,ipc_stamp,x,y,theta, found {line!r}")
-                header_seen = True
-                continue
-            tok = line.split(",")
-            if len(tok) != 5:
-                raise LogFormatError(path, f"line {n_line}", f"expected 5 comma-separated values, found {len(tok)}")
-            rows.append(_floats(path, n_line, tok, "matched pose"))
+    rows, lines, header_seen = [], [], False
+    for n_line, line in _content_lines(path):
+        if not header_seen:
+            cols = [c.strip() for c in line.split(",")]
+            if cols[:5] != ["bag_scan_index", "ipc_stamp", "x", "y", "theta"]:
+                raise LogFormatError(path, f"line {n_line}", f"expected header bag_scan_index,ipc_stamp,x,y,theta, "
+                                     f"found {line[:80]!r}")
+            header_seen = True
+            continue
+        tok = line.split(",")
+        if len(tok) != 5:
+            raise LogFormatError(path, f"line {n_line}", f"expected 5 comma-separated values, found {len(tok)}")
+        row = parse_floats(path, n_line, tok, "matched pose")
+        _check_pose(path, n_line, row[2:5])
+        rows.append(row)
+        lines.append(n_line)
     if not rows:
         raise LogFormatError(path, None, "no poses (empty file or header only)")
     a = np.array(rows)
-    return a[:, 1], a[:, 2:5]
+    return check_pose_stamps(path, a[:, 1], a[:, 2:5], lines)
+
+
+def _check_pose(path, n_line, pose, what="pose"):
+    x, y, yaw = pose
+    if max(abs(x), abs(y)) > MAX_PLAUSIBLE_MOTION_M:
+        raise LogFormatError(path, f"line {n_line}", f"{what} ({x:g}, {y:g}) is more than {MAX_PLAUSIBLE_MOTION_M:g} m "
+                             f"away: expected metres")
+    if abs(yaw) > MAX_PLAUSIBLE_MOTION_M:  # unwrapped headings are fine (mit-csail's keyframes reach 6.6 rad)
+        raise LogFormatError(path, f"line {n_line}", f"{what} yaw {yaw:g}: expected radians")
 
 
 @dataclass
@@ -59,23 +92,26 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
     """A TUM trajectory (evo's format: ``stamp x y z qx qy qz qw`` per line, '#' comments) -> (stamps[N],
     poses[N, 3]); the yaw is taken from the quaternion, which must be a rotation about z."""
     path = Path(path)
-    rows = []
-    with open_text(path) as f:
-        for n_line, line in enumerate(f, start=1):
-            line = line.strip()
-            if not line or line.startswith("#"):
-                continue
-            tok = line.split()
-            if len(tok) != 8:
-                raise LogFormatError(path, f"line {n_line}", f"expected 8 values (stamp x y z qx qy qz qw), found {len(tok)}")
-            t, x, y, _, qx, qy, qz, qw = _floats(path, n_line, tok, "TUM pose")
-            if abs(qx) > 1e-3 or abs(qy) > 1e-3:
-                raise LogFormatError(path, f"line {n_line}", f"a 2D pose needs a rotation about z, found q = ({qx}, {qy}, {qz}, {qw})")
-            rows.append((t, x, y, 2.0 * np.arctan2(qz, qw)))
+    rows, lines = [], []
+    for n_line, line in _content_lines(path):
+        tok = line.split()
+        if len(tok) != 8:
+            raise LogFormatError(path, f"line {n_line}", f"expected 8 values (stamp x y z qx qy qz qw), found {len(tok)}")
+        t, x, y, _, qx, qy, qz, qw = parse_floats(path, n_line, tok, "TUM pose")
+        norm = float(np.sqrt(qx * qx + qy * qy + qz * qz + qw * qw))
+        if abs(norm - 1.0) > 1e-2:  # printed to a few decimals a unit quaternion stays within 1e-3 of 1
+            raise LogFormatError(path, f"line {n_line}", f"quaternion ({qx}, {qy}, {qz}, {qw}) has length {norm:.4g}: "
+                                 f"expected a unit quaternion")
+        if abs(qx) > 1e-3 or abs(qy) > 1e-3:
+            raise LogFormatError(path, f"line {n_line}", f"a 2D pose needs a rotation about z, found q = ({qx}, {qy}, {qz}, {qw})")
+        _check_pose(path, n_line, (x, y, 0.0))
+        rows.append((t, x, y, 2.0 * np.arctan2(qz, qw)))
+        lines.append(n_line)
     if not rows:
         raise LogFormatError(path, None, "no poses (empty file or comments only)")
     a = np.array(rows)
-    return a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi])
+    return check_pose_stamps(path, a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi]),
+                             lines)
 
 
 def write_tum(path, stamps, poses) -> None:
@@ -85,20 +121,29 @@ def write_tum(path, stamps, poses) -> None:
 
 
 def read_relations(path) -> Relations:
-    """``t1 t2 x y z roll pitch yaw`` per line."""
+    """``t1 t2 x y z roll pitch yaw`` per line: the motion from the pose stamped t1 to the one stamped t2
+    (t1 < t2, yaw in radians within [-pi, pi])."""
     path = Path(path)
     rows = []
-    with open_text(path) as f:
-        for n_line, line in enumerate(f, start=1):
-            tok = line.split()
-            if not tok or tok[0].startswith("#"):
-                continue
-            if len(tok) != 8:
-                raise LogFormatError(path, f"line {n_line}", f"expected 8 values 't1 t2 x y z roll pitch yaw', found {len(tok)}")
-            rows.append(_floats(path, n_line, tok, "relation"))
+    for n_line, line in _content_lines(path):
+        tok = line.split()
+        if len(tok) != 8:
+            raise LogFormatError(path, f"line {n_line}", f"expected 8 values 't1 t2 x y z roll pitch yaw', found {len(tok)}")
+        row = parse_floats(path, n_line, tok, "relation")
+        if not row[0] < row[1]:
+            raise LogFormatError(path, f"line {n_line}", f"t1 {row[0]:.6f} is not before t2 {row[1]:.6f}: expected "
+                                 f"the earlier stamp first")
+        if abs(row[7]) > np.pi + 1e-6 or max(abs(row[2]), abs(row[3])) > MAX_PLAUSIBLE_MOTION_M:
+            raise LogFormatError(path, f"line {n_line}", f"motion ({row[2]:g}, {row[3]:g}, yaw {row[7]:g}): expected "
+                                 f"metres and a yaw in radians within [-pi, pi]")
+        rows.append(row)
     if not rows:
         raise LogFormatError(path, None, "no relations")
     a = np.array(rows)
+    pairs = np.unique(a[:, :2], axis=0, return_counts=True)[1]
+    if (pairs > 1).any():
+        warnings.warn(f"{path}: {int((pairs > 1).sum())} relations given more than once (each is scored as often)",
+                      LogDefectWarning, stacklevel=2)
     return Relations(a[:, 0], a[:, 1], a[:, [2, 3, 7]])
 
 
@@ -106,14 +151,45 @@ def read_splits(path) -> dict[str, np.ndarray]:
     """``splits/<name>.json`` -> {split name: stamps}, for train/val/test and their *_block variants."""
     path = Path(path)
     try:
-        d = json.loads(Path(path).read_text())
+        d = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise LogFormatError(path, None, f"not UTF-8 text (byte {e.start}): expected a JSON file") from e
     except json.JSONDecodeError as e:
         raise LogFormatError(path, f"line {e.lineno}", f"invalid JSON: {e.msg}") from e
-    out = {k: np.asarray(v, dtype=np.float64) for k, v in d.items() if isinstance(v, list)}
+    if not isinstance(d, dict):
+        raise LogFormatError(path, None, f"expected a JSON object of split name -> stamps, found {type(d).__name__}")
+    out = {}
+    names = {f"{s}{b}" for s in ("train", "val", "test") for b in ("", "_block")}
+    odd = sorted(k for k, v in d.items() if isinstance(v, list) and k not in names)
+    if odd:
+        warnings.warn(f"{path}: lists of unknown split names {odd[:5]} (expected {sorted(names)})", LogDefectWarning,
+                      stacklevel=2)
+    for k, v in d.items():
+        if not isinstance(v, list) or k not in names:
+            continue
+        bad = [x for x in v if isinstance(x, bool) or not isinstance(x, (int, float)) or not np.isfinite(x)]
+        if bad:
+            raise LogFormatError(path, f"split {k!r}", f"{len(bad)} entries are not finite stamps (first: {bad[0]!r})")
+        stamps = np.asarray(v, dtype=np.float64)
+        back = np.flatnonzero(np.diff(stamps) < -MAX_SPLIT_STEP_BACK_S)
+        if back.size:
+            i = int(back[0])
+            raise LogFormatError(path, f"split {k!r}", f"stamp {stamps[i + 1]!r} (entry {i + 1}) lies "
+                                 f"{stamps[i] - stamps[i + 1]:g} s before the one listed before it: expected stamps in "
+                                 f"time order")
+        if len(np.unique(stamps)) != len(stamps):
+            raise LogFormatError(path, f"split {k!r}", f"{len(stamps) - len(np.unique(stamps))} stamps listed twice")
+        out[k] = stamps
     for need in ("train", "val", "test"):
         if need not in out or len(out[need]) == 0:
             raise LogFormatError(path, None, f"split {need!r} missing or empty (found {sorted(out)})")
     return out
+
+
+G2O_RECORD = re.compile(r"[A-Z][A-Z0-9_:]{1,39}")
+# g2o's 2D types besides the ones read here: skipped without a word
+G2O_KNOWN = {"VERTEX_XY", "EDGE_SE2_XY", "EDGE_PRIOR_SE2", "EDGE_SE2_PRIOR", "FIX", "PARAMS_SE2OFFSET",
+             "VERTEX_SE2_TAG", "EDGE_SE2_OFFSET", "EDGE_SE2_POINTXY"}
 
 
 @dataclass
@@ -130,38 +206,74 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
     """g2o file with VERTEX_SE2, EDGE_SE2 and ROBOTLASER1 (plain, .gz, or the one .g2o in a .zip)."""
     path = Path(path)
     if zipfile.is_zipfile(path):
-        with zipfile.ZipFile(path) as z:
-            names = [n for n in z.namelist() if n.endswith(".g2o") and not n.startswith("__MACOSX")]
-            if not names:
-                raise LogFormatError(path, None, "zip holds no .g2o file")
-            lines = z.read(member or names[0]).decode("utf-8", "replace").splitlines()
+        try:
+            with zipfile.ZipFile(path) as z:
+                names = [n for n in z.namelist() if n.endswith(".g2o") and not n.startswith("__MACOSX")]
+                if not names:
+                    raise LogFormatError(path, None, f"zip holds no .g2o file (has {z.namelist()[:5]})")
+                if member is not None and member not in z.namelist():
+                    raise LogFormatError(path, None, f"zip holds no {member!r} (its .g2o files: {names[:5]})")
+                numbered = decode_lines(path, z.read(member or names[0]))
+        except LogFormatError:
+            raise
+        except Exception as e:  # zipfile raises many types for a damaged archive (BadZipFile, zlib.error, EOFError,
+            #                     RuntimeError for a flag misread as encryption, NotImplementedError, ...)
+            raise LogFormatError(path, None, f"cannot read the zip (truncated or corrupt?): {e}") from e
     else:
-        with open_text(path) as f:
-            lines = f.read().splitlines()
-    vid, vpose, edges, stamps, ranges, max_range = [], [], [], [], [], float("nan")
-    for n_line, line in enumerate(lines, start=1):
+        numbered = None
+    vid, vline, vpose, edges, eline, stamps, ranges, max_range = [], [], [], [], [], [], [], float("nan")
+    unknown: dict[str, int] = {}
+    for n_line, line in _content_lines(path, numbered):
         tok = line.split()
-        if not tok or tok[0].startswith("#"):
-            continue
         if tok[0] == "VERTEX_SE2":
-            if len(tok) < 5:
-                raise LogFormatError(path, f"line {n_line}", "VERTEX_SE2: expected 'id x y theta'")
-            v = _floats(path, n_line, tok[1:5], "VERTEX_SE2")
-            vid.append(int(v[0]))
-            vpose.append(v[1:4])
+            if len(tok) != 5:
+                raise LogFormatError(path, f"line {n_line}", f"VERTEX_SE2: expected 'id x y theta', found {len(tok) - 1} "
+                                     f"values")
+            vid.append(_count(path, n_line, tok[1], "VERTEX_SE2 id"))
+            v = parse_floats(path, n_line, tok[2:5], "VERTEX_SE2")
+            _check_pose(path, n_line, v, "vertex")
+            vpose.append(v)
+            vline.append(n_line)
         elif tok[0] == "EDGE_SE2":
-            if len(tok) < 6:
-                raise LogFormatError(path, f"line {n_line}", "EDGE_SE2: expected 'from to x y theta [information]'")
-            edges.append(_floats(path, n_line, tok[1:6], "EDGE_SE2"))
+            if len(tok) not in (6, 12):
+                raise LogFormatError(path, f"line {n_line}", f"EDGE_SE2: expected 'from to x y theta' and optionally "
+                                     f"the 6 values of the information matrix, found {len(tok) - 1} values")
+            parse_floats(path, n_line, tok[6:], "EDGE_SE2 information")
+            ids = [_count(path, n_line, t, "EDGE_SE2 vertex id") for t in tok[1:3]]
+            motion = parse_floats(path, n_line, tok[3:6], "EDGE_SE2")
+            _check_pose(path, n_line, motion, "edge motion")
+            edges.append([*ids, *motion])
+            eline.append(n_line)
         elif tok[0] == "ROBOTLASER1":
             scan = _parse_robotlaser(path, n_line, tok)
             stamps.append(scan.stamp)
             ranges.append(np.asarray(scan.ranges, np.float64))
             max_range = scan.max_range
+        elif not G2O_RECORD.fullmatch(tok[0]):
+            raise LogFormatError(path, f"line {n_line}", f"expected a record name (VERTEX_SE2, EDGE_SE2, ...), found "
+                                 f"{tok[0][:40]!r}: a line broken in two?")
+        elif tok[0] not in G2O_KNOWN:
+            unknown[tok[0]] = unknown.get(tok[0], 0) + 1
+    if unknown:
+        kinds = ", ".join(f"{k!r} x{n}" for k, n in sorted(unknown.items(), key=lambda kv: -kv[1])[:5])
+        warnings.warn(f"{path}: lines of unknown kinds skipped ({kinds})", LogDefectWarning, stacklevel=2)
     if not vid:
         raise LogFormatError(path, None, "no VERTEX_SE2 lines")
-    return G2oGraph(np.array(vid), np.array(vpose), np.array(edges).reshape(-1, 5), np.array(stamps), ranges,
-                    max_range)
+    seen = {}
+    for i, n_line in zip(vid, vline):
+        if i in seen:
+            raise LogFormatError(path, f"line {n_line}", f"vertex {i} was defined at line {seen[i]} already")
+        seen[i] = n_line
+    for e, n_line in zip(edges, eline):
+        missing = [int(i) for i in e[:2] if int(i) not in seen]
+        if missing:
+            raise LogFormatError(path, f"line {n_line}", f"edge to vertex {missing[0]}, which no VERTEX_SE2 defines")
+    edges = np.array(edges, np.float64).reshape(-1, 5)
+    repeated = len(edges) - len(np.unique(edges, axis=0))
+    if repeated:
+        warnings.warn(f"{path}: {repeated} EDGE_SE2 lines repeat another exactly", LogDefectWarning, stacklevel=2)
+    return G2oGraph(np.array(vid), np.array(vpose), edges, np.array(stamps),
+                    ranges, max_range)
 
 
 def g2o_scan_stamps(graph: G2oGraph, ranges_m: np.ndarray, decimals: int = 2) -> np.ndarray:

@@ -7,11 +7,14 @@ pose of the lower-left pixel; with negate 0, p_occ = (255 - pixel) / 255; we wri
 
 from __future__ import annotations
 
+import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.io.errors import LogDefectWarning
 from irmcl_warp.mapping.grid import OccupancyGrid
 
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_server's defaults
@@ -58,7 +61,9 @@ def _read_pgm(path: Path) -> np.ndarray:
         while pos < len(data) and chr(data[pos]).isspace():
             pos += 1
         if pos < len(data) and data[pos:pos + 1] == b"#":
-            pos = data.index(b"\n", pos) + 1
+            pos = data.find(b"\n", pos) + 1
+            if pos == 0:
+                raise ValueError(f"{path}: truncated PGM header (a comment runs to the end of the file)")
             continue
         start = pos
         while pos < len(data) and not chr(data[pos]).isspace():
@@ -68,6 +73,9 @@ def _read_pgm(path: Path) -> np.ndarray:
         tokens.append(data[start:pos].decode("ascii", "replace"))
     if tokens[0] != "P5":
         raise ValueError(f"{path}: expected a binary PGM (P5), found {tokens[0]!r}")
+    if not all(t.isdigit() and 0 < int(t) < 1 << 16 for t in tokens[1:4]):
+        raise ValueError(f"{path}: PGM width, height and maxval must be whole numbers from 1 to 65535, found "
+                         f"{[t[:20] for t in tokens[1:4]]}")
     W, H, maxval = int(tokens[1]), int(tokens[2]), int(tokens[3])
     pixels = data[pos + 1:]
     if maxval > 255 or len(pixels) < W * H:
@@ -93,6 +101,47 @@ def _read_image(path: Path) -> np.ndarray:
     return np.round(img * 255.0 if img.max() <= 1.0 else img).astype(np.uint8)
 
 
+DECIMAL = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+
+
+def _number(path, key, text):
+    """A YAML scalar as a float, written as a decimal number: YAML 1.1 would read ``0x05`` as 5 and ``1_0`` as
+    10, which a damaged file can turn a value into."""
+    if not isinstance(text, str) or not DECIMAL.fullmatch(text.strip()):
+        raise ValueError(f"{path}: {key} must be a decimal number, found {text!r}")
+    return float(text)
+
+
+def _read_map_yaml(path: Path) -> dict:
+    """map_server's keys, numbers parsed strictly; unknown keys are left alone, as map_server does."""
+    import yaml
+
+    try:
+        text = path.read_bytes().decode("utf-8")
+        raw = yaml.load(text, Loader=yaml.BaseLoader)  # every scalar a string: the numbers are checked here
+    except Exception as e:  # decoding and the YAML parser raise many types
+        raise ValueError(f"{path}: not a map_server YAML ({type(e).__name__}: {str(e)[:300]})") from e
+    if not isinstance(raw, dict):
+        raise ValueError(f"{path}: not a map_server YAML (expected keys image, resolution, origin)")
+    for key in ("image", "resolution", "origin"):
+        if key not in raw:
+            raise ValueError(f"{path}: map YAML lacks {key!r}")
+    if text and not text.endswith("\n"):
+        warnings.warn(f"{path}: ends without a newline: if it was cut off, its last value may be cut too",
+                      LogDefectWarning, stacklevel=3)
+    meta = dict(raw)
+    if not isinstance(raw["origin"], list):
+        raise ValueError(f"{path}: origin must be [x, y, yaw], found {raw['origin']!r}")
+    meta["origin"] = [_number(path, "origin", v) for v in raw["origin"]]
+    meta["resolution"] = _number(path, "resolution", raw["resolution"])
+    for key in ("occupied_thresh", "free_thresh"):
+        if key in raw:
+            meta[key] = _number(path, key, raw[key])
+    if "negate" in raw:
+        meta["negate"] = {"0": 0, "1": 1, "false": 0, "true": 1}.get(str(raw["negate"]).strip().lower(), raw["negate"])
+    return meta
+
+
 def load_map(path) -> OccupancyGrid:
     """Load ``.npz`` (exact) or a map_server ``.yaml`` (+ its PGM or PNG; trinary: occupied above
     occupied_thresh, free below free_thresh, unknown between; ``negate`` flips the pixel scale). A rotated
@@ -103,29 +152,34 @@ def load_map(path) -> OccupancyGrid:
     if path.suffix == ".npz":
         with np.load(path) as z:
             return OccupancyGrid(z["logodds"], tuple(z["origin_xy"].tolist()), float(z["resolution_m"]))
-    from omegaconf import OmegaConf
-
-    try:
-        meta = OmegaConf.to_container(OmegaConf.load(path))
-    except Exception as e:  # the YAML parser's errors have many types
-        raise ValueError(f"{path}: not a map_server YAML ({type(e).__name__}: {e})") from e
-    if not isinstance(meta, dict):
-        raise ValueError(f"{path}: not a map_server YAML (expected keys image, resolution, origin)")
-    for key in ("image", "resolution", "origin"):
-        if key not in meta:
-            raise ValueError(f"{path}: map YAML lacks {key!r}")
+    meta = _read_map_yaml(path)
     origin, res = meta["origin"], meta["resolution"]
-    if not (isinstance(origin, list) and len(origin) in (2, 3) and all(isinstance(v, (int, float)) for v in origin)):
+    if not (isinstance(origin, list) and len(origin) in (2, 3)
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1e7 for v in origin)):
         raise ValueError(f"{path}: origin must be [x, y, yaw], found {origin!r}")
     if len(origin) == 3 and abs(origin[2]) > 1e-9:
         raise ValueError(f"{path}: origin yaw {origin[2]} is not supported (rotate the image into the map frame)")
-    if not (isinstance(res, (int, float)) and res > 0):
+    if isinstance(res, bool) or not (isinstance(res, (int, float)) and 0 < res < 1e3):
         raise ValueError(f"{path}: resolution must be a positive number of metres per pixel, found {res!r}")
     occ_t, free_t = meta.get("occupied_thresh", OCCUPIED_THRESH), meta.get("free_thresh", FREE_THRESH)
+    negate, mode = meta.get("negate", 0), meta.get("mode", "trinary")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (occ_t, free_t)):
+        raise ValueError(f"{path}: occupied_thresh and free_thresh must be numbers, found {occ_t!r}, {free_t!r}")
+    if negate not in (0, 1) or isinstance(negate, float):
+        raise ValueError(f"{path}: negate must be 0 or 1, found {negate!r}")
+    if mode != "trinary":
+        raise ValueError(f"{path}: mode {mode!r}: only map_server's trinary maps are read here")
+    if not isinstance(meta["image"], str):
+        raise ValueError(f"{path}: image must be a file name, found {meta['image']!r}")
     if not 0 <= free_t < occ_t <= 1:
         raise ValueError(f"{path}: expected 0 <= free_thresh < occupied_thresh <= 1, found {free_t}, {occ_t}")
-    img = _read_image(path.parent / meta["image"])[::-1].astype(np.float64)
-    p = (255.0 - img) / 255.0 if not meta.get("negate", 0) else img / 255.0
+    try:
+        img = _read_image(path.parent / meta["image"])[::-1].astype(np.float64)
+    except FileNotFoundError as e:
+        raise FileNotFoundError(f"{path}: its image {meta['image']!r}: {e}") from e
+    except ValueError as e:
+        raise ValueError(f"{path}: its image {meta['image']!r}: {e}") from e
+    p = (255.0 - img) / 255.0 if not negate else img / 255.0
     logodds = np.zeros(p.shape, dtype=np.float32)
     logodds[p > occ_t] = 4.0
     logodds[p < free_t] = -4.0

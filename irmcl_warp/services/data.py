@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.io import (GEOMETRY_FIELDS, apply_laser_geometry, attach_ground_truth, read_ground_truth, read_log,
+from irmcl_warp.io import (GEOMETRY_FIELDS, apply_laser_geometry, attach_ground_truth, check_ground_truth, read_ground_truth, read_log,
                            read_splits, resolve)
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.nof.beams import SPLITS, BeamSet, beams_from_log, interleaved_splits, split_beams
@@ -24,7 +24,7 @@ from irmcl_warp.services.outputs import settings_key, stage_dir, write_json
 from irmcl_warp.types import LaserInfo, LaserLog
 
 # data fields added after caches existed, left out of the cache key at these defaults so those caches stay valid
-LATER_FIELDS = {"repair_reversing": False, "path_seed": None}
+LATER_FIELDS = {"repair_reversing": False, "path_seed": None, "ground_truth_tolerance_s": 1e-4}
 # data fields the readers never look at: they do not change what the stream cache holds
 NOT_READ = ("relations_path", "relation_stamps_path", "splits_path", "train_poses_path", "split", "far_m")
 
@@ -130,8 +130,11 @@ def prepare_beams(cfg) -> dict[str, BeamSet]:
         raise ValueError(f"data.split={cfg.data.split!r}: expected one of {sorted(SPLITS)}")
     log = load_stream(cfg)
     if cfg.data.get("train_poses_path"):  # train on these poses (the pipeline's SLAM), not the ground truth
-        n = attach_ground_truth(log, *read_ground_truth(resolve(cfg.data.train_poses_path)))
-        print(f"{cfg.data.name}: {n} of {len(log)} scans posed by {cfg.data.train_poses_path}")
+        path = resolve(cfg.data.train_poses_path)
+        stamps, poses = read_ground_truth(path)
+        match = attach_ground_truth(log, stamps, poses)
+        check_ground_truth(path, log, stamps, poses, match, offset_set=True)
+        print(f"{cfg.data.name}: {match.scans_posed} of {len(log)} scans posed by {cfg.data.train_poses_path}")
     beams = beams_from_log(log, cfg.render.near_m, far_bound_m(cfg, log.info.range_max_m), name=cfg.data.name)
     splits, source = split_ids(cfg, beams.stamps)
     names = SPLITS[cfg.data.split]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from irmcl_warp.geometry import align_rigid, compose, relative, wrap_angle
+from irmcl_warp.geometry import align_rigid, compose, interpolate_se2, relative, wrap_angle
 from irmcl_warp.types import match_stamps
 
 
@@ -23,18 +23,29 @@ def coverage_warning(rel: dict, what: str) -> str | None:
             f"the figure is the error of those, not of the whole log")
 
 
-def relations_error(stamps, poses, relations, tol_s: float = 1e-4) -> dict:
+def relations_error(stamps, poses, relations, tol_s: float = 1e-4, max_gap_s: float | None = None) -> dict:
     """The metric of Kümmerle et al. 2009 (Auton. Robots 27(4), eq. 2): for every relation (t1, t2, d*),
     compare the estimated motion d = x(t1)^-1 x(t2) with d*. Translational error = ||t(d* ^-1 d)||
     = ||t(d) - t(d*)||, rotational = |yaw(d) - yaw(d*)|. Reports mean and std of the absolute errors and
-    of their squares; relations whose stamps have no pose are counted, not scored."""
-    i = match_stamps(stamps, relations.t1, tol_s)
-    j = match_stamps(stamps, relations.t2, tol_s)
-    ok = (i >= 0) & (j >= 0)
+    of their squares; relations whose stamps have no pose are counted, not scored. ``max_gap_s``: the poses
+    are a dense trajectory, SE(2)-interpolated at the relation stamps between poses at most this far apart
+    (a stamp within ``tol_s`` of a pose takes it); None: poses are matched by stamp."""
+    poses = np.asarray(poses, dtype=np.float64)
+    if max_gap_s is None:
+        i = match_stamps(stamps, relations.t1, tol_s)
+        j = match_stamps(stamps, relations.t2, tol_s)
+        ok = (i >= 0) & (j >= 0)
+        p1, p2 = poses[i[ok]], poses[j[ok]]
+    else:
+        order = np.argsort(stamps, kind="stable")
+        t, P = np.asarray(stamps, np.float64)[order], poses[order]
+        a = interpolate_se2(t, P, relations.t1, max_gap_s, tol_s)
+        b = interpolate_se2(t, P, relations.t2, max_gap_s, tol_s)
+        ok = np.isfinite(a[:, 0]) & np.isfinite(b[:, 0])
+        p1, p2 = a[ok], b[ok]
     if not ok.any():
         raise ValueError("no relation could be matched to a pose by stamp")
-    poses = np.asarray(poses, dtype=np.float64)
-    est = relative(poses[i[ok]], poses[j[ok]])
+    est = relative(p1, p2)
     gt = relations.motion[ok]
     e_t = np.hypot(est[:, 0] - gt[:, 0], est[:, 1] - gt[:, 1])
     e_r = np.degrees(np.abs(wrap_angle(est[:, 2] - gt[:, 2])))
