@@ -70,7 +70,7 @@ def test_keyframes_pose_one_scan_each_and_a_small_share_is_refused():
     assert attach_ground_truth(log, stamps[::10] + 0.05, truth[::10], tol_s=0.06).scans_posed == 20
 
 
-def test_a_clock_offset_is_found_from_the_turns_and_named_in_the_refusal(tmp_path, rng):
+def test_a_dense_ground_truth_with_a_clock_offset_is_named_then_scores_every_relation(tmp_path, rng):
     stamps = 5000.0 + 0.2 * np.arange(3000)  # 10 minutes at 5 Hz
     truth = drive(stamps)
     odom = truth.copy()
@@ -91,6 +91,12 @@ def test_a_clock_offset_is_found_from_the_turns_and_named_in_the_refusal(tmp_pat
     # ... and interpolated at every scan once the trajectory is declared dense
     m = apply_ground_truth(log, path, gt_config(ground_truth_time_offset_s=4711.25, ground_truth_max_gap_s=0.05))
     assert m.mode == "interpolated" and m.share == 1.0
+    # every relation between scans is scored against it (none lost to the clock or the 100 Hz stamps)
+    k = np.arange(0, len(stamps) - 25, 7)
+    rel = Relations(stamps[k], stamps[k + 25], relative(truth[k], truth[k + 25]))
+    scored = relations_error(log.stamps, log.ground_truth, rel)
+    assert scored["relations_used"] == len(k) and scored["relations_unmatched"] == 0
+    assert scored["trans_abs_mean_m"] < 5e-3 and scored["rot_abs_mean_deg"] < 0.05
     # the trajectory starts elsewhere: compare motions from the first scan, which do not depend on the frame
     got, want = relative(log.ground_truth[:1], log.ground_truth), relative(truth[:1], truth)
     assert np.hypot(*(got[:, :2] - want[:, :2]).T).max() < 1e-2  # two integration grids over 300 m, TUM decimals

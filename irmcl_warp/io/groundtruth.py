@@ -18,7 +18,7 @@ from irmcl_warp.io.errors import LogDefectWarning, LogFormatError, check_pose_st
 from irmcl_warp.io.text import check_comment, decode_lines, parse_floats, read_lines
 
 MAX_PLAUSIBLE_MOTION_M = 1.0e4  # a relation or pose farther than this is corrupt
-MAX_SPLIT_STEP_BACK_S = 1.0  # split stamps follow the log's time; intel's logger steps back by < 0.13 s
+MAX_SPLIT_STEP_BACK_S = 0.5  # split stamps follow the log's time; intel's logger steps back by < 0.13 s
 
 
 def _content_lines(path, numbered=None):
@@ -177,6 +177,14 @@ def read_splits(path) -> dict[str, np.ndarray]:
             raise LogFormatError(path, f"split {k!r}", f"stamp {stamps[i + 1]!r} (entry {i + 1}) lies "
                                  f"{stamps[i] - stamps[i + 1]:g} s before the one listed before it: expected stamps in "
                                  f"time order")
+        gaps = np.diff(stamps)
+        if gaps.size > 2:
+            limit = max(60.0, 100.0 * float(np.median(np.abs(gaps))))
+            if (gaps > limit).any():
+                i = int(np.argmax(gaps > limit))
+                raise LogFormatError(path, f"split {k!r}", f"stamps jump from {stamps[i]!r} to {stamps[i + 1]!r} (entry "
+                                     f"{i + 1}), {gaps[i]:g} s where they are {np.median(np.abs(gaps)):g} s apart "
+                                     f"otherwise: expected the stamps of one log (a number split in two?)")
         if len(np.unique(stamps)) != len(stamps):
             raise LogFormatError(path, f"split {k!r}", f"{len(stamps) - len(np.unique(stamps))} stamps listed twice")
         out[k] = stamps
