@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from eval.fuzz import BY_NAME, READERS, carmen_text, classes_of, encode, g2o_text, intact_read, same, verdict
-from irmcl_warp.io import LogDefectWarning, LogFormatError, read_carmen, read_g2o, read_splits
+from eval.fuzz import BY_NAME, READERS, carmen_text, classes_of, encode, g2o_text, intact_read, relations_text, same, verdict
+from irmcl_warp.io import LogDefectWarning, LogFormatError, read_carmen, read_g2o, read_relations, read_splits
 
 FUZZ = settings(max_examples=int(os.environ.get("IRMCL_FUZZ_EXAMPLES", 40)), deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -57,7 +57,7 @@ def test_a_last_line_cut_mid_number_is_dropped_loudly_never_kept(reader, tmp_pat
 
 
 @pytest.mark.parametrize("reader, old, new, expected", [
-    ("relations", "100.000000 102.500000", "102.500000 100.000000", "t1 102.500000 is not before t2"),
+    ("relations", "100.000000 102.500000", "100.000000 100.000000", "t1 = t2 = 100.000000: a relation joins two"),
     ("relations", "0.100000\n", "1000000.0\n", r"yaw 1e\+06\): expected metres and a yaw in radians"),
     ("g2o", "VERTEX_SE2 3 ", "VERTEX_SE2 3.5 ", "VERTEX_SE2 id: expected a whole number"),
     ("g2o", "EDGE_SE2 4 5 ", "EDGE_SE2 4 9 ", "edge to vertex 9, which no VERTEX_SE2 defines"),
@@ -89,6 +89,14 @@ def test_broken_compressed_and_binary_input_is_a_log_format_error(reader, what, 
     with pytest.raises(LogFormatError) as e:
         BY_NAME[reader].read(p)
     assert str(p) in str(e.value) and len(str(e.value)) < 2000
+
+
+def test_relations_whose_stamps_run_backwards_are_warned_about_and_kept(tmp_path):
+    """intel's relations file holds 6 (its logger's clock steps back): each is still the motion t1 -> t2."""
+    p = _write(tmp_path, "back.relations", relations_text().replace("100.000000 102.500000", "102.500000 100.000000", 1))
+    with pytest.warns(LogDefectWarning, match="1 relations whose t1 is later than t2"):
+        rel = read_relations(p)
+    assert (rel.t1[0], rel.t2[0]) == (102.5, 100.0) and len(rel) == 12
 
 
 def test_broken_zip_and_json_are_log_format_errors(tmp_path):

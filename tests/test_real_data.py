@@ -77,3 +77,24 @@ def test_killian_relations_match_only_through_g2o_stamps(data_dir):
     rel = read_relations(data_dir / "kuemmerle2009/relations/mit-killian.relations")
     both = (match_stamps(g.laser_stamps, rel.t1) >= 0) & (match_stamps(g.laser_stamps, rel.t2) >= 0)
     assert both.sum() == 658
+
+
+@pytest.mark.parametrize("name, count, backwards, repeated", [
+    ("fr079", 1685, 0, 4), ("intel", 2984, 6, 0), ("mit-csail", 1172, 0, 1), ("mit-killian", 4677, 0, 4)])
+def test_every_real_file_reads_with_its_known_oddities_reported(data_dir, name, count, backwards, repeated):
+    """Every relations, split and ground-truth file of the shared data reads; what is odd in it is warned about
+    (intel's 6 relations whose t1 is later than t2: its logger's clock steps back), not refused."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rel = read_relations(data_dir / f"kuemmerle2009/relations/{name}.relations")
+    said = " ".join(str(w.message) for w in caught)
+    assert len(rel) == count
+    assert (f"{backwards} relations whose t1 is later than t2" in said) == bool(backwards)
+    assert (f"{repeated} relations given more than once" in said) == bool(repeated)
+    assert int(np.sum(rel.t1 > rel.t2)) == backwards
+    if name != "mit-killian":
+        from irmcl_warp.io import read_splits
+
+        splits = read_splits(data_dir / f"splits/{name}.json")
+        stamps, _ = quiet(read_matched_csv, data_dir / f"corrected/matched/{name}.gmapping_corrected_keyframes.csv")
+        assert set(np.round(splits["test"], 6)) <= set(np.round(stamps, 6))

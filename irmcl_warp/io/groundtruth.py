@@ -122,17 +122,17 @@ def write_tum(path, stamps, poses) -> None:
 
 def read_relations(path) -> Relations:
     """``t1 t2 x y z roll pitch yaw`` per line: the motion from the pose stamped t1 to the one stamped t2
-    (t1 < t2, yaw in radians within [-pi, pi])."""
+    (t1 != t2; t1 > t2 is warned about: intel's logger stamps step back; yaw in radians within [-pi, pi])."""
     path = Path(path)
-    rows = []
+    rows, backwards = [], 0
     for n_line, line in _content_lines(path):
         tok = line.split()
         if len(tok) != 8:
             raise LogFormatError(path, f"line {n_line}", f"expected 8 values 't1 t2 x y z roll pitch yaw', found {len(tok)}")
         row = parse_floats(path, n_line, tok, "relation")
-        if not row[0] < row[1]:
-            raise LogFormatError(path, f"line {n_line}", f"t1 {row[0]:.6f} is not before t2 {row[1]:.6f}: expected "
-                                 f"the earlier stamp first")
+        if row[0] == row[1]:
+            raise LogFormatError(path, f"line {n_line}", f"t1 = t2 = {row[0]:.6f}: a relation joins two scans")
+        backwards += int(row[0] > row[1])
         if abs(row[7]) > np.pi + 1e-6 or max(abs(row[2]), abs(row[3])) > MAX_PLAUSIBLE_MOTION_M:
             raise LogFormatError(path, f"line {n_line}", f"motion ({row[2]:g}, {row[3]:g}, yaw {row[7]:g}): expected "
                                  f"metres and a yaw in radians within [-pi, pi]")
@@ -140,6 +140,10 @@ def read_relations(path) -> Relations:
     if not rows:
         raise LogFormatError(path, None, "no relations")
     a = np.array(rows)
+    if backwards:  # intel's: its logger's stamps step back (../shared/data/README.md); the motion is still t1 -> t2
+        warnings.warn(f"{path}: {backwards} relations whose t1 is later than t2 (a log whose clock steps back?); "
+                      f"each is scored as the motion from the scan stamped t1 to the one stamped t2", LogDefectWarning,
+                      stacklevel=2)
     pairs = np.unique(a[:, :2], axis=0, return_counts=True)[1]
     if (pairs > 1).any():
         warnings.warn(f"{path}: {int((pairs > 1).sum())} relations given more than once (each is scored as often)",
