@@ -85,6 +85,26 @@ def collect_slam(**where) -> dict:
     return collect("slam", ("slam",), **where)
 
 
+def collect_slam_reference(results: Path = RESULTS, outputs: Path | None = OUTPUTS) -> dict:
+    """{(exp, run): metrics} of the released GMapping's runs (eval.reference.gmapping): kept ones
+    (results/slam/reference/<exp>.json), then your own (outputs/<exp>/reference-gmapping-*/metrics.json)."""
+    runs = {}
+    for path in sorted((Path(results) / "slam" / "reference").glob("*.json")):
+        for name, m in _load_kept(path).items():
+            runs[(path.stem, name)] = m
+    for f in sorted(Path(outputs).glob("*/reference-gmapping-*/metrics.json")) if outputs is not None else ():
+        runs[(f.parent.parent.name, f.parent.name.removeprefix("reference-gmapping-"))] = json.loads(f.read_text())
+    return runs
+
+
+DERIVED_SETTINGS = ("maxRange", "angleIncrement")  # taken from the log by eval.reference.gmapping, not chosen
+
+
+def reference_variant(m: dict) -> str:
+    """The driver settings of a released-code run that differ from the ROS wrapper's defaults."""
+    return ", ".join(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS)
+
+
 def collect_pipeline(**where) -> dict:
     return collect("pipeline", ("pipeline",), **where)
 

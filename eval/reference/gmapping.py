@@ -1,0 +1,220 @@
+"""``python -m eval.reference.gmapping +exp=gmapping_fr079 [--seeds 0-9] [--keep]``: the released GMapping on
+our logs, scored by our relations metric, so every released-code figure a table shows is a run anyone repeats.
+
+The released code (OpenSLAM GMapping as ros-perception/openslam_gmapping packages it) is built outside the
+project by ``bash eval/reference/build_gmapping.sh <clone>`` with our driver ``gmapping_replay.cpp``, which
+replays a log the way the ROS wrapper (slam_gmapping) feeds it: the wrapper's defaults, laser poses from the
+odometry and the base->laser extrinsic, ``maxRange`` = the scan's ``range_max`` - 0.01. This command writes
+the log as the driver reads it (no-return beams as the no-return value, as the bag holds them), runs the
+seeds (``seed`` k seeds drand48 with k + 1: 0 would leave it unseeded), and scores each path like our own
+runs: a pose at every scan (the best particle's pose at the last processed scan plus the odometry since),
+the relations on the laser's path. Runs go to ``outputs/<exp>/reference-gmapping-<N>p[-<settings>]-seed<k>/`` (metrics.json,
+trajectory.tum, neff.txt); ``--keep`` merges them into ``results/slam/reference/<exp>.json``.
+
+Settings left at the wrapper's defaults unless given with ``--set key=value`` (the driver's parameter names).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from eval.collect import DERIVED_SETTINGS
+from irmcl_warp.geometry import compose
+from irmcl_warp.io import read_bag, read_relations, resolve, write_tum
+from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.services.cli import guard
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.metrics import relations_error
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.slam.rbpf import per_scan_poses
+from irmcl_warp.slam.stage import relation_stamps
+from irmcl_warp.types import match_stamps
+
+REPO = Path(__file__).resolve().parents[2]
+BINARY = REPO / "outputs" / "reference" / "gmapping" / "gmapping_replay"
+
+
+def compose_config(exp: str, overrides=()):
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    from irmcl_warp.config import register
+
+    register()
+    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
+        return hydra_compose("config", overrides=[f"+exp={exp}", *overrides])
+
+
+def scan_range_max(cfg) -> float:
+    """The LaserScan's range_max of the log's bag (the wrapper's maxRange is it - 0.01): the data path when it
+    is a bag, else the bag that gives the extrinsic (the derived CARMEN logs carry no range_max)."""
+    bag = cfg.data.path if cfg.data.format == "bag" else cfg.data.get("laser_frame_path")
+    if not bag:
+        raise ValueError(f"data={cfg.data.name}: no bag to take range_max from; give --set maxRange=...")
+    return read_bag(resolve(bag)).info.range_max_m
+
+
+def export_scans(log, path: Path) -> None:
+    """One line per scan: the laser's odometry pose and the ranges, no-return beams as the no-return value."""
+    laser = compose(log.odom, log.T_base_laser)
+    ranges = np.where(np.isfinite(log.ranges_m), log.ranges_m, log.info.no_return_m)
+    lines = [f"{t:.6f} {x:.6f} {y:.6f} {a:.6f} {len(r)} " + " ".join(f"{v:.3f}" for v in r)
+             for t, (x, y, a), r in zip(log.stamps, laser, ranges)]
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
+
+
+def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path) -> dict:
+    n = int(params.get("particles", 30))
+    chosen = "-".join(f"{k}{v}" for k, v in sorted(params.items()) if k not in DERIVED_SETTINGS + ("particles",))
+    out = out_root / f"reference-gmapping-{n}p{'-' + chosen if chosen else ''}-seed{seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    done = out / "metrics.json"
+    if done.is_file():  # a finished run of the same settings: kept, not run again (an interrupted sweep resumes)
+        m = json.loads(done.read_text())
+        if m.get("settings") == {k: float(v) for k, v in params.items()} and m.get("drand48_seed") == seed + 1:
+            return m
+    args = [str(BINARY), str(scans_file), str(out / "path.txt"), str(out / "neff.txt"), f"seed={seed + 1}"]
+    args += [f"{k}={v}" for k, v in params.items()]
+    t0 = time.perf_counter()
+    ran = subprocess.run(args, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if ran.returncode != 0:
+        raise RuntimeError(f"gmapping_replay seed {seed} failed ({ran.returncode}): {ran.stderr[-1000:]}")
+    path = np.loadtxt(out / "path.txt", ndmin=2)
+    processed = match_stamps(log.stamps, path[:, 0], 1e-5)
+    if (processed < 0).any():
+        raise RuntimeError(f"{out / 'path.txt'}: {int((processed < 0).sum())} stamps match no scan of the log")
+    laser_odom = compose(log.odom, log.T_base_laser)
+    every = per_scan_poses(np.arange(len(log)), processed, path[:, 1:4], laser_odom)
+    write_tum(out / "trajectory.tum", log.stamps, every)
+    rel = read_relations(resolve(cfg.data.relations_path))
+    stamps = relation_stamps(cfg, log)
+    neff = np.loadtxt(out / "neff.txt", ndmin=2)
+    metrics = {"dataset": cfg.data.name, "implementation": "released GMapping (openslam_gmapping "
+               f"{(BINARY.parent / 'COMMIT').read_text().split()[0]}) via eval/reference/gmapping_replay.cpp",
+               "particles": n, "seed": seed, "drand48_seed": seed + 1, "scans": len(log),
+               "processed_scans": int(len(processed)), "wall_time_s": wall,
+               "resamplings_upper_bound": int(np.sum(neff[:, 1] < 0.5 * n)) if len(neff) else 0,
+               "settings": {k: float(v) for k, v in params.items()},
+               "relations_frame": {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]},
+               "relations": relations_error(stamps, every, rel)}
+    metrics["run"] = out.name.removeprefix("reference-gmapping-")
+    write_json(out / "metrics.json", metrics)
+    return metrics
+
+
+MOTION = BINARY.parent / "gmapping_motion"
+# odometry steps (old pose, new pose) of the kinds a log holds: straight, turning, sideways slip, turning on
+# the spot; the particle starts elsewhere with another heading
+MOTION_CASES = {"straight": ((1.0, 0.0, 0.3), (1.4, 0.12, 0.3)), "turning": ((1.0, 0.0, 0.3), (1.25, 0.1, 0.7)),
+                "sideways": ((0.0, 0.0, 0.0), (0.02, 0.15, 0.05)), "on the spot": ((2.0, 1.0, -2.9), (2.0, 1.0, 2.9))}
+
+
+def motion_check(samples: int = 200_000, noise=(0.1, 0.2, 0.1, 0.2)) -> dict:
+    """Our GMapping motion model (kernels.slam motion_kernel) against the released code's drawFromMotion on
+    the same steps: mean and standard deviation of x, y, theta over ``samples`` draws each. Agreement means
+    mean differences within 5 standard errors and deviations within 2 %."""
+    import warp as wp
+
+    from irmcl_warp.geometry import relative, wrap_angle
+    from kernels import SLAM
+
+    if not MOTION.is_file():
+        raise FileNotFoundError(f"{MOTION}: build it first: bash eval/reference/build_gmapping.sh <clone>")
+    start = np.array([3.0, -1.0, 1.2])
+    ours_model = SLAM.build("motion", srr=noise[0], srt=noise[1], str_=noise[2], stt=noise[3], device="cpu")
+    report = {}
+    for name, (old, new) in MOTION_CASES.items():
+        args = [str(MOTION), *map(str, noise), *map(str, start), *map(str, new), *map(str, old), str(samples), "7"]
+        released = np.loadtxt(subprocess.run(args, capture_output=True, text=True, check=True).stdout.splitlines())
+        poses = wp.array(np.tile(start, (samples, 1)).astype(np.float32), dtype=wp.vec3, device="cpu")
+        ours_model(poses, relative(np.array(old)[None], np.array(new)[None])[0], seed=11)
+        ours = poses.numpy().astype(np.float64)
+        for a in (released, ours):  # headings around the mean, so a wrap at pi does not split the cloud
+            a[:, 2] = wrap_angle(a[:, 2] - start[2])
+        m_r, m_o, s_r, s_o = released.mean(0), ours.mean(0), released.std(0), ours.std(0)
+        z = np.abs(m_r - m_o) / np.sqrt((s_r ** 2 + s_o ** 2) / samples)
+        ratio = s_o / s_r
+        report[name] = {"released_mean": m_r.tolist(), "ours_mean": m_o.tolist(), "released_std": s_r.tolist(),
+                        "ours_std": s_o.tolist(), "mean_z": z.tolist(), "std_ratio": ratio.tolist(),
+                        "agree": bool((z < 5).all() and (np.abs(ratio - 1) < 0.02).all())}
+    return {"samples": samples, "noise_srr_srt_str_stt": list(noise), "start": start.tolist(), "cases": report}
+
+
+def seeds_of(text: str) -> list[int]:
+    if "-" in text:
+        lo, hi = text.split("-")
+        return list(range(int(lo), int(hi) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m eval.reference.gmapping")
+    ap.add_argument("exp", help="+exp=<name>, e.g. +exp=gmapping_fr079")
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--set", action="append", default=[], help="driver parameter key=value (e.g. particles=60)")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--keep", action="store_true", help="merge the runs into results/slam/reference/<exp>.json")
+    ap.add_argument("--keep-only", action="store_true", help="run nothing: merge the finished runs in outputs/")
+    ap.add_argument("--motion", action="store_true", help="run nothing else: our motion model against the "
+                    "released one's samples (results/checks/gmapping_motion.json)")
+    a = ap.parse_args(argv)
+    if a.motion:
+        r = motion_check()
+        print("| step | x mean: released / ours | y mean | theta mean | std ratio ours/released (x, y, theta) | agree |")
+        print("|---|---|---|---|---|---|")
+        for name, c in r["cases"].items():
+            means = " | ".join(f"{c['released_mean'][i]:.5f} / {c['ours_mean'][i]:.5f}" for i in range(3))
+            print(f"| {name} | {means} | {', '.join(f'{v:.4f}' for v in c['std_ratio'])} | {c['agree']} |")
+        write_json(REPO / "results" / "checks" / "gmapping_motion.json", r)
+        return 0 if all(c["agree"] for c in r["cases"].values()) else 1
+    if a.keep_only:
+        keep_runs(a.exp.removeprefix("+exp="))
+        return 0
+    if not BINARY.is_file():
+        raise FileNotFoundError(f"{BINARY}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
+    exp = a.exp.removeprefix("+exp=")
+    cfg = compose_config(exp)
+    log = load_stream(cfg)
+    params = dict(kv.split("=", 1) for kv in a.set)
+    params.setdefault("maxRange", f"{scan_range_max(cfg) - 0.01:.4f}")
+    params["angleIncrement"] = f"{log.info.angle_increment_rad:.9f}"
+    out_root = REPO / "outputs" / exp
+    out_root.mkdir(parents=True, exist_ok=True)
+    scans_file = out_root / "reference-gmapping-scans.txt"
+    export_scans(log, scans_file)
+    with ThreadPoolExecutor(a.jobs) as pool:
+        runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root), seeds_of(a.seeds)))
+    print(f"released GMapping on {exp} ({len(log)} scans, {params.get('particles', 30)} particles)")
+    print("| seed | processed | relations m | deg | wall s |")
+    print("|---|---|---|---|---|")
+    for m in runs:
+        r = m["relations"]
+        print(f"| {m['seed']} | {m['processed_scans']} | {r['trans_abs_mean_m']:.3f} | {r['rot_abs_mean_deg']:.2f} | "
+              f"{m['wall_time_s']:.1f} |")
+    if a.keep:
+        keep_runs(exp)
+    return 0
+
+
+def keep_runs(exp: str) -> Path:
+    """Merge every finished run of ``exp`` in outputs/ into results/slam/reference/<exp>.json."""
+    keep = REPO / "results" / "slam" / "reference" / f"{exp}.json"
+    kept = json.loads(keep.read_text()) if keep.is_file() else {}
+    for f in sorted((REPO / "outputs" / exp).glob("reference-gmapping-*/metrics.json")):
+        m = json.loads(f.read_text())
+        kept[m.get("run", f.parent.name.removeprefix("reference-gmapping-"))] = m
+    atomic_write_bytes(keep, (json.dumps(kept, sort_keys=True, default=float) + "\n").encode())
+    print(f"{len(kept)} runs -> {keep}")
+    return keep
+
+
+if __name__ == "__main__":
+    raise SystemExit(guard(main))
