@@ -5,10 +5,11 @@ runs' metrics.json, never typed), and the command that makes the runs. Written b
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 
-from eval.collect import CONVERGED_M, REPO, slam_variant
+from eval.collect import CONVERGED_M, REPO, reference_variant, slam_variant
 from irmcl_warp.config import GlobLocConfig
 
 
@@ -39,6 +40,17 @@ def _slam(runs, ds, proposal="paper", resample="selective", particles=30, varian
     return f"{ok.sum()}/{len(e)} seeds converge, {e[ok].mean():.3f} m" if ok.any() else f"0/{len(e)} converge"
 
 
+def _released(runs, ds, variant=""):
+    """The released GMapping's seeds on ``ds`` (eval.reference.gmapping) at the wrapper's defaults (or a variant)."""
+    e = np.array([m["relations"]["trans_abs_mean_m"] for m in (runs or {}).values()
+                  if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == variant])
+    if not e.size:
+        return None
+    ok = e < CONVERGED_M
+    return (f"{ok.sum()}/{len(e)} seeds converge, {e[ok].mean():.3f} m" if ok.any() else f"0/{len(e)} converge") + \
+        f", all runs {e.mean():.3f} m"
+
+
 def _globloc(runs, exp, method, key="localized"):
     """``method``'s count over the runs of ``exp`` made with the default trigger (not its ablation)."""
     for (e, _), m in runs.items():
@@ -54,7 +66,7 @@ def _bench(name):
     return json.loads(p.read_text()) if p.is_file() else None
 
 
-def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple]:
+def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dict | None = None) -> list[tuple]:
     """(system, claim, paper's figure, ours, command) rows."""
     rows = []
     s = _synthesis(nof, "fr079", "paper")
@@ -79,9 +91,11 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
         rows.append(("GMapping", f"relations error on {ds}, 30 particles", f"{pub:.3f} m (Kümmerle et al. 2009)",
                      _slam(slam, ds) or "not run",
                      f"python -m irmcl_warp.slam -m +exp=gmapping_{ds} slam.seed=0,1,2,3,4,5,6,7,8,9"))
-    for ds, ref in (("intel", "10/10 seeds converge, 0.051 m"), ("fr079", "9/10 seeds converge, 0.080 m")):
+    for ds in ("intel", "fr079"):
+        ref = _released(released, ds)
         rows.append(("GMapping", f"relations error on {ds} against the released C++ (same log, 30 particles, 10 seeds)",
-                     f"{ref} (released code, issue 6)",
+                     f"{ref} (released code, `python -m eval.reference.gmapping +exp=gmapping_{ds}`)" if ref else
+                     "not run (`bash eval/reference/build_gmapping.sh`, then `python -m eval.reference.gmapping`)",
                      f"released code's proposal: {_slam(slam, ds, 'gmapping_code') or 'not run'}; with twice its "
                      f"rotational noise (slam=gmapping_rot2x): {_slam(slam, ds, 'gmapping_code', variant='srt0.4, stt0.4') or 'not run'}",
                      f"python -m irmcl_warp.slam -m +exp=gmapping_{ds} slam.proposal=gmapping_code slam=gmapping,gmapping_rot2x "
@@ -123,6 +137,68 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict) -> list[tuple
         rows.append(("Pipeline", f"raw log to a localized robot ({exp})", "-", f"{ours} ({ms[0]['device']})",
                      commands.get(exp, "python -m irmcl_warp.pipeline")))
     return rows
+
+
+def _converged(errs) -> tuple[int, int, float | None]:
+    e = np.asarray(errs, float)
+    ok = e < CONVERGED_M
+    return int(ok.sum()), len(e), (float(e[ok].mean()) if ok.any() else None)
+
+
+def _slam_errs(runs, ds, proposal, variant="", particles=30):
+    return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
+            if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == "selective"
+            and m.get("particles") == particles and isinstance(m.get("relations"), dict) and slam_variant(m) == variant]
+
+
+def facts(slam: dict, released: dict) -> dict[str, str]:
+    """The figures the README's prose quotes, by name, from the kept runs: ``eval.tables --write`` puts each
+    between ``<!-- fact:<name> -->`` and ``<!-- /fact -->``, and tests/test_tables.py fails when the prose and
+    the results disagree."""
+    out = {}
+
+    def count(name, errs):
+        if errs:
+            k, n, _ = _converged(errs)
+            out[name] = f"{k}/{n}"
+
+    def error(name, errs):
+        if errs and _converged(errs)[2] is not None:
+            out[name] = f"{_converged(errs)[2]:.3f} m"
+
+    for ds in ("fr079", "intel", "mit_csail"):
+        code, paper = _slam_errs(slam, ds, "gmapping_code"), _slam_errs(slam, ds, "paper")
+        count(f"{ds}_code", code)
+        count(f"{ds}_paper", paper)
+        count(f"{ds}_code_rot2x", _slam_errs(slam, ds, "gmapping_code", "srt0.4, stt0.4"))
+        error(f"{ds}_code_error", code)
+        error(f"{ds}_paper_error", paper)
+        rel = [m["relations"]["trans_abs_mean_m"] for m in released.values()
+               if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == ""]
+        count(f"{ds}_released", rel)
+        error(f"{ds}_released_error", rel)
+    count("fr079_code_60p", _slam_errs(slam, "fr079", "gmapping_code", particles=60))
+    processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
+    if processed:
+        out["intel_released_processed"] = "/".join(str(p) for p in processed)
+    count("fr079_released_gfs_noise", [m["relations"]["trans_abs_mean_m"] for m in released.values()
+                                       if m.get("dataset") == "fr079" and reference_variant(m) == "srt=0.1, stt=0.1"])
+    return out
+
+
+FACT = re.compile(r"<!-- fact:([a-z0-9_]+) -->(.*?)<!-- /fact -->", re.S)
+
+
+def readme_facts(text: str) -> dict[str, str]:
+    return {name: value for name, value in FACT.findall(text)}
+
+
+def write_facts(text: str, values: dict[str, str]) -> str:
+    """``text`` with every fact it quotes set to its value; a quoted fact the results cannot give is an error."""
+    missing = sorted(set(readme_facts(text)) - set(values))
+    if missing:
+        raise SystemExit(f"README.md quotes facts the results do not give: {missing}")
+    return FACT.sub(lambda m: f"<!-- fact:{m.group(1)} -->{values[m.group(1)]}<!-- /fact -->", text)
 
 
 def reproduction_markdown(rows: list[tuple]) -> str:

@@ -12,27 +12,23 @@ import re
 
 from omegaconf import OmegaConf
 
-from eval.claims import claims, reproduction_markdown
+from eval.claims import claims, facts, reproduction_markdown, write_facts
 from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, collect_globloc, collect_localization,
-                          collect_pipeline, collect_slam, collect_synthesis, localize_cell, slam_variant)
+                          collect_pipeline, collect_slam, collect_slam_reference, collect_synthesis, reference_variant, localize_cell, slam_variant)
 from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.pipeline import run_folder as pipeline_run_folder
 from irmcl_warp.services.metrics import FULL_COVERAGE
 from irmcl_warp.services.cli import guard
 
-# GMapping references (facts cited, scored with the relations metric, mean translational error):
-# * "released C++": issue 6 of this project: the public GMapping source built without ROS, ROS wrapper defaults,
-#   30 particles, 10 seeds, the same 2-core CPU, on the same derived logs; converged seeds (< 0.15 m), error of
-#   converged runs (mean +- std);
-# * "published": Kümmerle et al. 2009 (Auton. Robots 27(4)) / the Cartographer paper (Hess et al. ICRA 2016).
+# GMapping references. The released code's rows come from runs this project repeats (python -m
+# eval.reference.gmapping, kept in results/slam/reference/); the published figures are cited facts (relations
+# metric, mean translational error): Kümmerle et al. 2009 (Auton. Robots 27(4)) / the Cartographer paper (Hess
+# et al. ICRA 2016).
 SLAM_REFERENCES = {
-    "intel": [("released C++, derived/intel.fileorder", "10/10", "0.051 +- 0.047", "57 s"),
-              ("released C++, intel as in the bag", "8/10", "0.068 +- 0.072", "65-72 s"),
-              ("published GMapping (Kümmerle et al. 2009)", "", "0.070", ""),
+    "intel": [("published GMapping (Kümmerle et al. 2009)", "", "0.070", ""),
               ("published Cartographer (Hess et al. 2016)", "", "0.0229", "")],
-    "fr079": [("released C++, derived/fr079.revfix", "9/10", "0.080 +- 0.058", "68 s"),
-              ("published GMapping (Kümmerle et al. 2009)", "", "0.061", ""),
+    "fr079": [("published GMapping (Kümmerle et al. 2009)", "", "0.061", ""),
               ("published Cartographer (Hess et al. 2016)", "", "0.0452", "")],
     "mit_csail": [("published GMapping (Kümmerle et al. 2009)", "", "0.049", ""),
                   ("published Cartographer (Hess et al. 2016)", "", "0.0319", "")],
@@ -168,12 +164,27 @@ def kidnap_table(runs: dict) -> str:
     return "\n".join(lines + [r for _, r in sorted(rows)])
 
 
-def slam_table(runs: dict) -> str:
+def slam_rows(ds: str, label: str, particles, rows: list, device: str) -> str:
+    """A table row over seeds: converged count, error of the converged runs, mean of all runs, wall time."""
+    import numpy as np
+
+    t = np.array([r["relations"]["trans_abs_mean_m"] for r in rows])
+    t_std = np.array([r["relations"]["trans_abs_std_m"] for r in rows])
+    rot = np.array([r["relations"]["rot_abs_mean_deg"] for r in rows])
+    ok = t < CONVERGED_M
+    wall = np.array([r["wall_time_s"] for r in rows])
+    if not ok.any():
+        return (f"| {ds} | {label} | {particles} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
+                f"{wall.min():.0f}-{wall.max():.0f} s | {device} |")
+    return (f"| {ds} | {label} | {particles} | {ok.sum()}/{len(rows)} | {t[ok].mean():.3f} +- {t_std[ok].mean():.3f} | "
+            f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {device} |")
+
+
+def slam_table(runs: dict, reference: dict | None = None) -> str:
     """Per dataset and filter variant, over seeds: how many converged (relations error < CONVERGED_M), the
     error of the converged runs (their mean and std over the relations, averaged over those runs: the
     reference's convention), the mean over all runs, and the wall time; the references below each dataset.
     Runs with ablation settings (their folder names them) follow the default ones, settings in brackets."""
-    import numpy as np
 
     groups = {}
     for m in runs.values():
@@ -189,25 +200,52 @@ def slam_table(runs: dict) -> str:
     for ds in sorted({k[0] for k in groups}, key=lambda d: (ds_rank.get(d, 99), d)):
         for key in sorted(k for k in groups if k[0] == ds):
             rows = groups[key]
-            t = np.array([r["relations"]["trans_abs_mean_m"] for r in rows])
-            t_std = np.array([r["relations"]["trans_abs_std_m"] for r in rows])
-            rot = np.array([r["relations"]["rot_abs_mean_deg"] for r in rows])
-            ok = t < CONVERGED_M
-            wall = np.array([r["wall_time_s"] for r in rows])
-            conv = f"{t[ok].mean():.3f} +- {t_std[ok].mean():.3f}" if ok.any() else "-"
             method = f"{key[2]} + {key[3]}" + (f" ({key[5]})" if key[5] else "")
             counts = min(((r["relations"]["relations_used"], r["relations"]["relations_used"] + r["relations"][
                 "relations_unmatched"]) for r in rows), key=lambda c: c[0] / max(c[1], 1))
             if counts[0] < FULL_COVERAGE * counts[1]:  # never print a score on a part of the relations as the log's
                 method += f" [scored on {counts[0]} of {counts[1]} relations]"
             dev = "H100" if str(key[6]).startswith("cuda") else key[6]
-            lines.append(f"| {ds} | {method} | {key[4]} | {ok.sum()}/{len(rows)} | {conv} | "
-                         f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {dev} |" if ok.any() else
-                         f"| {ds} | {method} | {key[4]} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
-                         f"{wall.min():.0f}-{wall.max():.0f} s | {dev} |")
+            lines.append(slam_rows(ds, method, key[4], rows, dev))
+        released = {}
+        for m in (reference or {}).values():
+            if m["dataset"] == ds and isinstance(m.get("relations"), dict):
+                released.setdefault((m["particles"], reference_variant(m)), []).append(m)
+        for (particles, variant), rows in sorted(released.items()):
+            label = "*released C++ (python -m eval.reference.gmapping" + (f"; {variant}" if variant else "") + ")*"
+            lines.append(slam_rows(ds, label, particles, rows, "2-core CPU"))
         for name, conv, err, wall in SLAM_REFERENCES.get(ds, []):
             lines.append(f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
                          if conv else f"| {ds} | *{name}* | | | | | {err} | | |")
+    return "\n".join(lines)
+
+
+def released_table(runs: dict, reference: dict) -> str:
+    """Ours against the released C++ on the same logs, 30 particles, seeds 0-9: the released code's runs
+    (eval.reference.gmapping, the ROS wrapper's settings) beside ours at the released settings (its proposal,
+    ``gmapping_code``) and with twice its rotational odometry noise. Each cell: converged seeds, the mean error
+    of the converged runs, and the mean of all runs."""
+    import numpy as np
+
+    def cell(errs):
+        if not errs:
+            return "not run"
+        e = np.array(errs)
+        ok = e < CONVERGED_M
+        conv = f"{ok.sum()}/{len(e)}" + (f", {e[ok].mean():.3f} m" if ok.any() else "")
+        return f"{conv} (all runs {e.mean():.3f} m)"
+
+    def ours(ds, variant):
+        return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
+                if m.get("dataset") == ds and m.get("proposal") == "gmapping_code" and m.get("resample") == "selective"
+                and m.get("particles") == 30 and isinstance(m.get("relations"), dict) and slam_variant(m) == variant]
+
+    lines = ["| log | released C++ (ROS wrapper's settings) | ours, released settings (`gmapping_code`) | "
+             "ours, `slam=gmapping_rot2x` |", "|---|---|---|---|"]
+    for ds in ("intel", "fr079", "mit_csail"):
+        rel = [m["relations"]["trans_abs_mean_m"] for m in reference.values()
+               if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == ""]
+        lines.append(f"| {ds} | {cell(rel)} | {cell(ours(ds, ''))} | {cell(ours(ds, 'srt0.4, stt0.4'))} |")
     return "\n".join(lines)
 
 
@@ -312,8 +350,11 @@ def main(argv=None):
                             kidnap_table(loc))
     slam = collect_slam()
     if slam:
+        reference = collect_slam_reference()
         tables["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
-                          slam_table(slam))
+                          slam_table(slam, reference))
+        tables["released"] = ("GMapping against the released C++, same logs, 30 particles, seeds 0-9",
+                              released_table(slam, reference))
     pipe = collect_pipeline()
     if pipe:
         tables["pipeline"] = ("The pipeline, raw log to localized robot (global localization from a uniform "
@@ -330,12 +371,13 @@ def main(argv=None):
         print(f"{title}\n\n{table}\n")
     if a.write:
         doc = REPO / "docs" / "REPRODUCTION.md"
-        atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe)).encode())
+        atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe, collect_slam_reference())).encode())
         print(f"-> {doc}")
         readme = REPO / "README.md"
         text = readme.read_text()
         for name, (_, table) in tables.items():
             text = replace_block(text, name, table)
+        text = write_facts(text, facts(slam, collect_slam_reference()))
         atomic_write_bytes(readme, text.encode())
         print(f"-> {readme}")
 

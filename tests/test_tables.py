@@ -118,13 +118,21 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     partial = {**run(5, 0.04), "particles": 60}  # scored on a fifth of the relations: the table says so
     partial["relations"] = {**partial["relations"], "relations_used": 20, "relations_unmatched": 80}
     _run(tmp_path, "gmapping_intel", "slam-partial", partial, {**config(5), "slam": {**config(5)["slam"], "num_particles": 60}})
-    lines = slam_table(collect_slam(results=tmp_path / "none", outputs=tmp_path)).splitlines()
+    released = {("gmapping_intel", f"30p-seed{k}"): {**run(k, err), "settings": {"maxRange": 79.99}}
+                for k, err in enumerate([0.05, 0.5])}
+    released[("gmapping_intel", "40")] = {**run(0, 0.06), "settings": {"maxRange": 79.99, "maxUrange": 40.0}}
+    lines = slam_table(collect_slam(results=tmp_path / "none", outputs=tmp_path), released).splitlines()
     ours = [l for l in lines if "paper + selective" in l]
     assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |",
                     "| intel | paper + selective [scored on 20 of 100 relations] | 60 | 1/1 | 0.040 +- 0.050 | 2.00 | "
                     "0.040 | 15-15 s | H100 |",
                     "| intel | paper + selective (dda) | 30 | 1/1 | 0.050 +- 0.050 | 2.00 | 0.050 | 14-14 s | H100 |"]
-    assert any("*released C++, derived/intel.fileorder*" in l and "10/10" in l for l in lines)
+    # the released code's rows come from its runs (eval.reference.gmapping), one per setting that differs from
+    # the ROS wrapper's defaults (maxRange is taken from the log, not chosen)
+    assert "| intel | *released C++ (python -m eval.reference.gmapping)* | 30 | 1/2 | 0.050 +- 0.050 | 2.00 | 0.275 | " \
+           "10-11 s | 2-core CPU |" in lines
+    assert any("eval.reference.gmapping; maxUrange=40)*" in l and "| 1/1 |" in l for l in lines)
+    assert any("published GMapping (Kümmerle et al. 2009)" in l for l in lines)
 
 
 def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path):
@@ -142,3 +150,22 @@ def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path
     assert particles_vs_success(runs, "fr079", tmp_path / "fr079.png") is None
     out = particles_vs_success(runs, "intel", tmp_path / "intel.png")
     assert out.is_file() and out.stat().st_size > 5000
+
+
+def test_readme_prose_agrees_with_the_kept_results():
+    """Every figure the README's prose quotes as a fact is what the kept runs give (eval.tables --write sets
+    them); an edited figure, or results that moved under the prose, fail here."""
+    from eval.claims import facts, readme_facts, write_facts
+    from eval.collect import REPO, collect_slam, collect_slam_reference
+
+    text = (REPO / "README.md").read_text()
+    quoted = readme_facts(text)
+    assert len(quoted) >= 8
+    values = facts(collect_slam(outputs=None), collect_slam_reference(outputs=None))
+    assert {k: v for k, v in quoted.items() if values.get(k) != v} == {}
+    name = next(iter(quoted))
+    edited = text.replace(f"<!-- fact:{name} -->{quoted[name]}", f"<!-- fact:{name} -->99/10", 1)
+    assert readme_facts(edited)[name] != values[name]  # what the check above would catch
+    assert readme_facts(write_facts(edited, values))[name] == values[name]
+    with pytest.raises(SystemExit, match="no_such_fact"):
+        write_facts(text + "<!-- fact:no_such_fact -->1<!-- /fact -->", values)
