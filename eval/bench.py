@@ -18,7 +18,7 @@ from pathlib import Path
 import torch
 
 from eval import bench_globloc, bench_mcl, bench_slam
-from eval.timing import time_per_call
+from eval.timing import repeated
 from irmcl_warp.config import ModelConfig
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
@@ -35,7 +35,13 @@ def _sync(device):
         torch.cuda.synchronize()
 
 
-def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False) -> dict:
+def _timing(r: dict, batch: int) -> dict:
+    """The median of the repeats (and their spread) in ms per step, and rays/s at the median."""
+    return {"step_ms": 1e3 * r["median"], "step_ms_min": 1e3 * r["min"], "step_ms_max": 1e3 * r["max"],
+            "step_ms_all": [1e3 * t for t in r["all"]], "repeats": len(r["all"]), "rays_per_s": batch / r["median"]}
+
+
+def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False, repeats=5) -> dict:
     torch.manual_seed(0)
     model = NOF(MODELS[model_name]).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=1e-4, weight_decay=1e-3)
@@ -55,12 +61,12 @@ def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=Fal
         loss.backward()
         opt.step()
 
-    s = time_per_call(step, lambda: _sync(device), steps)
+    r = repeated(step, lambda: _sync(device), steps, repeats)
     return {"what": "train step", "model": model_name, "renderer": renderer_name, "amp": "bf16" if amp else "off",
-            "batch_rays": batch, "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
+            "batch_rays": batch, "samples": samples, **_timing(r, batch)}
 
 
-def bench_composite(renderer_name, batch, samples, steps, device) -> dict:
+def bench_composite(renderer_name, batch, samples, steps, device, repeats=5) -> dict:
     torch.manual_seed(0)
     p = torch.rand(batch, samples, device=device).pow(3).requires_grad_()
     z = sample_depths(batch, samples, 0.02, 40.0, True, device=device)
@@ -72,9 +78,9 @@ def bench_composite(renderer_name, batch, samples, steps, device) -> dict:
         r, _ = render(p, z)
         (r * g).sum().backward()
 
-    s = time_per_call(step, lambda: _sync(device), steps)
+    r = repeated(step, lambda: _sync(device), steps, repeats)
     return {"what": "composite fwd+bwd", "model": "-", "renderer": renderer_name, "amp": "off", "batch_rays": batch,
-            "samples": samples, "step_ms": 1e3 * s, "rays_per_s": batch / s}
+            "samples": samples, **_timing(r, batch)}
 
 
 def run_train_bench(a) -> list[dict]:
@@ -84,18 +90,19 @@ def run_train_bench(a) -> list[dict]:
     rows = []
     for batch in a.batch:
         for r in ("warp", "torch_ref"):
-            rows.append(bench_composite(r, batch, a.samples, max(a.steps, 5), device))
+            rows.append(bench_composite(r, batch, a.samples, max(a.steps, 5), device, a.repeats))
         for r in ("warp", "torch_ref"):
-            rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device))
+            rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, repeats=a.repeats))
         if a.amp and device.type == "cuda":
             for r in ("warp", "torch_ref"):
-                rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, amp=True))
+                rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, amp=True, repeats=a.repeats))
     name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
     print(f"\nNOF training speed on {name} ({device}), torch {torch.__version__}, tf32 {a.tf32 and device.type == 'cuda'}")
-    print("| what | model | renderer | amp | batch | samples | ms/step | rays/s |\n|---|---|---|---|---|---|---|---|")
+    print(f"| what | model | renderer | amp | batch | samples | ms/step: median of {a.repeats} [min-max] | rays/s |\n"
+          "|---|---|---|---|---|---|---|---|")
     for x in rows:
         print(f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
-              f"{x['step_ms']:.2f} | {x['rays_per_s']:,.0f} |")
+              f"{x['step_ms']:.2f} [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}] | {x['rays_per_s']:,.0f} |")
     out = Path(a.out) / f"train-{device.type}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows})
@@ -114,6 +121,7 @@ def main(argv=None):
     t.add_argument("--steps", type=int, default=10)
     t.add_argument("--amp", action="store_true", help="also time bf16 autocast (CUDA only)")
     t.add_argument("--tf32", action="store_true")
+    t.add_argument("--repeats", type=int, default=5, help="timings of --steps steps each; the table shows their median")
     t.add_argument("--out", default="outputs/bench")
     bench_mcl.add_parser(sub)
     bench_slam.add_parser(sub)

@@ -37,22 +37,32 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
             "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}
 
 
+def repeat_runs(runs: list[dict]) -> dict:
+    """The run of median wall time among repeats of the same run, with every repeat's wall time beside it."""
+    walls = sorted(r["wall_s"] for r in runs)
+    median = next(r for r in runs if r["wall_s"] == walls[(len(walls) - 1) // 2])
+    return {**median, "wall_s_all": [r["wall_s"] for r in runs], "wall_s_min": walls[0], "wall_s_max": walls[-1],
+            "repeats": len(runs)}
+
+
 def run_slam_bench(a) -> list[dict]:
 
     device = pick_device(a.device or "auto")
-    rows = [run_one(a.exp, p, device, a.scans, a.override) for p in a.particles]
+    rows = [repeat_runs([run_one(a.exp, p, device, a.scans, a.override) for _ in range(a.repeats)])
+            for p in a.particles]
     name = platform.processor() or "cpu"
     if device.startswith("cuda"):
         import torch
 
         name = torch.cuda.get_device_name()
     print(f"\nGMapping RBPF on {name} ({device}), {a.exp}, {rows[0]['scans']} scans")
-    print("| particles | processed scans | wall (s) | matching | motion | weights + resampling | integration |  (ms per processed scan)")
+    print(f"| particles | processed scans | wall (s): median of {a.repeats} [min-max] | matching | motion | "
+          "weights + resampling | integration |  (ms per processed scan, of the median run)")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         t = r["ms_per_processed_scan"]
-        print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} | {t['matching']:.1f} | {t['motion']:.1f} | "
-              f"{t['weights_resampling']:.1f} | {t['integration']:.1f} |")
+        print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} [{r['wall_s_min']:.1f}-{r['wall_s_max']:.1f}] | "
+              f"{t['matching']:.1f} | {t['motion']:.1f} | {t['weights_resampling']:.1f} | {t['integration']:.1f} |")
     out = Path(a.out) / f"slam-{a.exp}-{device.split(':')[0]}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "argv": vars(a), "rows": rows})
@@ -67,4 +77,5 @@ def add_parser(sub) -> None:
     p.add_argument("--device", default=None)
     p.add_argument("--scans", type=int, default=None, help="only the first N scans")
     p.add_argument("--override", nargs="*", default=[], help="more Hydra overrides, e.g. sim.duration_s=60")
+    p.add_argument("--repeats", type=int, default=5, help="runs per particle count; the table shows the median run")
     p.add_argument("--out", default="outputs/bench")
