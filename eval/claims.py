@@ -181,6 +181,10 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
     processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
     if processed:
         out["intel_released_processed"] = "/".join(str(p) for p in processed)
+    ours = sorted({m["processed_scans"] for m in slam.values() if m.get("dataset") == "intel"
+                   and m.get("proposal") == "gmapping_code" and m.get("particles") == 30 and slam_variant(m) == ""})
+    if ours:
+        out["intel_code_processed"] = "/".join(str(p) for p in ours)
     count("fr079_released_gfs_noise", [m["relations"]["trans_abs_mean_m"] for m in released.values()
                                        if m.get("dataset") == "fr079" and reference_variant(m) == "srt=0.1, stt=0.1"])
     return out
