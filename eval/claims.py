@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 
-from eval.collect import CONVERGED_M, REPO, reference_variant, slam_variant
+from eval.collect import REPO, converged, released_errors, slam_errors, slam_variant
 from irmcl_warp.config import GlobLocConfig
 
 
@@ -29,26 +29,20 @@ def _loc(runs, exp, tag):
 
 
 def _slam(runs, ds, proposal="paper", resample="selective", particles=30, variant=""):
-    errs = [m["relations"]["trans_abs_mean_m"] for m in runs.values()
-            if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == resample
-            and m.get("particles") == particles and isinstance(m.get("relations"), dict)
-            and slam_variant(m) == variant]
+    errs = slam_errors(runs, ds, proposal, resample, particles, variant)
     if not errs:
         return None
-    e = np.array(errs)
-    ok = e < CONVERGED_M
-    return f"{ok.sum()}/{len(e)} seeds converge, {e[ok].mean():.3f} m" if ok.any() else f"0/{len(e)} converge"
+    k, n, conv, _ = converged(errs)
+    return f"{k}/{n} seeds converge, {conv:.3f} m" if k else f"0/{n} converge"
 
 
 def _released(runs, ds, variant=""):
     """The released GMapping's seeds on ``ds`` (eval.reference.gmapping) at the wrapper's defaults (or a variant)."""
-    e = np.array([m["relations"]["trans_abs_mean_m"] for m in (runs or {}).values()
-                  if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == variant])
-    if not e.size:
+    errs = released_errors(runs or {}, ds, variant=variant)
+    if not errs:
         return None
-    ok = e < CONVERGED_M
-    return (f"{ok.sum()}/{len(e)} seeds converge, {e[ok].mean():.3f} m" if ok.any() else f"0/{len(e)} converge") + \
-        f", all runs {e.mean():.3f} m"
+    k, n, conv, mean = converged(errs)
+    return (f"{k}/{n} seeds converge, {conv:.3f} m" if k else f"0/{n} converge") + f", all runs {mean:.3f} m"
 
 
 def _globloc(runs, exp, method, key="localized"):
@@ -139,18 +133,6 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
     return rows
 
 
-def _converged(errs) -> tuple[int, int, float | None]:
-    e = np.asarray(errs, float)
-    ok = e < CONVERGED_M
-    return int(ok.sum()), len(e), (float(e[ok].mean()) if ok.any() else None)
-
-
-def _slam_errs(runs, ds, proposal, variant="", particles=30):
-    return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
-            if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == "selective"
-            and m.get("particles") == particles and isinstance(m.get("relations"), dict) and slam_variant(m) == variant]
-
-
 def facts(slam: dict, released: dict) -> dict[str, str]:
     """The figures the README's prose quotes, by name, from the kept runs: ``eval.tables --write`` puts each
     between ``<!-- fact:<name> -->`` and ``<!-- /fact -->``, and tests/test_tables.py fails when the prose and
@@ -159,25 +141,25 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
 
     def count(name, errs):
         if errs:
-            k, n, _ = _converged(errs)
+            k, n, _, _ = converged(errs)
             out[name] = f"{k}/{n}"
 
     def error(name, errs):
-        if errs and _converged(errs)[2] is not None:
-            out[name] = f"{_converged(errs)[2]:.3f} m"
+        conv = converged(errs)[2] if errs else None
+        if conv is not None:
+            out[name] = f"{conv:.3f} m"
 
     for ds in ("fr079", "intel", "mit_csail"):
-        code, paper = _slam_errs(slam, ds, "gmapping_code"), _slam_errs(slam, ds, "paper")
+        code, paper = slam_errors(slam, ds, "gmapping_code"), slam_errors(slam, ds, "paper")
         count(f"{ds}_code", code)
         count(f"{ds}_paper", paper)
-        count(f"{ds}_code_rot2x", _slam_errs(slam, ds, "gmapping_code", "srt0.4, stt0.4"))
+        count(f"{ds}_code_rot2x", slam_errors(slam, ds, "gmapping_code", variant="srt0.4, stt0.4"))
         error(f"{ds}_code_error", code)
         error(f"{ds}_paper_error", paper)
-        rel = [m["relations"]["trans_abs_mean_m"] for m in released.values()
-               if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == ""]
+        rel = released_errors(released, ds)
         count(f"{ds}_released", rel)
         error(f"{ds}_released_error", rel)
-    count("fr079_code_60p", _slam_errs(slam, "fr079", "gmapping_code", particles=60))
+    count("fr079_code_60p", slam_errors(slam, "fr079", "gmapping_code", particles=60))
     processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
     if processed:
         out["intel_released_processed"] = "/".join(str(p) for p in processed)
@@ -185,8 +167,7 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
                    and m.get("proposal") == "gmapping_code" and m.get("particles") == 30 and slam_variant(m) == ""})
     if ours:
         out["intel_code_processed"] = "/".join(str(p) for p in ours)
-    count("fr079_released_gfs_noise", [m["relations"]["trans_abs_mean_m"] for m in released.values()
-                                       if m.get("dataset") == "fr079" and reference_variant(m) == "srt=0.1, stt=0.1"])
+    count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
     return out
 
 

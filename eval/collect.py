@@ -105,6 +105,30 @@ def reference_variant(m: dict) -> str:
     return ", ".join(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS)
 
 
+def slam_errors(runs: dict, ds: str, proposal: str = "paper", resample: str = "selective", particles: int = 30,
+                variant: str = "") -> list[float]:
+    """Mean relations errors (m) of our SLAM runs on ``ds`` with these settings (``variant``: slam_variant)."""
+    return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
+            if m.get("dataset") == ds and m.get("proposal") == proposal and m.get("resample") == resample
+            and m.get("particles") == particles and isinstance(m.get("relations"), dict) and slam_variant(m) == variant]
+
+
+def released_errors(runs: dict, ds: str, particles: int = 30, variant: str = "") -> list[float]:
+    """Mean relations errors (m) of the released GMapping's runs on ``ds`` (``variant``: reference_variant)."""
+    return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
+            if m.get("dataset") == ds and m.get("particles") == particles and isinstance(m.get("relations"), dict)
+            and reference_variant(m) == variant]
+
+
+def converged(errs) -> tuple[int, int, float | None, float]:
+    """(converged runs, runs, mean error of the converged ones or None, mean error of all) of relations errors."""
+    import numpy as np
+
+    e = np.asarray(errs, float)
+    ok = e < CONVERGED_M
+    return int(ok.sum()), len(e), (float(e[ok].mean()) if ok.any() else None), float(e.mean())
+
+
 def collect_pipeline(**where) -> dict:
     return collect("pipeline", ("pipeline",), **where)
 

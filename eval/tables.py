@@ -14,7 +14,8 @@ from omegaconf import OmegaConf
 
 from eval.claims import claims, facts, reproduction_markdown, write_facts
 from eval.collect import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, REPO, collect_globloc, collect_localization,
-                          collect_pipeline, collect_slam, collect_slam_reference, collect_synthesis, reference_variant, localize_cell, slam_variant)
+                          collect_pipeline, collect_slam, collect_slam_reference, collect_synthesis, converged,
+                          localize_cell, reference_variant, released_errors, slam_errors, slam_variant)
 from irmcl_warp.config import GlobLocConfig, LocalizeConfig, MCLConfig
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.pipeline import run_folder as pipeline_run_folder
@@ -225,27 +226,18 @@ def released_table(runs: dict, reference: dict) -> str:
     (eval.reference.gmapping, the ROS wrapper's settings) beside ours at the released settings (its proposal,
     ``gmapping_code``) and with twice its rotational odometry noise. Each cell: converged seeds, the mean error
     of the converged runs, and the mean of all runs."""
-    import numpy as np
 
     def cell(errs):
         if not errs:
             return "not run"
-        e = np.array(errs)
-        ok = e < CONVERGED_M
-        conv = f"{ok.sum()}/{len(e)}" + (f", {e[ok].mean():.3f} m" if ok.any() else "")
-        return f"{conv} (all runs {e.mean():.3f} m)"
-
-    def ours(ds, variant):
-        return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
-                if m.get("dataset") == ds and m.get("proposal") == "gmapping_code" and m.get("resample") == "selective"
-                and m.get("particles") == 30 and isinstance(m.get("relations"), dict) and slam_variant(m) == variant]
+        k, n, conv, mean = converged(errs)
+        return f"{k}/{n}" + (f", {conv:.3f} m" if k else "") + f" (all runs {mean:.3f} m)"
 
     lines = ["| log | released C++ (ROS wrapper's settings) | ours, released settings (`gmapping_code`) | "
              "ours, `slam=gmapping_rot2x` |", "|---|---|---|---|"]
     for ds in ("intel", "fr079", "mit_csail"):
-        rel = [m["relations"]["trans_abs_mean_m"] for m in reference.values()
-               if m.get("dataset") == ds and m.get("particles") == 30 and reference_variant(m) == ""]
-        lines.append(f"| {ds} | {cell(rel)} | {cell(ours(ds, ''))} | {cell(ours(ds, 'srt0.4, stt0.4'))} |")
+        ours = [cell(slam_errors(runs, ds, "gmapping_code", variant=v)) for v in ("", "srt0.4, stt0.4")]
+        lines.append(f"| {ds} | {cell(released_errors(reference, ds))} | {ours[0]} | {ours[1]} |")
     return "\n".join(lines)
 
 
@@ -348,9 +340,8 @@ def main(argv=None):
                               "60 s; ms per scan: the whole filter step, median over the starts)", ablation_table(loc))
         tables["kidnap"] = ("Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)",
                             kidnap_table(loc))
-    slam = collect_slam()
+    slam, reference = collect_slam(), collect_slam_reference()
     if slam:
-        reference = collect_slam_reference()
         tables["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
                           slam_table(slam, reference))
         tables["released"] = ("GMapping against the released C++, same logs, 30 particles, seeds 0-9",
@@ -371,13 +362,13 @@ def main(argv=None):
         print(f"{title}\n\n{table}\n")
     if a.write:
         doc = REPO / "docs" / "REPRODUCTION.md"
-        atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe, collect_slam_reference())).encode())
+        atomic_write_bytes(doc, reproduction_markdown(claims(runs, loc, slam, gl, pipe, reference)).encode())
         print(f"-> {doc}")
         readme = REPO / "README.md"
         text = readme.read_text()
         for name, (_, table) in tables.items():
             text = replace_block(text, name, table)
-        text = write_facts(text, facts(slam, collect_slam_reference()))
+        text = write_facts(text, facts(slam, reference))
         atomic_write_bytes(readme, text.encode())
         print(f"-> {readme}")
 

@@ -20,8 +20,8 @@ from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
-__all__ = ["GEOMETRY_FIELDS", "GroundTruthMatch", "apply_ground_truth", "attach_ground_truth", "check_ground_truth", "LogDefectWarning", "LogFormatError", "apply_laser_geometry", "data_root", "load_log",
-           "read_bag", "read_carmen", "read_log",
+__all__ = ["GEOMETRY_FIELDS", "GroundTruthMatch", "LogDefectWarning", "LogFormatError", "apply_ground_truth",
+           "apply_laser_geometry", "attach_ground_truth", "check_ground_truth", "data_root", "load_log", "read_bag", "read_carmen", "read_log",
            "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
            "write_bag", "write_tum"]
 

@@ -74,7 +74,7 @@ def harmonise_beams(path, scans, locations, policy: BeamPolicy, report: DefectRe
         raise ValueError(f"beam_policy={policy!r}: expected one of {', '.join(get_args(BeamPolicy))}")
     if geometries is None:  # same field of view, any count: place the beams evenly over it
         geometries = [ScanGeometry(len(s), -1.0, 2.0 / max(len(s) - 1, 1)) for s in scans]
-    scans = list(scans)
+    scans, geometries = list(scans), list(geometries)  # reversed scanners are flipped here, not in the caller's lists
     for i, g in enumerate(geometries):
         if g.angle_increment_rad < 0:  # reversed scanner: the same beams, in increasing angle
             scans[i] = np.asarray(scans[i])[::-1]

@@ -15,7 +15,6 @@ FLASER scans span 180 deg with angle_increment = pi / (n - 1), as the bags of th
 from __future__ import annotations
 
 import re
-import warnings
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +24,7 @@ import numpy as np
 from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams, mask_ranges
 from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
-from irmcl_warp.io.errors import LogDefectWarning, LogFormatError, check_pose_stamps, warn_defects
+from irmcl_warp.io.errors import LogFormatError, check_pose_stamps, warn_defects
 from irmcl_warp.io.text import check_comment, parse_floats, read_lines
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
 
@@ -140,8 +139,13 @@ def parse_carmen(path) -> CarmenContents:
     return out
 
 
-def _unknown(skipped: Counter) -> Counter:
-    return Counter({k: n for k, n in skipped.items() if k not in KNOWN_RECORDS})
+def _parse_report(c: CarmenContents) -> DefectReport:
+    """What parsing found odd (a cut last line, lines of unknown kinds), for either reader to warn about."""
+    report = DefectReport()
+    report.add("truncated_last_line", int(c.truncated_last_line), "unfinished last line dropped")
+    unknown = Counter({k: n for k, n in c.skipped.items() if k not in KNOWN_RECORDS})
+    report.add("unknown_records", sum(unknown.values()), f"lines of unknown kinds skipped ({_kinds(unknown)})")
+    return report
 
 
 def _kinds(skipped: Counter, most: int = 5) -> str:
@@ -159,10 +163,7 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
     c = parse_carmen(path)
     if not c.scans:
         raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
-    report = DefectReport()
-    report.add("truncated_last_line", int(c.truncated_last_line), "unfinished last line dropped")
-    unknown = _unknown(c.skipped)
-    report.add("unknown_records", sum(unknown.values()), f"lines of unknown kinds skipped ({_kinds(unknown)})")
+    report = _parse_report(c)
     geometries = [_geometry(path, s, fov_rad) for s in c.scans]
     ranges, kept, common = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
                                            beam_policy, report, geometries)
@@ -208,9 +209,6 @@ def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:
     c = parse_carmen(path)
     if not c.scans:
         raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
-    if c.truncated_last_line:
-        warnings.warn(f"{path}: unfinished last line dropped", LogDefectWarning, stacklevel=2)
-    if unknown := _unknown(c.skipped):
-        warnings.warn(f"{path}: lines of unknown kinds skipped ({_kinds(unknown)})", LogDefectWarning, stacklevel=2)
+    warn_defects(path, _parse_report(c))
     return check_pose_stamps(path, np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans]),
                              [s.line for s in c.scans])
