@@ -5,9 +5,15 @@ Side-by-side speed of one full MCL step (motion + weighting + resampling + estim
 Warp kernel variants, against IR-MCL's weighting formulated as the authors do in torch (every sample,
 chunks of 500 particles; irmcl_warp/reference/weighting.py) on the same device, in one run:
 
-* ``warp``: the same formulation as the torch reference (every sample);
+* ``warp``: the same formulation as the torch reference (every sample, one node load at a time);
 * ``warp+et``: early termination once the transmittance is below 1e-3;
-* ``warp+et+skip``: and nodes below p_occ 0.01 read as empty and jumped over.
+* ``+b4``: four node loads in flight per beam before compositing (``mcl.march_batch``; same result);
+* ``+beam``: GPU threads ordered by beam, then particle (``mcl.march_order``);
+* ``warp+et+skip``: nodes below p_occ 0.01 read as empty and jumped over (``mcl.empty_below``);
+
+each with the step's launches replayed as one captured graph (``graph``, mcl.step_graph=on) and launched
+one by one (``eager``), side by side (``--step-graph`` picks one). ``DEFAULT_VARIANT`` names the one
+``mcl``'s defaults run.
 
 The NOG is ``--nog`` (a baked outputs/<exp>/nog/nog-*.npz), else the simulator's walls rasterised at
 5 cm (no data needed). Particles start uniform over the free nodes (a global localization's first
@@ -36,8 +42,16 @@ from irmcl_warp.sim import simulate
 from kernels import SIM
 from kernels import WEIGHTING
 
-VARIANTS = {"warp": dict(t_min=0.0, empty_below=0.0), "warp+et": dict(t_min=1e-3, empty_below=0.0),
-            "warp+et+skip": dict(t_min=1e-3, empty_below=0.01)}
+VARIANTS = {
+    "warp": dict(t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et": dict(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et+b4": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
+    "warp+et+b4+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
+    "warp+et+skip": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
+    "warp+et+skip+beam": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
+}
+DEFAULT_VARIANT = next((name for name, v in VARIANTS.items()
+                        if all(getattr(MCLConfig, k) == value for k, value in v.items())), None)
 
 
 def simulator_nog(resolution_m: float = 0.05, device: str = "cpu") -> NOG:
@@ -62,8 +76,8 @@ def _sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
-def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5) -> dict:
-    cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, **VARIANTS[variant])
+def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on") -> dict:
+    cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
     pf.init_uniform()
@@ -79,7 +93,8 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
         "read back": lambda: pf.weights.summary(),
     }
     part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
-    return {"method": variant, "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
+    return {"method": f"{variant} {'graph' if pf.use_graph else 'eager'}", "variant": variant, "graph": pf.use_graph,
+            "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
             "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
             "weighting_ms": part_ms["weighting"], "parts_ms": part_ms}
 
@@ -125,8 +140,10 @@ def run_mcl_bench(a) -> list[dict]:
     rows = []
     for n in a.particles:
         for v in a.variants:
-            rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats))
-            print(rows[-1], flush=True)
+            for graph in (["on", "off"] if a.step_graph == "both" else [a.step_graph]):
+                rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats,
+                                         graph=graph))
+                print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
             print(rows[-1], flush=True)
@@ -161,6 +178,8 @@ def add_parser(sub) -> None:
     p.add_argument("--particles", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     p.add_argument("--torch-max", type=int, default=1_000_000, help="largest particle count for the torch reference")
+    p.add_argument("--step-graph", default="both", choices=["both", "on", "off"],
+                   help="a step replayed as one captured graph (on), launched one by one (off), or both side by side")
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
     p.add_argument("--steps", type=int, default=20)

@@ -143,6 +143,8 @@ class MCLConfig:
     near_m: float = 0.02
     t_min: float = 1e-3  # early termination once the transmittance is below (0 = the authors' formulation)
     empty_below: float = 0.0  # NOG nodes below this p_occ read as 0 and are jumped over (0 = authors')
+    march_batch: int = 4  # NOG nodes loaded together per beam before compositing (1 = one at a time; same result)
+    march_order: str = "particle"  # GPU threads by particle then beam (particle) | by beam then particle (beam)
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
     estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | best_cluster | mean
@@ -157,6 +159,7 @@ class MCLConfig:
     map_resolution_m: float = 0.05  # NOG / grid resolution
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
+    step_graph: str = "auto"  # a step's launches replayed as one graph: auto (on a GPU, when capturable) | on | off
     seed: int = 0
 
 

@@ -39,6 +39,12 @@ def pose_moments(w: float, p: wp.vec3) -> vec5:
     return vec5(w, w * p[0], w * p[1], w * wp.cos(p[2]), w * wp.sin(p[2]))
 
 
+def mean_pose(sums: np.ndarray) -> np.ndarray:
+    """[x, y, yaw] from the five pose moments (w, w x, w y, w cos, w sin)."""
+    s = np.asarray(sums, np.float64)
+    return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
+
+
 @wp.func
 def add_moments(sums: wp.array(dtype=wp.float32), acc: vec5):
     for c in range(5):
@@ -80,9 +86,9 @@ class TopShareMean:
         launch_reduction(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles, self.sums, self.k],
                          self.device)
 
-    def result(self) -> np.ndarray:
-        s = self.sums.numpy().astype(np.float64)
-        return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
+    def result(self, sums: np.ndarray | None = None) -> np.ndarray:
+        """[x, y, yaw] from the five sums (``sums``: a copy already read back)."""
+        return mean_pose(self.sums.numpy() if sums is None else sums)
 
 
 @ESTIMATE.register("top_share")
@@ -157,9 +163,9 @@ class BestCluster:
     def launch(self, particles: wp.array, log_w: wp.array) -> None:
         self(particles, log_w)  # the heaviest bin is found on the host: nothing to defer
 
-    def result(self) -> np.ndarray:
-        s = self.sums.numpy().astype(np.float64)
-        return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
+    def result(self, sums: np.ndarray | None = None) -> np.ndarray:
+        """[x, y, yaw] from the five sums (``sums``: a copy already read back)."""
+        return mean_pose(self.sums.numpy() if sums is None else sums)
 
 
 @ESTIMATE.register("best_cluster")

@@ -5,7 +5,9 @@ particle draws its own noisy version with standard deviations
     s_rot1 = sqrt(a1 rot1^2 + a2 trans^2),  s_trans = sqrt(a3 trans^2 + a4 (rot1^2 + rot2^2)),
     s_rot2 = sqrt(a1 rot2^2 + a2 trans^2)
 
-and moves by it. Random numbers: Warp's per-thread generator seeded by (seed, particle).
+and moves by it. Random numbers: Warp's per-thread generator seeded by (seed, particle). The step and the
+seed are read from device arrays, so that a captured filter step (irmcl_warp/mcl/filter.py) replays with
+each scan's values; ``__call__`` takes host values and writes them there first.
 Numpy twin: irmcl_warp/reference/motion.py.
 """
 
@@ -33,9 +35,9 @@ def odometry_step(odom_from, odom_to, min_trans_m: float = 0.01) -> tuple[float,
 
 def make_kernel(a1: float, a2: float, a3: float, a4: float):
     @wp.kernel(module="unique")
-    def sample(particles: wp.array(dtype=wp.vec3), step: wp.vec3, seed: int):
+    def sample(particles: wp.array(dtype=wp.vec3), step: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32)):
         i = wp.tid()
-        state = wp.rand_init(seed, i)
+        state = wp.rand_init(seed[0], i)
         r1 = step[0]
         t = step[1]
         r2 = step[2]
@@ -60,9 +62,18 @@ class OdometryMotion:
             raise ValueError(f"motion: expected 4 non-negative alphas (Thrun a1..a4), got {list(alphas)}")
         self.device = pick_device(device)
         self.kernel = make_kernel(*map(float, alphas))
+        self._step = wp.zeros(3, dtype=wp.float32, device=self.device)
+        self._seed = wp.zeros(1, dtype=wp.int32, device=self.device)
 
     def __call__(self, particles: wp.array, step, seed: int) -> None:
-        wp.launch(self.kernel, particles.shape[0], [particles, wp.vec3(*map(float, step)), int(seed)], device=self.device)
+        """Move ``particles`` by a noisy version of ``step`` = (rot1, trans, rot2) each."""
+        self._step.assign(np.asarray(step, np.float32).reshape(3))
+        self._seed.assign(np.array([seed], np.int32))
+        self.launch(particles, self._step, self._seed)
+
+    def launch(self, particles: wp.array, step: wp.array, seed: wp.array) -> None:
+        """The same with (rot1, trans, rot2) in ``step`` [3] and the seed in ``seed`` [1], both on the device."""
+        wp.launch(self.kernel, particles.shape[0], [particles, step, seed], device=self.device)
 
 
 @MOTION.register("odometry")

@@ -71,14 +71,15 @@ def resample_now(sums: wp.array(dtype=wp.float32), limit: float) -> bool:
 
 
 @wp.kernel
-def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: float, src: wp.array(dtype=wp.vec3),
+def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: wp.array(dtype=wp.float32), src: wp.array(dtype=wp.vec3),
                       dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
                       log_w: wp.array(dtype=wp.float32)):
-    """dst = the low-variance draw from src and log_w = 0 when N_eff < limit, else dst = src (weights kept)."""
+    """dst = the low-variance draw from src (pointer offset ``offset[0]`` in [0, 1)) and log_w = 0 when
+    N_eff < limit, else dst = src (weights kept)."""
     i = wp.tid()
     if resample_now(sums, limit):
         n = dst.shape[0]
-        u = (offset + float(i)) / float(n) * cdf[cdf.shape[0] - 1]
+        u = (offset[0] + float(i)) / float(n) * cdf[cdf.shape[0] - 1]
         dst[i] = src[search(cdf, u)]
         log_w[i] = 0.0
     else:
@@ -86,12 +87,12 @@ def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: float, src: wp.ar
 
 
 @wp.kernel
-def multinomial_kernel(cdf: wp.array(dtype=wp.float32), seed: int, src: wp.array(dtype=wp.vec3),
+def multinomial_kernel(cdf: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32), src: wp.array(dtype=wp.vec3),
                        dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
                        log_w: wp.array(dtype=wp.float32)):
     i = wp.tid()
     if resample_now(sums, limit):
-        state = wp.rand_init(seed, i)
+        state = wp.rand_init(seed[0], i)
         dst[i] = src[search(cdf, wp.randf(state) * cdf[cdf.shape[0] - 1])]
         log_w[i] = 0.0
     else:
@@ -121,10 +122,10 @@ class ParticleWeights:
                          self.device)
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
-    def summary(self) -> tuple[np.ndarray, float, float]:
-        """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums).
-        spread = sqrt(var x + var y) of the weighted particle positions (m)."""
-        s = self.sums.numpy().astype(np.float64)
+    def summary(self, sums: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
+        """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums;
+        ``sums``: a copy already read back). spread = sqrt(var x + var y) of the weighted positions (m)."""
+        s = (self.sums.numpy() if sums is None else np.asarray(sums)).astype(np.float64)
         total = s[5]
         mx, my = s[1] / total, s[2] / total
         pose = np.array([mx + self.centre[0], my + self.centre[1], np.arctan2(s[4], s[3])])
@@ -134,17 +135,33 @@ class ParticleWeights:
 
 class Resampler:
     """Draws dst from src by the cumulative weights. Given ParticleWeights' ``sums`` and ``neff_below``, the
-    decision is taken on the device (no read back): below it, resample and zero ``log_w``; else copy."""
+    decision is taken on the device (no read back): below it, resample and zero ``log_w``; else copy.
+    ``__call__`` takes the random draw from the host; ``launch`` reads it from device arrays (a captured
+    filter step replays with each scan's draw)."""
 
     def __init__(self, method: str, device: str = "auto"):
         self.method, self.device = method, pick_device(device)
         self._always = wp.array(np.array([1, 0, 0, 0, 0, 1, 0, 0], np.float32), dtype=wp.float32, device=self.device)
         self._scratch = None
+        self._offset = wp.zeros(1, dtype=wp.float32, device=self.device)
+        self._seed = wp.zeros(1, dtype=wp.int32, device=self.device)
+
+    @staticmethod
+    def seed_of(draw: float) -> int:
+        """multinomial's generator seed from the uniform draw."""
+        return int(draw * 2**31)
 
     def __call__(self, cdf: wp.array, src: wp.array, dst: wp.array, draw: float, sums: wp.array | None = None,
                  neff_below: float = np.inf, log_w: wp.array | None = None) -> None:
         """``draw``: a uniform number in [0, 1) (low_variance offset; multinomial derives its seed from it).
         Without ``sums`` every call resamples."""
+        self._offset.assign(np.array([draw], np.float32))
+        self._seed.assign(np.array([self.seed_of(draw)], np.int32))
+        self.launch(cdf, src, dst, self._offset, self._seed, sums, neff_below, log_w)
+
+    def launch(self, cdf: wp.array, src: wp.array, dst: wp.array, offset: wp.array, seed: wp.array,
+               sums: wp.array | None = None, neff_below: float = np.inf, log_w: wp.array | None = None) -> None:
+        """The same with the draw on the device: ``offset`` [1] (low_variance) and ``seed`` [1] (multinomial)."""
         if sums is None:
             sums, neff_below = self._always, np.inf
         if log_w is None:
@@ -152,12 +169,8 @@ class Resampler:
                 self._scratch = wp.zeros(dst.shape[0], dtype=wp.float32, device=self.device)
             log_w = self._scratch
         limit = float(min(neff_below, 3.0e38))
-        if self.method == "low_variance":
-            wp.launch(systematic_kernel, dst.shape[0], [cdf, float(draw), src, dst, sums, limit, log_w],
-                      device=self.device)
-        else:
-            wp.launch(multinomial_kernel, dst.shape[0], [cdf, int(draw * 2**31), src, dst, sums, limit, log_w],
-                      device=self.device)
+        kernel, draw = (systematic_kernel, offset) if self.method == "low_variance" else (multinomial_kernel, seed)
+        wp.launch(kernel, dst.shape[0], [cdf, draw, src, dst, sums, limit, log_w], device=self.device)
 
 
 @RESAMPLE.register("low_variance")

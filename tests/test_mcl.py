@@ -243,3 +243,47 @@ def test_reduce_keeps_the_heaviest_particles_and_their_weights():
     assert np.all(np.isfinite(pose)) and 0 < neff <= 50
     pf.init_uniform()  # a new run gets the full set back
     assert pf.num_particles == 400
+
+
+@pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
+def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rng):
+    """mcl.step_graph=on (one captured graph per step; Warp's CPU graph here, a CUDA graph on a GPU) against
+    off: the same estimates, N_eff and particles bit for bit, through selective resampling (both ways) and a
+    reduce() that reallocates every array the graphs were captured on."""
+    log, nog = _world_and_map(duration_s=4.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed = int(rng.integers(1 << 16))
+    runs = {}
+    for mode in ("off", "on"):
+        cfg = MCLConfig(num_particles=600, num_samples=64, seed=seed, weighting=weighting, step_graph=mode)
+        pf = build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, maps)
+        pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
+        out = []
+        for k in range(1, len(log)):
+            if k == len(log) // 2:
+                pf.reduce(300)
+            out.append(pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k]))
+        assert pf.use_graph == (mode == "on") and len(pf.graphs) == (2 if mode == "on" else 0)
+        runs[mode] = (np.array([o[0] for o in out]), np.array([o[1] for o in out]), pf.particles.numpy())
+    neffs = runs["off"][1]
+    assert (neffs < 0.5 * 600).any() and (neffs >= 0.5 * 300).any(), "both resampling decisions taken"
+    if DEVICE == "cpu":
+        for graph, eager in zip(runs["on"], runs["off"]):
+            assert np.array_equal(graph, eager), f"seed {seed}"
+    else:  # on a GPU the atomic sums add in no fixed order, run to run: the estimates agree, not their last bits
+        diff = runs["on"][0] - runs["off"][0]
+        diff[:, 2] = np.arctan2(np.sin(diff[:, 2]), np.cos(diff[:, 2]))
+        assert np.abs(diff).max() < 0.02, f"seed {seed}: {np.abs(diff).max(0)}"
+
+
+def test_step_graph_refuses_what_it_cannot_capture():
+    log, nog = _world_and_map(duration_s=2.0)
+    for extra, why in [(dict(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1), "recovery is on"),
+                       (dict(estimate="best_cluster"), "finds its cluster on the host")]:
+        with pytest.raises(ValueError, match=why):
+            _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="on", **extra), log)
+        pf = _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="auto", **extra), log)
+        assert not pf.use_graph  # auto falls back to launching one by one
+    with pytest.raises(ValueError, match="choose auto, on or off"):
+        _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="yes"), log)

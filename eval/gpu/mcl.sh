@@ -6,6 +6,8 @@
 #   global   global localization, 100k particles: every dataset x {nog_raymarch, likelihood_field,
 #            beam_model} x {5, 10 cm} (Hydra multirun)
 #   tracking the same with 10k particles from a noisy initial pose
+#   real     issue 18: a real fr079 global run (100k particles kept, train=fast) beside the micro-benchmark
+#            on its own NOG, the same filter settings, the step as a graph
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
@@ -27,6 +29,11 @@ for part in "$@"; do
              --out "$OUT/bench" 2>&1 | tail -16 ;;
     global) sweep global "${N_GLOBAL:-100000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
     tracking) sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
+    real) python -m irmcl_warp.train +exp=fr079 train=fast 2>&1 | grep -v "^\[" | tail -3
+          python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=global mcl.num_particles=100000 \
+            mcl.reduce_to=0 localize.num_starts=${STARTS:-3} 2>&1 | grep -E "start|ms|Error" | tail -8
+          python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --particles 100000 \
+            --variants warp+et+b4 --step-graph both --torch-max 0 --out "$OUT/bench-fr079" 2>&1 | tail -8 ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;

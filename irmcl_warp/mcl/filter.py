@@ -2,10 +2,16 @@
 chosen from a registry once, in ``__init__``; particle arrays are allocated once (again only when
 ``reduce`` shrinks the set) and only launched on.
 
-Per step the host sends the odometry step and the measured ranges of the chosen beams, and reads back
-once after everything is launched: the eight weight sums (mean, N_eff, spread) and the estimate's sums.
+Per step the host sends what the step takes (``StepInputs``: the odometry step, the measured ranges of
+the chosen beams, the motion seed and the resampling draw; two copies) and reads back once after
+everything is launched: the eight weight sums (mean, N_eff, spread) and the estimate's five (one copy).
 Resampling runs when N_eff < ``resample_threshold`` * N (selective resampling; 1.0 = every step),
 decided on the device. With recovery on, the log mean likelihood is read back as well.
+
+``mcl.step_graph``: since every kernel reads the step's values from device arrays, the launches of one
+step can be captured once as a graph (a CUDA graph on a GPU, Warp's CPU graph on a CPU) and replayed for
+each scan: one launch instead of ~15. Two graphs, one per ping-pong order of the particle buffers. The
+same kernels in the same order: results are identical to launching them one by one (tested).
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ import warp as wp
 
 from irmcl_warp.config import MCLConfig
 from kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
-from kernels.resample import LogMeanLikelihood, ParticleWeights, accumulate_kernel, inject_kernel
+from kernels.resample import LogMeanLikelihood, ParticleWeights, Resampler, accumulate_kernel, inject_kernel
 
 # mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
 ESTIMATORS = {
@@ -26,6 +32,32 @@ ESTIMATORS = {
                                                              device=d),
     "mean": lambda cfg, n, bounds, d: None,
 }
+
+
+class StepInputs:
+    """What one step takes from the host, written into one host buffer per type and copied to the device in
+    two copies: float32 [rot1, trans, rot2, resampling draw, measured ranges of the B beams] and int32
+    [motion seed, multinomial seed]. The kernels get views of the device buffers (``odom``, ``draw``,
+    ``measured``, ``motion_seed``, ``resample_seed``), so a captured step reads each scan's values. On a
+    GPU the host buffers are pinned (the copies are asynchronous); on a CPU they are the device buffers."""
+
+    def __init__(self, num_beams: int, device: str):
+        self.device = device
+        self.values = wp.zeros(4 + num_beams, dtype=wp.float32, device=device)
+        self.seeds = wp.zeros(2, dtype=wp.int32, device=device)
+        on_gpu = device.startswith("cuda")
+        self.host_values = wp.zeros_like(self.values, device="cpu", pinned=True) if on_gpu else self.values
+        self.host_seeds = wp.zeros_like(self.seeds, device="cpu", pinned=True) if on_gpu else self.seeds
+        self.odom, self.draw, self.measured = self.values[0:3], self.values[3:4], self.values[4:]
+        self.motion_seed, self.resample_seed = self.seeds[0:1], self.seeds[1:2]
+
+    def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
+        v = self.host_values.numpy()
+        v[0:3], v[3], v[4:] = odom_step, draw, measured
+        self.host_seeds.numpy()[:] = np.array([motion_seed, resample_seed], np.int64).astype(np.int32, casting="unsafe")
+        if self.host_values is not self.values:
+            wp.copy(self.values, self.host_values)
+            wp.copy(self.seeds, self.host_seeds)
 
 
 class ParticleFilter:
@@ -52,7 +84,12 @@ class ParticleFilter:
         self.bounds = (lo[0], lo[1], lo[0] + (W - 1) * free_space.resolution_m, lo[1] + (H - 1) * free_space.resolution_m)
         self._allocate(N)
         self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
-        self.measured = wp.zeros(B, dtype=wp.float32, device=d)
+        self.inputs = StepInputs(B, d)
+        self.measured = self.inputs.measured
+        # read back per step: the 8 weight sums, then the estimator's 5 (pinned on a GPU: one async copy each)
+        self.readback = wp.zeros(13, dtype=wp.float32, device="cpu", pinned=d.startswith("cuda"))
+        self.use_graph = self._graph_choice()
+        self.graphs = {}  # the particle buffer a step starts from -> its captured launches
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
@@ -70,6 +107,7 @@ class ParticleFilter:
         self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d)
         self.weighting = None  # the old set's scratch is released before the new one is allocated
         self.weighting = self.make_weighting(n, len(self.beam_index))
+        self.graphs = {}  # captured on the old arrays: capture again
         self.particles = wp.zeros(n, dtype=wp.vec3, device=d)
         self.scratch = wp.zeros(n, dtype=wp.vec3, device=d)
         self.log_w = wp.zeros(n, dtype=wp.float32, device=d)  # accumulated since the last resampling
@@ -122,6 +160,56 @@ class ParticleFilter:
         self.l_slow = self.l_fast = None
 
     # --- one filter step --------------------------------------------------------------------------
+    def _graph_choice(self) -> bool:
+        """``mcl.step_graph``: auto = on a GPU when the step can be captured, on = always (an error when it
+        cannot), off = launch one by one. A step can be captured when nothing in it needs the host between
+        launches: recovery off (it reads the mean likelihood back mid-step), an estimate that stays on the
+        device (top_share or mean) and a weighting made only of Warp launches."""
+        mode = self.cfg.step_graph
+        if mode not in ("auto", "on", "off"):
+            raise ValueError(f"MCL: mcl.step_graph={mode!r}; choose auto, on or off")
+        blockers = [why for why, bad in [
+            ("recovery is on (mcl.recovery_alpha_*)", self.recovery_on),
+            (f"mcl.estimate={self.cfg.estimate} finds its cluster on the host", self.cfg.estimate == "best_cluster"),
+            (f"the weighting {type(self.weighting).__name__} is not made of Warp launches only",
+             not getattr(self.weighting, "capturable", False))] if bad]
+        if mode == "on" and blockers:
+            raise ValueError("MCL: mcl.step_graph=on, but a step cannot be captured: " + "; ".join(blockers))
+        return mode == "on" or (mode == "auto" and not blockers and self.device.startswith("cuda"))
+
+    @property
+    def recovery_on(self) -> bool:
+        return self.cfg.recovery_alpha_slow > 0 and self.cfg.recovery_alpha_fast > 0
+
+    def _launch_update(self) -> None:
+        """Motion, weighting, the accumulated weights and the estimate: launches only."""
+        inp = self.inputs
+        self.motion.launch(self.particles, inp.odom, inp.motion_seed)
+        self.weighting(self.particles, self.T_base_laser, self.angles, inp.measured, self.log_lik)
+        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
+        self.weights.update(self.log_w, self.particles)
+        if self.estimator is not None:
+            self.estimator.launch(self.particles, self.log_w)
+
+    def _launch_resampling(self, limit: float) -> None:
+        """Resampling into the scratch buffer (decided on the device) and the copies to read back."""
+        inp = self.inputs
+        self.resampler.launch(self.weights.cdf, self.particles, self.scratch, inp.draw, inp.resample_seed,
+                              self.weights.sums, limit, self.log_w)
+        wp.copy(self.readback, self.weights.sums, 0, 0, 8)
+        if self.estimator is not None:
+            wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
+
+    def _replay(self, limit: float) -> None:
+        """The captured step from the current particle buffer (captured on first use)."""
+        key = self.particles.ptr
+        if key not in self.graphs:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._launch_update()
+                self._launch_resampling(limit)
+            self.graphs[key] = capture.graph
+        wp.capture_launch(self.graphs[key])
+
     def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
         """odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no return).
         Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling)."""
@@ -130,28 +218,30 @@ class ParticleFilter:
             raise ValueError(f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
                              f"for a sensor of {self.num_sensor_beams}")
         self.steps += 1
-        self.motion(self.particles, odom_step, seed=self.cfg.seed * 1_000_003 + self.steps)
         chosen = ranges_m[self.beam_index]
         chosen = np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
-        self.measured.assign(chosen)
-        self.weighting(self.particles, self.T_base_laser, self.angles, self.measured, self.log_lik)
-        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
-        self.weights.update(self.log_w, self.particles)
-        if self.estimator is not None:
-            self.estimator.launch(self.particles, self.log_w)
-        p_inject = self.recovery_probability()  # reads back (only when recovery is on)
-        # selective resampling decided on the device: one read back per step, after everything is launched
-        limit = np.inf if p_inject > 0 else self.cfg.resample_threshold * self.num_particles
-        self.resampler(self.weights.cdf, self.particles, self.scratch, float(self.rng.uniform()), self.weights.sums,
-                       limit, self.log_w)
+        draw = float(self.rng.uniform())
+        self.inputs.upload(odom_step, draw, chosen, self.cfg.seed * 1_000_003 + self.steps, Resampler.seed_of(draw))
+        limit = self.cfg.resample_threshold * self.num_particles
+        p_inject = 0.0
+        if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
+            self._replay(limit)
+        else:
+            self._launch_update()
+            p_inject = self.recovery_probability()  # reads back (only when recovery is on)
+            if p_inject > 0:
+                limit = np.inf
+            self._launch_resampling(limit)
+        wp.synchronize_device(self.device)
         self.particles, self.scratch = self.scratch, self.particles
         if p_inject > 0 and self.free_xy is not None:
             wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.free_space.resolution_m,
                       float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
-        pose, neff, self.spread = self.weights.summary()
+        sums = self.readback.numpy()
+        pose, neff, self.spread = self.weights.summary(sums[:8])
         if self.estimator is not None:
-            pose = self.estimator.result()
-        if p_inject <= 0 and neff < limit:
+            pose = self.estimator.result(sums[8:])
+        if self.recovery_on and p_inject <= 0 and neff < limit:
             self.injected.zero_()  # resampled without injection: every particle comes from the posterior
         return pose, neff
 

@@ -67,9 +67,16 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct; lazy: it needs torch)
 
             return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
-        return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below, **shared)
+        return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below,
+                             batch=mcl.march_batch, beam_major=_march_order(mcl.march_order), **shared)
     return WEIGHTING.build(w, occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
                            resolution_m=maps.resolution_m, max_range_m=far_m, device=device)
+
+
+def _march_order(order: str) -> bool:
+    if order not in ("particle", "beam"):
+        raise ValueError(f"mcl.march_order={order!r}; choose particle or beam")
+    return order == "beam"
 
 
 def _need(value, weighting: str, what: str):
