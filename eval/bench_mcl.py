@@ -46,6 +46,7 @@ VARIANTS = {
     "warp": dict(t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
     "warp+et": dict(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
     "warp+et+b4": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
+    "warp+et+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="beam"),
     "warp+et+b4+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
     "warp+et+skip": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
     "warp+et+skip+beam": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
@@ -76,7 +77,25 @@ def _sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
-def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on") -> dict:
+def host_profile(fn, sync, steps: int, what: str) -> None:
+    """Where a step's host time goes: cProfile over ``steps`` calls, the 12 largest own times."""
+    import cProfile
+    import io
+    import pstats
+
+    prof = cProfile.Profile()
+    prof.enable()
+    for _ in range(steps):
+        fn()
+    sync()
+    prof.disable()
+    text = io.StringIO()
+    pstats.Stats(prof, stream=text).sort_stats("tottime").print_stats(12)
+    print(f"host profile ({what}, {steps} steps):\n" + "\n".join(text.getvalue().splitlines()[4:24]))
+
+
+def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on",
+                 profile=False) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
@@ -84,6 +103,8 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
     u = (0.01, 0.05, -0.01)
     sync = lambda: _sync(device)  # noqa: E731
     step = repeated(lambda: pf.step(u, measured), sync, steps, repeats)  # median and spread of ``repeats``
+    if profile:
+        host_profile(lambda: pf.step(u, measured), sync, steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
     parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
         "motion": lambda: pf.motion(pf.particles, u, seed=1),
         "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
@@ -142,7 +163,7 @@ def run_mcl_bench(a) -> list[dict]:
         for v in a.variants:
             for graph in (["on", "off"] if a.step_graph == "both" else [a.step_graph]):
                 rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats,
-                                         graph=graph))
+                                         graph=graph, profile=a.profile))
                 print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
@@ -180,6 +201,7 @@ def add_parser(sub) -> None:
     p.add_argument("--torch-max", type=int, default=1_000_000, help="largest particle count for the torch reference")
     p.add_argument("--step-graph", default="both", choices=["both", "on", "off"],
                    help="a step replayed as one captured graph (on), launched one by one (off), or both side by side")
+    p.add_argument("--profile", action="store_true", help="also print where the host time of a step goes (cProfile)")
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
     p.add_argument("--steps", type=int, default=20)

@@ -100,7 +100,7 @@ def node_value(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, 
 
 
 def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, empty_below: float,
-                       eps: float = 1e-10, batch: int = 4, beam_major: bool = False):
+                       eps: float = 1e-10, batch: int = 1, beam_major: bool = False):
     """Two ways to the same march, for speed:
 
     * ``batch``: samples whose nodes are loaded together before they are composited one by one (the loads
@@ -207,7 +207,7 @@ class NogRaymarch:
 
     def __init__(self, nog, num_particles: int, num_beams: int, num_samples: int = 256, near_m: float = 0.02,
                  far_m: float = 40.0, t_min: float = 0.0, sigma_m: float = 0.5, empty_below: float = 0.0,
-                 batch: int = 4, beam_major: bool = False, device: str = "auto"):
+                 batch: int = 1, beam_major: bool = False, device: str = "auto"):
         if nog.occupancy.size == 0 or nog.occupancy.ndim != 2:
             raise ValueError(f"nog_raymarch: the NOG is empty (shape {nog.occupancy.shape})")
         if num_samples < 2 or not far_m > near_m:

@@ -116,6 +116,9 @@ def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_pat
     result = json.loads((out / "metrics.json").read_text())
     assert result["summary"]["starts"] == 2 and result["summary"]["success_rate"] == 1.0
     assert all(r["location_rmse_cm"] < 25 for r in result["runs"])
+    # every filter step timed: at most one per scan
+    steps, scans = sum(r["steps"] for r in result["runs"]), sum(r["poses"] for r in result["runs"])
+    assert 0 < steps <= scans and result["summary"]["ms_per_step_median"] > 0
     rows = np.loadtxt(out / "start1.tum")
     assert rows.shape[1] == 8 and rows[0, 0] >= 1000.0 + 30.0  # TUM rows, second start half-way
     assert (out / "start0.png").is_file()

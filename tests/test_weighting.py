@@ -47,10 +47,13 @@ def _random_nog_grid(rng, kind):
     return np.clip(gaussian_filter(occ, 0.8) * 2.5 + rng.uniform(0, 2e-3, occ.shape), 0, 1).astype(np.float32)
 
 
-@pytest.mark.parametrize("kind, t_min, empty_below", [("noise", 0.0, 0.0), ("noise", 1e-3, 0.0), ("noise", 0.0, 0.01),
-                                                      ("rooms", 0.0, 0.0), ("rooms", 1e-3, 0.01), ("rooms", 0.0, 0.05)])
-def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below):
-    """Every sample in the twin; the kernel's grid clipping and jumps over empty space must give the same."""
+@pytest.mark.parametrize("kind, t_min, empty_below, batch, beam_major", [
+    ("noise", 0.0, 0.0, 1, False), ("noise", 1e-3, 0.0, 4, True), ("noise", 0.0, 0.01, 1, True),
+    ("rooms", 0.0, 0.0, 4, False), ("rooms", 1e-3, 0.01, 1, True), ("rooms", 0.0, 0.05, 1, False),
+    ("rooms", 1e-3, 0.0, 3, False), ("rooms", 1e-3, 0.0, 1, True)])
+def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below, batch, beam_major):
+    """Every sample in the twin; the kernel's grid clipping, jumps over empty space, batched node loads and
+    thread order (by beam or by particle) must give the same."""
     occ = _random_nog_grid(rng, kind)
     nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
     P, B = 60, 16
@@ -60,7 +63,8 @@ def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below):
     measured = rng.uniform(0.5, 6.0, B).astype(np.float32)
     measured[3] = np.nan
     w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=P, num_beams=B, num_samples=128, near_m=0.02,
-                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, device=DEVICE)
+                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, batch=batch,
+                        beam_major=beam_major, device=DEVICE)
     pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
     aw = wp.array(angles, dtype=wp.float32, device=DEVICE)
     logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)

@@ -33,7 +33,9 @@ for part in "$@"; do
           python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=global mcl.num_particles=100000 \
             mcl.reduce_to=0 localize.num_starts=${STARTS:-3} 2>&1 | grep -E "start|ms|Error" | tail -8
           python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --particles 100000 \
-            --variants warp+et+b4 --step-graph both --torch-max 0 --out "$OUT/bench-fr079" 2>&1 | tail -8 ;;
+            --variants warp+et warp+et+beam warp+et+skip+beam --step-graph both --torch-max 0 --out "$OUT/bench-fr079" \
+            2>&1 | tail -10
+          tar czf "$OUT/fr079-nof-nog.tgz" outputs/fr079/train-fast/nof.pt outputs/fr079/nog ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;

@@ -3,6 +3,8 @@ shares (the localize stage, the pipeline)."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from irmcl_warp.types import LaserLog
@@ -27,12 +29,14 @@ def moved(odom_step, min_trans: float, min_rot: float) -> bool:
     return abs(trans) > min_trans or abs(rot1 + rot2) > min_rot
 
 
-def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None) -> np.ndarray:
+def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
+           step_times: list | None = None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised. As
     IR-MCL's code, the filter weighs and resamples only after the odometry moved (``m.update_min_*``), and
     keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). A jump in
     ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero. ``watch(j, pf)``, when given,
-    sees the filter after every scan (plots, animations)."""
+    sees the filter after every scan (plots, animations). ``step_times``, when given, gets the wall time (s)
+    of every filter step (each reads its estimate back, so the step is done when it returns)."""
     est = np.empty((len(idx), 3))
     last_odom, t_start, pose = log.odom[idx[0]], log.stamps[idx[0]], None
     reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
@@ -41,7 +45,10 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
             last_odom = log.odom[i]
         u = odometry_step(last_odom, log.odom[i])
         if pose is None or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+            t0 = time.perf_counter()
             pose = pf.step(u, log.ranges_m[i])[0]
+            if step_times is not None:
+                step_times.append(time.perf_counter() - t0)
             last_odom = log.odom[i]
             if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
                 pf.reduce(m.reduce_to)
