@@ -146,7 +146,10 @@ class MCLConfig:
     march_batch: int = 1  # NOG nodes loaded together per beam before compositing (1 = one at a time; same result)
     march_order: str = "beam"  # GPU threads by beam then particle (beam: 1.6x faster on an H100) | particle
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
+    motion: str = "odometry"  # odometry (Thrun / AMCL, noise mcl.alphas) | irmcl (IR-MCL's code, noise mcl.motion_noise)
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
+    motion_noise: List[float] = field(default_factory=lambda: [0.01, 0.0005, 0.0002, 0.0005, 0.0001, 0.0001, 0.001,
+                                                                0.00001, 0.05])  # irmcl: C (variance = C |u|), the authors'
     estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | best_cluster | mean
     estimate_share: float = 0.8
     cluster_cell_m: float = 0.5  # best_cluster: histogram cell (m) ...

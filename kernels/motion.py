@@ -1,11 +1,22 @@
-"""Particle motion: ``MOTION["odometry"]``, the sample_motion_model_odometry of Thrun, Burgard & Fox,
+"""Particle motion. Two models, both fed the odometry step (rot1, trans, rot2) between two scans:
+
+* ``MOTION["odometry"]`` (AMCL's ``diff`` model): the sample_motion_model_odometry of Thrun, Burgard & Fox,
 Probabilistic Robotics, Table 5.6. The odometry step between two scans is (rot1, trans, rot2); each
 particle draws its own noisy version with standard deviations
 
     s_rot1 = sqrt(a1 rot1^2 + a2 trans^2),  s_trans = sqrt(a3 trans^2 + a4 (rot1^2 + rot2^2)),
     s_rot2 = sqrt(a1 rot2^2 + a2 trans^2)
 
-and moves by it. Random numbers: Warp's per-thread generator seeded by (seed, particle). The step and the
+and moves by it.
+
+* ``MOTION["irmcl"]``: the model of IR-MCL's code (its particle-filter library, as Range-MCL's): the step as
+  a rigid motion u = (dx, dy, dtheta) in the robot's frame (dx = trans cos rot1, dy = trans sin rot1,
+  dtheta = rot1 + rot2), each component disturbed by a Gaussian of variance C |u| (a 3 x 3 matrix of
+  coefficients times the absolute step; the authors' C by default), and composed onto the pose. Its
+  heading noise grows with the square root of the turn (variance 0.05 |dtheta|), far wider for the small
+  turns between scans than Thrun's a1 rot^2.
+
+Random numbers: Warp's per-thread generator seeded by (seed, particle). The step and the
 seed are read from device arrays, so that a captured filter step (irmcl_warp/mcl/filter.py) replays with
 each scan's values; ``__call__`` takes host values and writes them there first.
 Numpy twin: irmcl_warp/reference/motion.py.
@@ -79,3 +90,47 @@ class OdometryMotion:
 @MOTION.register("odometry")
 def make_odometry(**settings) -> OdometryMotion:
     return OdometryMotion(**settings)
+
+
+# IR-MCL's code (mcl/srrg_utils/pf_library, MotionModelAndResample): variance of (dx, dy, dtheta) = C |u|, row by row
+IRMCL_NOISE = (0.01, 0.0005, 0.0002, 0.0005, 0.0001, 0.0001, 0.001, 0.00001, 0.05)
+
+
+def make_irmcl_kernel(c):
+    c = [float(v) for v in c]
+
+    @wp.kernel(module="unique")
+    def sample(particles: wp.array(dtype=wp.vec3), step: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32)):
+        i = wp.tid()
+        state = wp.rand_init(seed[0], i)
+        dx = step[1] * wp.cos(step[0])
+        dy = step[1] * wp.sin(step[0])
+        dt = step[0] + step[2]
+        ax = wp.abs(dx)
+        ay = wp.abs(dy)
+        at = wp.abs(dt)
+        nx = dx + wp.sqrt(wp.static(c[0]) * ax + wp.static(c[1]) * ay + wp.static(c[2]) * at) * wp.randn(state)
+        ny = dy + wp.sqrt(wp.static(c[3]) * ax + wp.static(c[4]) * ay + wp.static(c[5]) * at) * wp.randn(state)
+        nt = dt + wp.sqrt(wp.static(c[6]) * ax + wp.static(c[7]) * ay + wp.static(c[8]) * at) * wp.randn(state)
+        p = particles[i]
+        co = wp.cos(p[2])
+        si = wp.sin(p[2])
+        yaw = p[2] + nt
+        particles[i] = wp.vec3(p[0] + co * nx - si * ny, p[1] + si * nx + co * ny, wp.atan2(wp.sin(yaw), wp.cos(yaw)))
+
+    return sample
+
+
+class IrmclMotion(OdometryMotion):
+    """IR-MCL's motion model (see the module's docstring); ``noise``: the 9 coefficients of C, row by row."""
+
+    def __init__(self, noise=IRMCL_NOISE, device: str = "auto"):
+        if len(noise) != 9 or min(noise) < 0:
+            raise ValueError(f"motion irmcl: expected 9 non-negative noise coefficients (C row by row), got {list(noise)}")
+        super().__init__(device=device)
+        self.kernel = make_irmcl_kernel(noise)
+
+
+@MOTION.register("irmcl")
+def make_irmcl(**settings) -> IrmclMotion:
+    return IrmclMotion(**settings)

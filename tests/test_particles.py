@@ -149,3 +149,32 @@ def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     drawn = np.array([index[tuple(p)] for p in dst.numpy()])
     assert (drawn == low_variance_indices(log_w, 0.3)).mean() > 0.99, f"seed {rng.seed}"
     assert np.all(lw.numpy() == 0.0)
+
+
+def test_irmcl_motion_kernel_statistics_match_the_twin(rng):
+    """IR-MCL's code's model: u = (dx, dy, dtheta) in the robot frame, variance C |u|, composed onto the pose."""
+    from irmcl_warp.reference.motion import sample_irmcl
+    from kernels.motion import IRMCL_NOISE
+
+    n = 40000
+    step = (rng.uniform(-0.4, 0.4), rng.uniform(0.05, 0.5), rng.uniform(-0.4, 0.4))
+    start = np.tile(np.array([[1.0, -2.0, rng.uniform(-3, 3)]], np.float32), (n, 1))
+    p = wp.array(start, dtype=wp.vec3, device=DEVICE)
+    MOTION.build("irmcl", noise=IRMCL_NOISE, device=DEVICE)(p, step, seed=int(rng.integers(1 << 30)))
+    ours = p.numpy().astype(np.float64)
+    twin = sample_irmcl(start.astype(np.float64), step, IRMCL_NOISE, rng)
+    centre = lambda a: np.column_stack([a[:, :2], np.angle(np.exp(1j * (a[:, 2] - start[0, 2])))])  # noqa: E731
+    ours, twin = centre(ours), centre(twin)
+    assert np.allclose(ours.mean(0), twin.mean(0), atol=0.01), f"seed {rng.seed}: {ours.mean(0)} vs {twin.mean(0)}"
+    assert np.allclose(np.cov(ours.T), np.cov(twin.T), atol=2e-4, rtol=0.1), f"seed {rng.seed}"
+    # the heading's variance is 0.001 |dx| + 1e-5 |dy| + 0.05 |dtheta|: wide for a small turn
+    u = np.array([step[1] * np.cos(step[0]), step[1] * np.sin(step[0]), step[0] + step[2]])
+    assert ours[:, 2].var() == pytest.approx(np.array(IRMCL_NOISE[6:]) @ np.abs(u), rel=0.05), f"seed {rng.seed}"
+    # noiseless: the step is composed exactly
+    q = wp.array(start[:2], dtype=wp.vec3, device=DEVICE)
+    MOTION.build("irmcl", noise=(0,) * 9, device=DEVICE)(q, (0.5, 1.0, 0.1), seed=1)
+    yaw0 = float(start[0, 2])
+    assert np.allclose(q.numpy()[0], [1.0 + np.cos(yaw0 + 0.5), -2.0 + np.sin(yaw0 + 0.5),
+                                      np.angle(np.exp(1j * (yaw0 + 0.6)))], atol=1e-5)
+    with pytest.raises(ValueError, match="9 non-negative noise coefficients"):
+        MOTION.build("irmcl", noise=(0.1, 0.1), device=DEVICE)

@@ -76,7 +76,10 @@ class ParticleFilter:
         self.beam_index = np.unique(np.linspace(0, n_sensor - 1, min(cfg.num_beams, n_sensor)).round().astype(int))
         self.num_sensor_beams, self.free_space, self.T_base_laser = n_sensor, free_space, tuple(map(float, T_base_laser))
         N, B, d = cfg.num_particles, len(self.beam_index), self.device
-        self.motion = MOTION.build("odometry", alphas=cfg.alphas, device=d)
+        if cfg.motion not in ("odometry", "irmcl"):
+            raise ValueError(f"MCL: mcl.motion={cfg.motion!r}; choose odometry or irmcl")
+        self.motion = (MOTION.build("odometry", alphas=cfg.alphas, device=d) if cfg.motion == "odometry" else
+                       MOTION.build("irmcl", noise=cfg.motion_noise, device=d))
         self.make_weighting = make_weighting
         self.resampler = RESAMPLE.build(cfg.resample, device=d)
         H, W = free_space.shape

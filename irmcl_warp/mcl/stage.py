@@ -65,7 +65,7 @@ def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
 
 
 ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",
-                 "resample": "", "estimate": "", "sigma_m": "sigma"}
+                 "resample": "", "estimate": "", "sigma_m": "sigma", "motion": ""}
 
 
 def cell_tag(m, loc) -> str:

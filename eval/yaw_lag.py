@@ -1,0 +1,88 @@
+"""``python -m eval.yaw_lag outputs/<exp>/localize-<run> [...]``: does a localization run's heading trail the
+truth while the robot turns? (Issue 17: the NOG's yaw error grew with the turn rate.)
+
+For every run folder, from its trajectories (start*.tum) and the ground truth of its log (config.yaml names
+the log; the stream cache serves it): the signed heading error e = yaw_est - yaw_true at every scan after
+``--after-s`` of each start, the true turn rate w (central differences of the ground truth), the RMS of e
+while driving straight (|w| < ``--straight``) and while turning (|w| > ``--turning``), and a lag: the least
+squares fit e = -lag * w (a heading that follows the truth ``lag`` seconds late). Prints a table and writes
+``yaw_lag.json`` into each run folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from irmcl_warp.geometry import wrap_angle
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.types import match_stamps
+
+
+def heading_errors(stamps, est_yaw, gt_yaw, after_s=20.0) -> tuple[np.ndarray, np.ndarray]:
+    """(signed heading error e = est - true, true turn rate w) at the scans ``after_s`` into one trajectory
+    (arrays over the same scans; scans without ground truth dropped)."""
+    t, est, gt = (np.asarray(a, float) for a in (stamps, est_yaw, gt_yaw))
+    known = np.isfinite(gt) & np.isfinite(est)
+    if known.sum() < 3:
+        return np.empty(0), np.empty(0)
+    t, est, gt = t[known], est[known], gt[known]  # (np.unwrap would carry a NaN on to every later scan)
+    w = np.gradient(np.unwrap(gt), t)
+    keep = t - t[0] >= after_s
+    return wrap_angle(est - gt)[keep], w[keep]
+
+
+def summarise(e: np.ndarray, w: np.ndarray, straight: float = 0.1, turning: float = 0.3) -> dict:
+    """RMS heading error (deg) overall, straight and turning, and the lag (s) of the fit e = -lag * w."""
+    rms = lambda m: float(np.degrees(np.sqrt(np.mean(e[m] ** 2)))) if m.any() else None  # noqa: E731
+    return {"scans": int(len(e)), "rms_deg": rms(np.ones_like(e, bool)), "straight_rms_deg": rms(np.abs(w) < straight),
+            "turning_rms_deg": rms(np.abs(w) > turning),
+            "lag_s": float(-np.sum(e * w) / np.sum(w * w)) if np.sum(w * w) > 0 else None}
+
+
+def analyse(run: Path, after_s: float, straight: float, turning: float) -> dict:
+    cfg = OmegaConf.load(run / "config.yaml")
+    log = load_stream(cfg)
+    if log.ground_truth is None:
+        raise ValueError(f"{run}: its log ({log.source}) has no ground truth")
+    es, ws = [], []
+    for tum in sorted(run.glob("start*.tum")):
+        rows = np.loadtxt(tum, ndmin=2)
+        k = match_stamps(log.stamps, rows[:, 0], 1e-5)
+        if (k < 0).any():
+            raise ValueError(f"{tum}: {int((k < 0).sum())} stamps match no scan of {log.source}")
+        yaw = 2 * np.arctan2(rows[:, 6], rows[:, 7])  # TUM quaternion (qz, qw) of a planar pose
+        e, w = heading_errors(rows[:, 0], yaw, log.ground_truth[k, 2], after_s)
+        es.append(e)
+        ws.append(w)
+    if not es:
+        raise FileNotFoundError(f"{run}: no start*.tum trajectories")
+    return {"run": run.name, "starts": len(es), **summarise(np.concatenate(es), np.concatenate(ws), straight, turning),
+            "after_s": after_s, "straight_rad_s": straight, "turning_rad_s": turning}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m eval.yaw_lag", description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=Path, help="localize run folders (outputs/<exp>/localize-...)")
+    ap.add_argument("--after-s", type=float, default=20.0, help="skip this much of each start (IR-MCL scores after 20 s)")
+    ap.add_argument("--straight", type=float, default=0.1, help="|turn rate| below this (rad/s) counts as straight")
+    ap.add_argument("--turning", type=float, default=0.3, help="|turn rate| above this (rad/s) counts as turning")
+    a = ap.parse_args(argv)
+    rows = []
+    for run in a.runs:
+        r = analyse(run, a.after_s, a.straight, a.turning)
+        write_json(run / "yaw_lag.json", r)
+        rows.append(r)
+    print("| run | starts | scans | yaw RMS (deg) | straight | turning | fitted lag (s) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['run']} | {r['starts']} | {r['scans']} | {r['rms_deg']:.2f} | {r['straight_rms_deg']:.2f} | "
+              f"{r['turning_rms_deg']:.2f} | {r['lag_s']:.3f} |")
+
+
+if __name__ == "__main__":
+    main()
