@@ -87,9 +87,12 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
         n = _loc(loc, ds, "localize-nog_raymarch-global-100k-5cm")
         lf = _loc(loc, ds, "localize-likelihood_field-global-100k-5cm")
         rows.append(("IR-MCL", f"global localization on {ds} with 100k particles on the NOG, more accurate than AMCL's "
-                     "likelihood field", "converges; lower error than the grid baselines (Sec. IV)",
-                     (f"{n['successes']}/{n['starts']} starts, {n['location_rmse_cm_mean']:.1f} cm; likelihood field "
-                      f"{lf['successes']}/{lf['starts']}, {lf['location_rmse_cm_mean']:.1f} cm") if n and lf else "not run",
+                     "likelihood field", "measured on the authors' IPBLab sequences (not in our data): 6.62 cm / 1.11 deg "
+                     "against AMCL 11.11 cm / 4.15 deg; on fr079, intel and MIT CSAIL the paper reports the observation "
+                     "model only (Table I)",
+                     (f"{n['successes']}/{n['starts']} starts, {n['location_rmse_cm_mean']:.1f} cm / "
+                      f"{n['yaw_rmse_deg_mean']:.2f} deg; likelihood field {lf['successes']}/{lf['starts']}, "
+                      f"{lf['location_rmse_cm_mean']:.1f} cm / {lf['yaw_rmse_deg_mean']:.2f} deg") if n and lf else "not run",
                      f"python -m irmcl_warp.localize +exp={ds} train=<preset> mcl.weighting=nog_raymarch,likelihood_field -m"))
     b = _bench("mcl-cuda-h100.json")
     from eval.bench_mcl import DEFAULT_VARIANT

@@ -7,6 +7,13 @@ the log; the stream cache serves it): the signed heading error e = yaw_est - yaw
 while driving straight (|w| < ``--straight``) and while turning (|w| > ``--turning``), and a lag: the least
 squares fit e = -lag * w (a heading that follows the truth ``lag`` seconds late). Prints a table and writes
 ``yaw_lag.json`` into each run folder.
+
+``--profile``: the run's observation model itself, free of the filter. At every ``--every``-th scan with
+ground truth, particles at the true pose with the heading turned by -5..5 deg are weighed as the filter
+weighs them (its beams, its near/far masks). Per run: the median heading at which the log-likelihood
+peaks (a bias of the map or the model), and the heading spread the model alone implies, from a quadratic
+fit of the mean log-likelihood within +-2 deg (sigma = sqrt(-1 / 2a), per scan). Written to
+``yaw_profile.json``.
 """
 
 from __future__ import annotations
@@ -65,13 +72,67 @@ def analyse(run: Path, after_s: float, straight: float, turning: float) -> dict:
             "after_s": after_s, "straight_rad_s": straight, "turning_rad_s": turning}
 
 
+def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 41, overrides=()) -> dict:
+    """The observation model's log-likelihood against a heading error at the true poses (see the docstring)."""
+    import warp as wp
+
+    from irmcl_warp.mcl.stage import build_maps
+    from irmcl_warp.services.data import far_bound_m
+    from irmcl_warp.services.filters import build_filter
+
+    cfg = OmegaConf.merge(OmegaConf.load(run / "config.yaml"), OmegaConf.from_dotlist(list(overrides)))
+    device = "cpu"
+    log = load_stream(cfg)
+    view, maps, _ = build_maps(cfg, device)
+    far = far_bound_m(cfg)
+    m = OmegaConf.merge(cfg.mcl, {"num_particles": steps, "step_graph": "off"})
+    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
+    offsets = np.radians(np.linspace(-max_deg, max_deg, steps))
+    scans = np.flatnonzero(np.all(np.isfinite(log.ground_truth), axis=1))[::every]
+    curves, peaks = [], []
+    for k in scans:
+        pose = log.ground_truth[k]
+        poses = np.column_stack([np.full(steps, pose[0]), np.full(steps, pose[1]), wrap_angle(pose[2] + offsets)])
+        pf.particles.assign(wp.array(poses.astype(np.float32), dtype=wp.vec3, device=device))
+        chosen = log.ranges_m[k][pf.beam_index]
+        chosen = np.where((chosen > m.near_m) & (chosen < far), chosen, np.nan).astype(np.float32)
+        pf.measured.assign(chosen)
+        pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik)
+        ll = pf.log_lik.numpy().astype(np.float64)
+        curves.append(ll - ll.max())
+        peaks.append(np.degrees(offsets[np.argmax(ll)]))
+    mean = np.mean(curves, axis=0)
+    near = np.abs(np.degrees(offsets)) <= 2.0
+    a = np.polyfit(offsets[near], mean[near], 2)[0]
+    return {"run": run.name + "".join(f" {o}" for o in overrides), "weighting": cfg.mcl.weighting,
+            "scans": int(len(scans)),
+            "peak_deg_median": float(np.median(peaks)), "peak_deg_iqr": [float(np.percentile(peaks, 25)),
+                                                                        float(np.percentile(peaks, 75))],
+            "sigma_deg_per_scan": float(np.degrees(np.sqrt(-1.0 / (2 * a)))) if a < 0 else None,
+            "offsets_deg": np.degrees(offsets).tolist(), "mean_log_likelihood": mean.tolist()}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m eval.yaw_lag", description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path, help="localize run folders (outputs/<exp>/localize-...)")
     ap.add_argument("--after-s", type=float, default=20.0, help="skip this much of each start (IR-MCL scores after 20 s)")
     ap.add_argument("--straight", type=float, default=0.1, help="|turn rate| below this (rad/s) counts as straight")
     ap.add_argument("--turning", type=float, default=0.3, help="|turn rate| above this (rad/s) counts as turning")
+    ap.add_argument("--profile", action="store_true", help="the observation model's heading profile at the true poses")
+    ap.add_argument("--every", type=int, default=10, help="--profile: every n-th scan with ground truth")
+    ap.add_argument("--set", action="append", default=[], help="--profile: a setting over the run's, e.g. mcl.sigma_m=0.25")
     a = ap.parse_args(argv)
+    if a.profile:
+        print("| run | weighting | scans | peak heading (deg): median [IQR] | heading sigma per scan (deg) |")
+        print("|---|---|---|---|---|")
+        for run in a.runs:
+            r = yaw_profile(run, a.every, overrides=a.set)
+            if not a.set:
+                write_json(run / "yaw_profile.json", r)
+            sig = f"{r['sigma_deg_per_scan']:.2f}" if r["sigma_deg_per_scan"] else "flat"
+            print(f"| {r['run']} | {r['weighting']} | {r['scans']} | {r['peak_deg_median']:+.2f} "
+                  f"[{r['peak_deg_iqr'][0]:+.2f}, {r['peak_deg_iqr'][1]:+.2f}] | {sig} |", flush=True)
+        return
     rows = []
     for run in a.runs:
         r = analyse(run, a.after_s, a.straight, a.turning)
