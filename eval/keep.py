@@ -47,6 +47,8 @@ def migrate(config: dict, metrics: dict, stage: str) -> tuple[dict, dict]:
         c["pipeline"] = c.pop("localize")
     if "mcl" in c:
         c["mcl"].pop("far_m", None)  # overwritten from data's far bound by every stage
+        # runs from before `motion` existed moved their particles by Thrun's odometry model
+        c["mcl"].setdefault("motion", "odometry")
         proto = {k: c["mcl"].pop(k) for k in PROTOCOL if k in c["mcl"]}
         if proto:
             c["localize"] = {**c.get("localize", {}), **proto}
