@@ -13,7 +13,7 @@ ground truth, particles at the true pose with the heading turned by -5..5 deg ar
 weighs them (its beams, its near/far masks). Per run: the median heading at which the log-likelihood
 peaks (a bias of the map or the model), and the heading spread the model alone implies, from a quadratic
 fit of the mean log-likelihood within +-2 deg (sigma = sqrt(-1 / 2a), per scan). Written to
-``yaw_profile.json``.
+``yaw_profile.json`` (``yaw_profile-<setting>=<value>.json`` with ``--set``).
 """
 
 from __future__ import annotations
@@ -127,8 +127,7 @@ def main(argv=None) -> None:
         print("|---|---|---|---|---|")
         for run in a.runs:
             r = yaw_profile(run, a.every, overrides=a.set)
-            if not a.set:
-                write_json(run / "yaw_profile.json", r)
+            write_json(run / ("yaw_profile" + "".join(f"-{o}" for o in a.set) + ".json"), r)
             sig = f"{r['sigma_deg_per_scan']:.2f}" if r["sigma_deg_per_scan"] else "flat"
             print(f"| {r['run']} | {r['weighting']} | {r['scans']} | {r['peak_deg_median']:+.2f} "
                   f"[{r['peak_deg_iqr'][0]:+.2f}, {r['peak_deg_iqr'][1]:+.2f}] | {sig} |", flush=True)

@@ -169,3 +169,11 @@ def test_readme_prose_agrees_with_the_kept_results():
     assert readme_facts(write_facts(edited, values))[name] == values[name]
     with pytest.raises(SystemExit, match="no_such_fact"):
         write_facts(text + "<!-- fact:no_such_fact -->1<!-- /fact -->", values)
+
+
+def test_fidelity_document_agrees_with_the_kept_results():
+    """docs/fidelity.md is what eval.fidelity makes from results/ now (rerun --write after keeping runs)."""
+    from eval.fidelity import REPO as ROOT
+    from eval.fidelity import document
+
+    assert (ROOT / "docs" / "fidelity.md").read_text() == document(), "run python -m eval.fidelity --write"
