@@ -8,6 +8,8 @@
 #   tracking the same with 10k particles from a noisy initial pose
 #   real     issue 18: a real fr079 global run (100k particles kept, train=fast) beside the micro-benchmark
 #            on its own NOG, the same filter settings, the step as a graph
+#   motion   issue 17: global localization, 100k particles, train=fast, NOG and likelihood field with Thrun's and
+#            the authors' motion model (mcl.motion=odometry,irmcl), fr079 and intel
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
@@ -36,6 +38,14 @@ for part in "$@"; do
             --variants warp+et warp+et+beam warp+et+skip+beam --step-graph both --torch-max 0 --out "$OUT/bench-fr079" \
             2>&1 | tail -10
           tar czf "$OUT/fr079-nof-nog.tgz" outputs/fr079/train-fast/nof.pt outputs/fr079/nog ;;
+    motion) for exp in fr079 intel; do
+              [ -f "outputs/$exp/train-fast/nof.pt" ] || python -m irmcl_warp.train +exp="$exp" train=fast 2>&1 | grep -E "best|Error"
+              python -m irmcl_warp.localize -m +exp="$exp" train=fast localize.mode=global mcl.num_particles=100000 \
+                mcl.weighting=nog_raymarch,likelihood_field mcl.motion=odometry,irmcl 2>&1 | grep -E "success|Error"
+            done
+            find outputs -path "*localize-*-global-100k-*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
+              > "$OUT/motion-files.txt"
+            tar czf "$OUT/motion-results.tgz" -T "$OUT/motion-files.txt" outputs/intel/train-fast/nof.pt ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;
