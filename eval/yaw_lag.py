@@ -2,7 +2,7 @@
 truth while the robot turns? (Issue 17: the NOG's yaw error grew with the turn rate.)
 
 For every run folder, from its trajectories (start*.tum) and the ground truth of its log (config.yaml names
-the log; the stream cache serves it): the signed heading error e = yaw_est - yaw_true at every scan after
+the log; the stream cache serves it; starts its metrics.json marks unsuccessful are left out): the signed heading error e = yaw_est - yaw_true at every scan after
 ``--after-s`` of each start, the true turn rate w (central differences of the ground truth), the RMS of e
 while driving straight (|w| < ``--straight``) and while turning (|w| > ``--turning``), and a lag: the least
 squares fit e = -lag * w (a heading that follows the truth ``lag`` seconds late). Prints a table and writes
@@ -19,6 +19,7 @@ fit of the mean log-likelihood within +-2 deg (sigma = sqrt(-1 / 2a), per scan).
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
@@ -57,7 +58,11 @@ def analyse(run: Path, after_s: float, straight: float, turning: float) -> dict:
     if log.ground_truth is None:
         raise ValueError(f"{run}: its log ({log.source}) has no ground truth")
     es, ws = [], []
-    for tum in sorted(run.glob("start*.tum")):
+    metrics = run / "metrics.json"  # a start that never converged has no heading to lag: left out, as from its RMSE
+    ok = [r["success"] for r in json.loads(metrics.read_text())["runs"]] if metrics.is_file() else None
+    for tum in sorted(run.glob("start*.tum"), key=lambda p: int(p.stem.removeprefix("start"))):
+        if ok is not None and not ok[int(tum.stem.removeprefix("start"))]:
+            continue
         rows = np.loadtxt(tum, ndmin=2)
         k = match_stamps(log.stamps, rows[:, 0], 1e-5)
         if (k < 0).any():

@@ -18,7 +18,10 @@ def test_every_registry_entry_has_a_reference_twin():
     assert SIM.names() == ["camera", "rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite"]
     assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch"]
-    assert MOTION.names() == ["odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
+    assert MOTION.names() == ["irmcl", "odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
+    from irmcl_warp.reference import motion
+
+    assert callable(motion.sample_irmcl) and callable(motion.sample_odometry)  # one twin per motion model
     assert ESTIMATE.names() == ["best_cluster", "top_share"]
     assert SLAM.names() == ["integrate", "motion", "score"]
     for twin in ("raycast", "mapping", "sim", "camera", "render", "weighting", "motion", "resample", "estimate", "slam"):
