@@ -101,18 +101,24 @@ def test_odometry_step_treats_reversing_as_negative_translation():
     assert odometry_step((0.0, 0.0, 0.0), (0.005, 0.0, 0.2)) == pytest.approx((0.0, 0.005, 0.2))  # a turn in place
 
 
+def sim_tracking_run(duration_s: float, starts: int, run_s: float, particles: int):
+    """The localize stage on the simulator (likelihood field, pose tracking, 10 cm map) in the current folder."""
+    from irmcl_warp.mcl.stage import run_localize
+
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", f"sim.duration_s={duration_s}",
+                                           "mcl.weighting=likelihood_field", "localize.mode=tracking",
+                                           f"localize.num_starts={starts}", f"localize.run_s={run_s}",
+                                           f"mcl.num_particles={particles}", "mcl.map_resolution_m=0.1"])
+    return run_localize(cfg)
+
+
 def test_localize_stage_on_the_simulator_writes_trajectories_and_metrics(tmp_path, monkeypatch):
     import json
 
-    from irmcl_warp.mcl.stage import run_localize
-
     monkeypatch.chdir(tmp_path)
-    register()
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", "sim.duration_s=60",
-                                           "mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.num_starts=2",
-                                           "localize.run_s=15", "mcl.num_particles=500", "mcl.map_resolution_m=0.1"])
-    out = run_localize(cfg)
+    out = sim_tracking_run(duration_s=60, starts=2, run_s=15, particles=500)
     result = json.loads((out / "metrics.json").read_text())
     assert result["summary"]["starts"] == 2 and result["summary"]["success_rate"] == 1.0
     assert all(r["location_rmse_cm"] < 25 for r in result["runs"])

@@ -28,21 +28,11 @@ def test_a_heading_that_trails_the_truth_gives_its_lag(rng):
 def test_yaw_profile_of_the_likelihood_field_peaks_at_the_truth_and_narrows_with_beams(tmp_path, monkeypatch):
     """--profile on a simulator run: unbiased, and the likelihood field (a sum over beams) gets narrower in
     heading with more beams."""
-    from hydra import compose, initialize_config_dir
-
     from eval.yaw_lag import yaw_profile
-    from irmcl_warp.config import register
-    from irmcl_warp.mcl.stage import run_localize
-    from tests.devices import DEVICE
-    from tests.test_mcl import CONF
+    from tests.test_mcl import sim_tracking_run
 
     monkeypatch.chdir(tmp_path)
-    register()
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", "sim.duration_s=30",
-                                           "mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.num_starts=1",
-                                           "localize.run_s=10", "mcl.num_particles=200", "mcl.map_resolution_m=0.1"])
-    run = run_localize(cfg)
+    run = sim_tracking_run(duration_s=30, starts=1, run_s=10, particles=200)
     wide = yaw_profile(run, every=5, overrides=["mcl.num_beams=8"])
     narrow = yaw_profile(run, every=5, overrides=["mcl.num_beams=64"])
     assert abs(narrow["peak_deg_median"]) <= 0.5 and abs(wide["peak_deg_median"]) <= 0.75
