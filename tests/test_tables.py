@@ -177,3 +177,17 @@ def test_fidelity_document_agrees_with_the_kept_results():
     from eval.fidelity import document
 
     assert (ROOT / "docs" / "fidelity.md").read_text() == document(), "run python -m eval.fidelity --write"
+
+
+def test_verdicts_follow_the_figures(rng):
+    from eval.claims import _against_released, _fails_verdict, _slam_verdict
+
+    ok, bad = list(rng.uniform(0.04, 0.07, 10)), list(rng.uniform(0.2, 0.5, 10))
+    assert _slam_verdict(ok[:9] + bad[:1], 0.07) == "reproduced"
+    assert _slam_verdict(ok[:9] + bad[:1], 0.03).startswith("partly")  # converged, but far above the paper's error
+    assert _slam_verdict(ok[:6] + bad[:4]) == "partly: 6/10 seeds converge"
+    assert _slam_verdict(ok[:2] + bad[:8]).startswith("not reproduced: 2/10")
+    assert _slam_verdict([]) == "not run"
+    assert _against_released(ok[:3] + bad[:7], ok[:1] + bad[:9]).startswith("reproduced")
+    assert _against_released(ok[:1] + bad[:9], ok[:3] + bad[:7]).startswith("not reproduced")
+    assert _fails_verdict(bad) == "reproduced" and _fails_verdict(ok).startswith("partly")
