@@ -35,12 +35,13 @@ def heading_errors(stamps, est_yaw, gt_yaw, after_s=20.0) -> tuple[np.ndarray, n
     """(signed heading error e = est - true, true turn rate w) at the scans ``after_s`` into one trajectory
     (arrays over the same scans; scans without ground truth dropped)."""
     t, est, gt = (np.asarray(a, float) for a in (stamps, est_yaw, gt_yaw))
+    t_start = t[0]  # the trajectory's start, whether or not its first scan has ground truth
     known = np.isfinite(gt) & np.isfinite(est)
     if known.sum() < 3:
         return np.empty(0), np.empty(0)
     t, est, gt = t[known], est[known], gt[known]  # (np.unwrap would carry a NaN on to every later scan)
     w = np.gradient(np.unwrap(gt), t)
-    keep = t - t[0] >= after_s
+    keep = t - t_start >= after_s
     return wrap_angle(est - gt)[keep], w[keep]
 
 

@@ -36,6 +36,9 @@ def test_never_converging_and_diverging_filters():
     late = gt.copy()
     late[t < 70, 0] += 4.0  # converges only after 70 s: no success
     assert localization_metrics(t, late, gt)["success"] is False
+    flipped = gt + [0.05, 0.0, np.pi]  # at the right place facing the other way (seen on intel): no success
+    m = localization_metrics(t, flipped, gt)
+    assert m["converged"] and m["location_rmse_cm"] < 10 and m["yaw_rmse_deg"] > 170 and m["success"] is False
     with pytest.raises(ValueError, match="fewer than two"):
         localization_metrics(t[:1], gt[:1], gt[:1])
 

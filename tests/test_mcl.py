@@ -296,3 +296,23 @@ def test_step_graph_refuses_what_it_cannot_capture():
         assert not pf.use_graph  # auto falls back to launching one by one
     with pytest.raises(ValueError, match="choose auto, on or off"):
         _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="yes"), log)
+
+
+def test_rescore_recomputes_a_runs_metrics_from_its_trajectories(tmp_path, monkeypatch):
+    import json
+
+    from eval.rescore import rescore
+
+    monkeypatch.chdir(tmp_path)
+    out = sim_tracking_run(duration_s=30, starts=1, run_s=10, particles=200)
+    original = json.loads((out / "metrics.json").read_text())
+    spoiled = json.loads(json.dumps(original))
+    spoiled["runs"][0]["success"], spoiled["runs"][0]["location_rmse_cm"] = False, 99.0
+    spoiled["summary"]["successes"] = 0
+    (out / "metrics.json").write_text(json.dumps(spoiled))
+    changed = rescore(out)
+    again = json.loads((out / "metrics.json").read_text())
+    assert "successes" in changed and again["summary"]["successes"] == original["summary"]["successes"] == 1
+    # from the TUM files (positions to 0.1 mm): the same figures to rounding
+    assert again["runs"][0]["location_rmse_cm"] == pytest.approx(original["runs"][0]["location_rmse_cm"], abs=0.01)
+    assert again["runs"][0]["ms_per_step_median"] == original["runs"][0]["ms_per_step_median"]

@@ -10,6 +10,8 @@
 #            on its own NOG, the same filter settings, the step as a graph
 #   motion   issue 17: global localization, 100k particles, train=fast, NOG and likelihood field with Thrun's and
 #            the authors' motion model (mcl.motion=odometry,irmcl), fr079 and intel
+#   width    issue 17: the NOG with the authors' motion model and sigma 0.25 m (the likelihood field's heading width
+#            per scan, docs/fidelity.md), global, 100k, train=fast, fr079 and intel
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
@@ -46,6 +48,13 @@ for part in "$@"; do
             find outputs -path "*localize-*-global-100k-*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
               > "$OUT/motion-files.txt"
             tar czf "$OUT/motion-results.tgz" -T "$OUT/motion-files.txt" outputs/intel/train-fast/nof.pt ;;
+    width) for exp in fr079 intel; do
+             python -m irmcl_warp.localize +exp="$exp" train=fast localize.mode=global mcl.num_particles=100000 \
+               mcl.weighting=nog_raymarch mcl.motion=irmcl mcl.sigma_m=0.25 2>&1 | grep -E "success|Error"
+           done
+           find outputs -path "*localize-*-global-100k-*sigma*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
+             > "$OUT/width-files.txt"
+           tar czf "$OUT/width-results.tgz" -T "$OUT/width-files.txt" ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;

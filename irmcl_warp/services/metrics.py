@@ -103,12 +103,14 @@ def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float
 
 def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float = 20.0, success_within_s: float = 60.0,
                          success_rmse_m: float = 0.30, converged_m: float = 0.5, diverged_m: float = 1.0,
+                         success_yaw_deg: float = 30.0,
                          pos_thresholds_m=(0.05, 0.10, 0.20), yaw_thresholds_deg=(0.5, 1.0, 2.0)) -> dict:
     """IR-MCL's protocol (Kuang et al. 2023, Sec. IV-C) plus success, time to converge and divergence.
 
     * converged: the first time from which the position error stays below ``converged_m`` for 5 s
-      (``time_to_converge_s``, from the first stamp); success = converged within ``success_within_s`` and
-      location RMSE afterwards < ``success_rmse_m``;
+      (``time_to_converge_s``, from the first stamp); success = converged within ``success_within_s``,
+      location RMSE afterwards < ``success_rmse_m`` and heading RMSE < ``success_yaw_deg`` (a filter near the
+      true place facing the other way, as in a symmetric corridor, has not localized the robot);
     * location/yaw RMSE and % of poses within the thresholds over poses after max(converged,
       ``converge_after_s``) — IR-MCL evaluates after 20 s;
     * divergences: how often a converged filter's error rose above ``diverged_m``.
@@ -140,7 +142,8 @@ def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float
     for th in yaw_thresholds_deg:
         out[f"within_{th:g}deg_pct"] = float(100 * (e_yaw[after] < th).mean())
     rmse_since = float(np.sqrt(np.mean(e_xy[t >= t_conv] ** 2)))
-    out["success"] = bool(t_conv <= success_within_s and rmse_since < success_rmse_m)
+    out["success"] = bool(t_conv <= success_within_s and rmse_since < success_rmse_m
+                          and out["yaw_rmse_deg"] < success_yaw_deg)
     tracking = t >= t_conv
     high = (e_xy > diverged_m) & tracking
     out["divergences"] = int(np.sum(high[1:] & ~high[:-1]) + (high[0] if len(high) else 0))

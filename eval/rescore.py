@@ -1,0 +1,56 @@
+"""``python -m eval.rescore RUN_DIR...``: score finished localize runs again with today's metrics.
+
+The trajectories (start<k>.tum) are kept; the metrics are not fixed. When the scoring rule changes (for example,
+success now also needs the heading), this recomputes each start's metrics and the run's summary from its
+trajectories and its log's ground truth. It keeps the timings and the settings, rewrites metrics.json
+atomically, and prints what changed. Kidnapped runs are refused: their clock is rebuilt across the jump.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from irmcl_warp.mcl.stage import summarise
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.outputs import write_json
+from irmcl_warp.types import match_stamps
+
+
+def rescore(run: Path) -> dict:
+    doc = json.loads((run / "metrics.json").read_text())
+    if doc["settings"].get("kidnap_at_s", 0) > 0:
+        raise ValueError(f"{run}: a kidnapped run's clock is rebuilt across the jump; run it again instead")
+    log = load_stream(OmegaConf.load(run / "config.yaml"))
+    runs = []
+    for k, old in enumerate(doc["runs"]):
+        rows = np.loadtxt(run / f"start{k}.tum", ndmin=2)
+        idx = match_stamps(log.stamps, rows[:, 0], 1e-5)
+        if (idx < 0).any():
+            raise ValueError(f"{run / f'start{k}.tum'}: {int((idx < 0).sum())} stamps match no scan of {log.source}")
+        est = np.column_stack([rows[:, 1], rows[:, 2], 2 * np.arctan2(rows[:, 6], rows[:, 7])])
+        new = localization_metrics(rows[:, 0], est, log.ground_truth[idx])
+        runs.append({**{key: old[key] for key in ("start_s", "ms_per_scan", "steps", "ms_per_step_median")
+                        if key in old}, **new})
+    summary = {**doc["summary"], **summarise(runs, doc["settings"], doc["summary"].get("device", "?"))}
+    changed = {key: (doc["summary"].get(key), value) for key, value in summary.items()
+               if doc["summary"].get(key) != value}
+    write_json(run / "metrics.json", {**doc, "summary": summary, "runs": runs})
+    return changed
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m eval.rescore", description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=Path, help="localize run folders with start*.tum and metrics.json")
+    for run in ap.parse_args(argv).runs:
+        changed = rescore(run)
+        print(f"{run}: " + (", ".join(f"{k} {a} -> {b}" for k, (a, b) in changed.items()) or "unchanged"))
+
+
+if __name__ == "__main__":
+    main()
