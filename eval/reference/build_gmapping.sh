@@ -7,7 +7,8 @@
 # SRC: a clone of https://github.com/ros-perception/openslam_gmapping (a work tree or a bare repository);
 # default $OPENSLAM_GMAPPING_SRC. The commit used for the figures is pinned below; the build goes to
 # outputs/reference/gmapping/ (git-ignored): its sources, then the binaries gmapping_replay (a log through
-# GridSlamProcessor) and gmapping_motion (samples of its motion model).
+# GridSlamProcessor), gmapping_motion (samples of its motion model) and gmapping_matcher (its scan matcher's
+# score, likelihood and hill climbing on given scans and maps).
 set -euo pipefail
 PIN=5105476  # "Merge pull request #44" (2022), the newest commit of the ROS package
 SRC=${1:-${OPENSLAM_GMAPPING_SRC:?give the openslam_gmapping clone as an argument or in OPENSLAM_GMAPPING_SRC}}
@@ -33,4 +34,5 @@ SOURCES="utils/stat.cpp utils/movement.cpp sensor/sensor_base/sensor.cpp sensor/
 g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude $SOURCES "$HERE/gmapping_replay.cpp" -o "$OUT/gmapping_replay"
 g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude utils/stat.cpp utils/movement.cpp gridfastslam/motionmodel.cpp \
   "$HERE/gmapping_motion.cpp" -o "$OUT/gmapping_motion"
-echo "built $OUT/gmapping_replay and gmapping_motion from openslam_gmapping $(cat "$OUT/COMMIT")"
+g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude $SOURCES "$HERE/gmapping_matcher.cpp" -o "$OUT/gmapping_matcher"
+echo "built $OUT/gmapping_replay, gmapping_motion and gmapping_matcher from openslam_gmapping $(cat "$OUT/COMMIT")"
