@@ -88,17 +88,6 @@ def make_likelihood_kernel(sigma: float):
     return likelihood
 
 
-@wp.func
-def node_value(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, o: wp.vec2, d: wp.vec2,
-               z: float) -> float:
-    """The node nearest to the point at depth z on the beam (0 outside the grid)."""
-    ix = int(wp.round((o[0] + z * d[0] - origin[0]) / res))
-    iy = int(wp.round((o[1] + z * d[1] - origin[1]) / res))
-    if ix >= 0 and iy >= 0 and ix < grid.shape[1] and iy < grid.shape[0]:
-        return grid[iy, ix]
-    return 0.0
-
-
 def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, empty_below: float,
                        eps: float = 1e-10, batch: int = 1, beam_major: bool = False):
     """Two ways to the same march, for speed:
@@ -148,7 +137,8 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
                 for j in range(wp.static(batch)):
                     occ[j] = 0.0
                     if k + j <= k_end:
-                        occ[j] = node_value(grid, origin, res, o, d, wp.static(near) + wp.static(step) * float(k + j))
+                        zj = wp.static(near) + wp.static(step) * float(k + j)
+                        occ[j] = nearest_node(grid, origin, res, o[0] + zj * d[0], o[1] + zj * d[1])
                 for j in range(wp.static(batch)):
                     if k + j <= k_end and T >= wp.static(t_min):
                         z = wp.static(near) + wp.static(step) * float(k + j)
@@ -162,16 +152,12 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
                 if T < wp.static(t_min):
                     break
                 z = wp.static(near) + wp.static(step) * float(k)
-                ix = int(wp.round((o[0] + z * d[0] - origin[0]) / res))
-                iy = int(wp.round((o[1] + z * d[1] - origin[1]) / res))
-                occ1 = float(0.0)
+                occ1 = nearest_node(grid, origin, res, o[0] + z * d[0], o[1] + z * d[1])
                 jump = int(1)
-                if ix >= 0 and iy >= 0 and ix < grid.shape[1] and iy < grid.shape[0]:
-                    occ1 = grid[iy, ix]
-                    if wp.static(skip):
-                        if occ1 < 0.0:  # an empty node holds -(the distance it lets the ray jump)
-                            jump = wp.max(1, int(-occ1 * wp.static(1.0 / step)))
-                            occ1 = 0.0
+                if wp.static(skip):
+                    if occ1 < 0.0:  # an empty node holds -(the distance it lets the ray jump); outside reads 0
+                        jump = wp.max(1, int(-occ1 * wp.static(1.0 / step)))
+                        occ1 = 0.0
                 w1 = occ1 * T
                 A += w1 * z
                 W += w1
