@@ -13,7 +13,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from eval.keep import read_run, stage_of
+from eval.keep import migrate, read_run, stage_of
 from irmcl_warp.mcl.folders import resolution_tag
 from irmcl_warp.mcl.stage import cell_tag, run_tag as localize_run_tag
 from irmcl_warp.nof.folders import run_name as nof_run_name
@@ -49,8 +49,9 @@ def collect(group: str, stages: tuple[str, ...], results: Path = RESULTS, output
     for path in sorted((Path(results) / group).glob("*.json")):
         doc = _load_kept(path)
         for folder, r in doc["runs"].items():
-            if stage_of(folder) in stages:
-                runs[(doc["exp"], folder)] = Run(r["metrics"], r["config"], "results")
+            if stage_of(folder) in stages:  # in today's names, settings added since filled (as eval.keep does)
+                config, metrics = migrate(r["config"], r["metrics"], stage_of(folder))
+                runs[(doc["exp"], folder)] = Run(metrics, config, "results")
     for stage in stages if outputs is not None else ():
         for f in sorted(Path(outputs).glob(f"*/{stage}*/metrics.json")):
             if stage_of(f.parent.name) != stage:

@@ -63,6 +63,8 @@ def migrate(config: dict, metrics: dict, stage: str) -> tuple[dict, dict]:
     m = json.loads(json.dumps(metrics))
     if stage == "slam" and isinstance(m.get("settings"), dict):
         m["settings"] = dict(c["slam"])
+    if stage == "localize" and isinstance(m.get("settings"), dict):
+        m["settings"].setdefault("motion", "odometry")  # as the config: the runs before `motion` used Thrun's
     return c, m
 
 

@@ -191,3 +191,19 @@ def test_verdicts_follow_the_figures(rng):
     assert _against_released(ok[:3] + bad[:7], ok[:1] + bad[:9]).startswith("reproduced")
     assert _against_released(ok[:1] + bad[:9], ok[:3] + bad[:7]).startswith("not reproduced")
     assert _fails_verdict(bad) == "reproduced" and _fails_verdict(ok).startswith("partly")
+
+
+def test_kept_runs_read_in_todays_names():
+    """A localize run kept before mcl.motion existed reads with the model it ran with, in its config and its
+    settings, however often it is migrated (eval.collect migrates every kept run it reads)."""
+    from eval.keep import migrate
+
+    config = {"mcl": {"weighting": "nog_raymarch", "num_particles": 10000}, "localize": {"mode": "tracking"}}
+    metrics = {"settings": {"weighting": "nog_raymarch", "mode": "tracking"}, "summary": {}}
+    c1, m1 = migrate(config, metrics, "localize")
+    assert c1["mcl"]["motion"] == "odometry" and m1["settings"]["motion"] == "odometry"
+    assert "motion" not in config["mcl"] and "motion" not in metrics["settings"]  # the inputs are left alone
+    assert migrate(c1, m1, "localize") == (c1, m1)
+    c2, m2 = migrate({**config, "mcl": {**config["mcl"], "motion": "irmcl"}},
+                     {**metrics, "settings": {**metrics["settings"], "motion": "irmcl"}}, "localize")
+    assert c2["mcl"]["motion"] == m2["settings"]["motion"] == "irmcl"

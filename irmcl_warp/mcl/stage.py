@@ -82,9 +82,8 @@ def run_tag(m, loc) -> str:
     tag += "-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else ""
     defaults = MCLConfig()
     for key, short in ABLATION_TAGS.items():
-        value = m.get(key, getattr(defaults, key))  # (a run kept before the setting existed: its default)
-        if value != getattr(defaults, key):
-            tag += f"-{short}{value:g}" if short else f"-{value}"
+        if m[key] != getattr(defaults, key):
+            tag += f"-{short}{m[key]:g}" if short else f"-{m[key]}"
     return tag
 
 
