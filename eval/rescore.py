@@ -12,9 +12,9 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
 from omegaconf import OmegaConf
 
+from irmcl_warp.io import read_tum
 from irmcl_warp.mcl.stage import summarise
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.metrics import localization_metrics
@@ -22,19 +22,36 @@ from irmcl_warp.services.outputs import write_json
 from irmcl_warp.types import match_stamps
 
 
+def run_trajectories(run: Path):
+    """(log, [(stamps, estimates [N, 3], ground truth [N, 3]) per start, in start order]) of a localize run
+    folder: its start<k>.tum read back (io.read_tum) and matched scan by scan to its log (config.yaml names
+    it; the stream cache serves it)."""
+    log = load_stream(OmegaConf.load(run / "config.yaml"))
+    if log.ground_truth is None:
+        raise ValueError(f"{run}: its log ({log.source}) has no ground truth")
+    tums = sorted(run.glob("start*.tum"), key=lambda p: int(p.stem.removeprefix("start")))
+    if not tums:
+        raise FileNotFoundError(f"{run}: no start*.tum trajectories")
+    out = []
+    for tum in tums:
+        stamps, est = read_tum(tum)
+        idx = match_stamps(log.stamps, stamps, 1e-5)
+        if (idx < 0).any():
+            raise ValueError(f"{tum}: {int((idx < 0).sum())} stamps match no scan of {log.source}")
+        out.append((stamps, est, log.ground_truth[idx]))
+    return log, out
+
+
 def rescore(run: Path) -> dict:
     doc = json.loads((run / "metrics.json").read_text())
     if doc["settings"].get("kidnap_at_s", 0) > 0:
         raise ValueError(f"{run}: a kidnapped run's clock is rebuilt across the jump; run it again instead")
-    log = load_stream(OmegaConf.load(run / "config.yaml"))
+    _, starts = run_trajectories(run)
+    if len(starts) != len(doc["runs"]):
+        raise ValueError(f"{run}: {len(starts)} trajectories for the {len(doc['runs'])} starts its metrics.json lists")
     runs = []
-    for k, old in enumerate(doc["runs"]):
-        rows = np.loadtxt(run / f"start{k}.tum", ndmin=2)
-        idx = match_stamps(log.stamps, rows[:, 0], 1e-5)
-        if (idx < 0).any():
-            raise ValueError(f"{run / f'start{k}.tum'}: {int((idx < 0).sum())} stamps match no scan of {log.source}")
-        est = np.column_stack([rows[:, 1], rows[:, 2], 2 * np.arctan2(rows[:, 6], rows[:, 7])])
-        new = localization_metrics(rows[:, 0], est, log.ground_truth[idx])
+    for old, (stamps, est, gt) in zip(doc["runs"], starts):
+        new = localization_metrics(stamps, est, gt)
         runs.append({**{key: old[key] for key in ("start_s", "ms_per_scan", "steps", "ms_per_step_median")
                         if key in old}, **new})
     summary = {**doc["summary"], **summarise(runs, doc["settings"], doc["summary"].get("device", "?"))}

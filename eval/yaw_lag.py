@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
+from eval.rescore import run_trajectories
 from irmcl_warp.geometry import wrap_angle
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
-from irmcl_warp.types import match_stamps
 
 
 def heading_errors(stamps, est_yaw, gt_yaw, after_s=20.0) -> tuple[np.ndarray, np.ndarray]:
@@ -54,27 +54,14 @@ def summarise(e: np.ndarray, w: np.ndarray, straight: float = 0.1, turning: floa
 
 
 def analyse(run: Path, after_s: float, straight: float, turning: float) -> dict:
-    cfg = OmegaConf.load(run / "config.yaml")
-    log = load_stream(cfg)
-    if log.ground_truth is None:
-        raise ValueError(f"{run}: its log ({log.source}) has no ground truth")
-    es, ws = [], []
+    _, starts = run_trajectories(run)
     metrics = run / "metrics.json"  # a start that never converged has no heading to lag: left out, as from its RMSE
-    ok = [r["success"] for r in json.loads(metrics.read_text())["runs"]] if metrics.is_file() else None
-    for tum in sorted(run.glob("start*.tum"), key=lambda p: int(p.stem.removeprefix("start"))):
-        if ok is not None and not ok[int(tum.stem.removeprefix("start"))]:
-            continue
-        rows = np.loadtxt(tum, ndmin=2)
-        k = match_stamps(log.stamps, rows[:, 0], 1e-5)
-        if (k < 0).any():
-            raise ValueError(f"{tum}: {int((k < 0).sum())} stamps match no scan of {log.source}")
-        yaw = 2 * np.arctan2(rows[:, 6], rows[:, 7])  # TUM quaternion (qz, qw) of a planar pose
-        e, w = heading_errors(rows[:, 0], yaw, log.ground_truth[k, 2], after_s)
-        es.append(e)
-        ws.append(w)
-    if not es:
-        raise FileNotFoundError(f"{run}: no start*.tum trajectories")
-    return {"run": run.name, "starts": len(es), **summarise(np.concatenate(es), np.concatenate(ws), straight, turning),
+    ok = [r["success"] for r in json.loads(metrics.read_text())["runs"]] if metrics.is_file() else [True] * len(starts)
+    pairs = [heading_errors(stamps, est[:, 2], gt[:, 2], after_s) for (stamps, est, gt), good in zip(starts, ok) if good]
+    if not pairs:
+        raise ValueError(f"{run}: no start converged")
+    e, w = (np.concatenate(a) for a in zip(*pairs))
+    return {"run": run.name, "starts": len(pairs), **summarise(e, w, straight, turning),
             "after_s": after_s, "straight_rad_s": straight, "turning_rad_s": turning}
 
 
