@@ -92,14 +92,13 @@ def _globloc(runs, exp, method, key="localized"):
     return None
 
 
-def _real_vs_bench() -> str:
-    """A real fr079 run's median ms per filter step beside the micro-benchmark on its own NOG (same settings)."""
+def _real_vs_bench(variant: str) -> str:
+    """A real fr079 run's median ms per filter step beside the micro-benchmark of ``variant`` (the settings
+    it ran with) on its own NOG."""
     b = _bench("mcl-real-fr079-h100.json")
     if not b:
         return ""
-    from eval.bench_mcl import DEFAULT_VARIANT
-
-    micro = next((r["step_ms"] for r in b["bench"]["rows"] if r.get("variant") == DEFAULT_VARIANT and r.get("graph")), None)
+    micro = next((r["step_ms"] for r in b["bench"]["rows"] if r.get("variant") == variant and r.get("graph")), None)
     real = b["real"]["summary"].get("ms_per_step_median")
     if micro is None or real is None:
         return ""
@@ -147,7 +146,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
                  and r["particles"] == 100000 and r["step_ms"] is not None]
     step = min(rows_100k, key=lambda r: not r.get("graph", False))["step_ms"] if rows_100k else None  # the graph's
     rows.append(("IR-MCL", "100k particles in real time on a GPU", "85 ms GPU rendering of 100k particles (authors' code)",
-                 (f"{step:.2f} ms per full filter step (H100)" if step else "not run") + _real_vs_bench(),
+                 (f"{step:.2f} ms per full filter step (H100)" if step else "not run") + _real_vs_bench(DEFAULT_VARIANT),
                  NOT_RUN if not step else "reproduced" if step < 85.0 else "not reproduced",
                  "python -m eval.bench mcl; bash eval/gpu/mcl.sh real"))
     for ds, pub in (("intel", 0.070), ("fr079", 0.061), ("mit_csail", 0.049)):

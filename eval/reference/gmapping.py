@@ -183,7 +183,8 @@ def matcher_check(log, registered: int = 20, queries: int = 10, usable_m: float 
              " ".join(f"{a:.12f}" for a in angles),
              f"PARAMS {usable_m} {usable_m} {sigma} {kernel} {lstep} {astep} {iterations} {lsigma} 0"]
     lines += [f"R {pose_txt(log.ground_truth[k])} {fed(log.ranges_m[k])}" for k in reg]
-    lines += [f"S {pose_txt(p)} {fed(log.ranges_m[k])}" for k in qry for p in (log.ground_truth[k], perturbed[list(qry).index(k)])]
+    scored = [(k, p) for k, off in zip(qry, perturbed) for p in (log.ground_truth[k], off)]  # true, then perturbed
+    lines += [f"S {pose_txt(p)} {fed(log.ranges_m[k])}" for k, p in scored]
     lines += [f"O {pose_txt(perturbed[j])} {fed(log.ranges_m[k])}" for j, k in enumerate(qry)]
     out = subprocess.run([str(MATCHER)], input="\n".join(lines) + "\n", capture_output=True, text=True, check=True).stdout
     rows = [line.split() for line in out.splitlines()]
@@ -197,7 +198,7 @@ def matcher_check(log, registered: int = 20, queries: int = 10, usable_m: float 
                                 lsigma, free_check=False)
     released_s = [tuple(map(float, r[1:])) for r in rows if r[0] == "S"]
     released_o = [tuple(map(float, r[1:])) for r in rows if r[0] == "O"]
-    ours = [ours_s(p, k) for k in qry for p in (log.ground_truth[k], perturbed[list(qry).index(k)])]
+    ours = [ours_s(p, k) for k, p in scored]
     climbs = []
     for j, k in enumerate(qry):
         evaluate = lambda c, k=k: np.array([[ours_s(p, k)[0] for p in row] for row in c])  # noqa: E731
