@@ -87,9 +87,7 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
         pose = log.ground_truth[k]
         poses = np.column_stack([np.full(steps, pose[0]), np.full(steps, pose[1]), wrap_angle(pose[2] + offsets)])
         pf.particles.assign(wp.array(poses.astype(np.float32), dtype=wp.vec3, device=device))
-        chosen = log.ranges_m[k][pf.beam_index]
-        chosen = np.where((chosen > m.near_m) & (chosen < far), chosen, np.nan).astype(np.float32)
-        pf.measured.assign(chosen)
+        pf.measured.assign(pf.chosen_ranges(log.ranges_m[k]))
         pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik)
         ll = pf.log_lik.numpy().astype(np.float64)
         curves.append(ll - ll.max())

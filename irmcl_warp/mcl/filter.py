@@ -42,7 +42,6 @@ class StepInputs:
     GPU the host buffers are pinned (the copies are asynchronous); on a CPU they are the device buffers."""
 
     def __init__(self, num_beams: int, device: str):
-        self.device = device
         self.values = wp.zeros(4 + num_beams, dtype=wp.float32, device=device)
         self.seeds = wp.zeros(2, dtype=wp.int32, device=device)
         on_gpu = device.startswith("cuda")
@@ -213,6 +212,11 @@ class ParticleFilter:
             self.graphs[key] = capture.graph
         wp.capture_launch(self.graphs[key])
 
+    def chosen_ranges(self, ranges_m: np.ndarray) -> np.ndarray:
+        """The weighted beams' ranges of a whole scan, NaN (not weighted) at or below near and at or beyond far."""
+        chosen = np.asarray(ranges_m, np.float32)[self.beam_index]
+        return np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
+
     def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
         """odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no return).
         Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling)."""
@@ -221,10 +225,9 @@ class ParticleFilter:
             raise ValueError(f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
                              f"for a sensor of {self.num_sensor_beams}")
         self.steps += 1
-        chosen = ranges_m[self.beam_index]
-        chosen = np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
         draw = float(self.rng.uniform())
-        self.inputs.upload(odom_step, draw, chosen, self.cfg.seed * 1_000_003 + self.steps, Resampler.seed_of(draw))
+        self.inputs.upload(odom_step, draw, self.chosen_ranges(ranges_m), self.cfg.seed * 1_000_003 + self.steps,
+                           Resampler.seed_of(draw))
         limit = self.cfg.resample_threshold * self.num_particles
         p_inject = 0.0
         if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
