@@ -67,12 +67,13 @@ def make_kernel(a1: float, a2: float, a3: float, a4: float):
     return sample
 
 
-class OdometryMotion:
-    def __init__(self, alphas=(0.05, 0.005, 0.05, 0.005), device: str = "auto"):
-        if len(alphas) != 4 or min(alphas) < 0:
-            raise ValueError(f"motion: expected 4 non-negative alphas (Thrun a1..a4), got {list(alphas)}")
+class Motion:
+    """One motion kernel (``kernel(particles, step [3], seed [1])``) with the host-side call and the
+    device-side launch every model shares."""
+
+    def __init__(self, kernel, device: str = "auto"):
         self.device = pick_device(device)
-        self.kernel = make_kernel(*map(float, alphas))
+        self.kernel = kernel
         self._step = wp.zeros(3, dtype=wp.float32, device=self.device)
         self._seed = wp.zeros(1, dtype=wp.int32, device=self.device)
 
@@ -85,6 +86,13 @@ class OdometryMotion:
     def launch(self, particles: wp.array, step: wp.array, seed: wp.array) -> None:
         """The same with (rot1, trans, rot2) in ``step`` [3] and the seed in ``seed`` [1], both on the device."""
         wp.launch(self.kernel, particles.shape[0], [particles, step, seed], device=self.device)
+
+
+class OdometryMotion(Motion):
+    def __init__(self, alphas=(0.05, 0.005, 0.05, 0.005), device: str = "auto"):
+        if len(alphas) != 4 or min(alphas) < 0:
+            raise ValueError(f"motion: expected 4 non-negative alphas (Thrun a1..a4), got {list(alphas)}")
+        super().__init__(make_kernel(*map(float, alphas)), device)
 
 
 @MOTION.register("odometry")
@@ -121,14 +129,13 @@ def make_irmcl_kernel(c):
     return sample
 
 
-class IrmclMotion(OdometryMotion):
+class IrmclMotion(Motion):
     """IR-MCL's motion model (see the module's docstring); ``noise``: the 9 coefficients of C, row by row."""
 
     def __init__(self, noise=IRMCL_NOISE, device: str = "auto"):
         if len(noise) != 9 or min(noise) < 0:
             raise ValueError(f"motion irmcl: expected 9 non-negative noise coefficients (C row by row), got {list(noise)}")
-        super().__init__(device=device)
-        self.kernel = make_irmcl_kernel(noise)
+        super().__init__(make_irmcl_kernel(noise), device)
 
 
 @MOTION.register("irmcl")
