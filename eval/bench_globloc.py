@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.services.outputs import write_json
-from irmcl_warp.config import register
+from irmcl_warp.config import compose_config
 from irmcl_warp.geometry import compose as compose_se2
 from irmcl_warp.globloc.database import build_database, describe, keyframe_indices
 from irmcl_warp.globloc.gist import Gist
@@ -40,12 +40,7 @@ def add_parser(sub) -> None:
 
 
 def run_globloc_bench(a) -> dict:
-    from hydra import compose, initialize_config_dir  # lazy: only this bench composes a config
-
-
-    register()
-    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=[f"+exp={a.exp}", f"device={a.device}"])
+    cfg = compose_config([f"+exp={a.exp}", f"device={a.device}"])
     device = pick_device(a.device)
     g, s = cfg.globloc, cfg.sim
     world = world_of(cfg)

@@ -37,7 +37,7 @@ from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.reference.weighting import nog_log_weights_torch
 from kernels import pick_device
-from irmcl_warp.config import register
+from irmcl_warp.config import compose_config
 from irmcl_warp.sim import simulate
 from kernels import SIM
 from kernels import WEIGHTING
@@ -56,12 +56,7 @@ DEFAULT_VARIANT = next((name for name, v in VARIANTS.items()
 
 
 def simulator_nog(resolution_m: float = 0.05, device: str = "cpu") -> NOG:
-    from hydra import compose, initialize_config_dir
-
-
-    register()
-    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=["sim.duration_s=1"])
+    cfg = compose_config(["sim.duration_s=1"])
     _, world = simulate(cfg.sim, device)
     lo = world.segments.reshape(-1, 2).min(0) - 1.0
     hi = world.segments.reshape(-1, 2).max(0) + 1.0

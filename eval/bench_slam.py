@@ -13,20 +13,14 @@ import time
 from pathlib import Path
 
 from irmcl_warp.services.outputs import write_json
-from irmcl_warp.config import register
+from irmcl_warp.config import compose_config
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.slam.stage import start_filter
 from kernels import pick_device
 
 
 def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
-    from hydra import compose, initialize_config_dir
-
-
-    register()
-    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[1] / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=[f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}",
-                                           *overrides])
+    cfg = compose_config([f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}", *overrides])
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
     rbpf = start_filter(cfg, log, device)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import builtins
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import List, Optional
 
 from hydra.core.config_store import ConfigStore
@@ -295,6 +296,18 @@ class Config:
 def register() -> None:
     cs = ConfigStore.instance()
     cs.store(name="config_schema", node=Config)
+
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the experiment configs (the apps' config_path)
+
+
+def compose_config(overrides=(), name: str = "config"):
+    """``conf/<name>`` composed with Hydra ``overrides`` outside a Hydra app (benchmarks, reference checks)."""
+    from hydra import compose, initialize_config_dir
+
+    register()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return compose(name, overrides=list(overrides))
 
 
 class ConfigError(ValueError):

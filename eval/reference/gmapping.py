@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from eval.collect import DERIVED_SETTINGS
+from irmcl_warp.config import compose_config
 from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_bag, read_relations, resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
@@ -39,17 +40,6 @@ from irmcl_warp.types import match_stamps
 
 REPO = Path(__file__).resolve().parents[2]
 BINARY = REPO / "outputs" / "reference" / "gmapping" / "gmapping_replay"
-
-
-def compose_config(exp: str, overrides=()):
-    from hydra import compose as hydra_compose
-    from hydra import initialize_config_dir
-
-    from irmcl_warp.config import register
-
-    register()
-    with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
-        return hydra_compose("config", overrides=[f"+exp={exp}", *overrides])
 
 
 def scan_range_max(cfg) -> float:
@@ -251,7 +241,7 @@ def main(argv=None):
         return 0
     if a.matcher:
         exp = a.exp.removeprefix("+exp=")
-        r = matcher_check(load_stream(compose_config(exp)))
+        r = matcher_check(load_stream(compose_config([f"+exp={exp}"])))
         print("| pose | score: released / ours | log-likelihood: released / ours |")
         print("|---|---|---|")
         for i, c in enumerate(r["scores"]):
@@ -264,7 +254,7 @@ def main(argv=None):
     if not BINARY.is_file():
         raise FileNotFoundError(f"{BINARY}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
     exp = a.exp.removeprefix("+exp=")
-    cfg = compose_config(exp)
+    cfg = compose_config([f"+exp={exp}"])
     log = load_stream(cfg)
     params = dict(kv.split("=", 1) for kv in a.set)
     params.setdefault("maxRange", f"{scan_range_max(cfg) - 0.01:.4f}")
