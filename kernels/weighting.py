@@ -3,8 +3,9 @@ the grid baselines ``likelihood_field`` and ``beam_model``.
 
 ``nog_raymarch``: for every particle and beam (one thread each), march ``num_samples`` fixed depths over
 [near, far] from the particle's laser pose, read the nearest NOG node (occupancy 0 outside the grid), and
-composite as in training (kernels/render.py, normalised weights). The thread adds |r_rendered - r_measured|
-of a valid beam into its particle's sum, and a second kernel turns the sums into (IR-MCL eq. 6)
+composite as in training (kernels/render.py, normalised weights) into the rendered ranges [P, B]. A
+second kernel, one thread per particle, adds |r_rendered - r_measured| over the valid beams in beam order
+(the same bits on every device and run) and turns the sum into (IR-MCL eq. 6)
 
     D = mean over valid beams of |r_rendered - r_measured|,   log w = -0.5 * D^2 / sigma^2
 
@@ -69,20 +70,24 @@ def slab(o: float, d: float, lo: float, hi: float) -> wp.vec2:
 
 
 def make_likelihood_kernel(sigma: float):
-    """IR-MCL eq. 6 from the per-particle sums of |r_rendered - r_measured|: D = the sum / valid beams,
-    log w = -0.5 D^2 / sigma^2; the sums are reset for the next scan. Shared by nog_raymarch and nof_direct."""
+    """IR-MCL eq. 6 from the rendered ranges [P, B]: D = sum over the valid beams of |r_rendered - r_measured|
+    / their number, log w = -0.5 D^2 / sigma^2. One thread per particle adds its beams in beam order, so the
+    weights are the same bits on every device and every run (atomic adds from the march threads were not:
+    on CUDA their order varied, and resampling could amplify the last-bit differences). Shared by
+    nog_raymarch and nof_direct."""
 
     @wp.kernel(module="unique")
-    def likelihood(err_sum: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+    def likelihood(rendered: wp.array2d(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
                    log_weights: wp.array(dtype=wp.float32)):
         p = wp.tid()
         n = float(0.0)
+        err = float(0.0)
         for b in range(measured.shape[0]):
             m = measured[b]
-            if m == m:
+            if m == m:  # NaN: invalid beam
                 n += 1.0
-        D = err_sum[p] / wp.max(n, 1.0)
-        err_sum[p] = 0.0  # ready for the next scan
+                err += wp.abs(rendered[p, b] - m)
+        D = err / wp.max(n, 1.0)
         log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
 
     return likelihood
@@ -99,7 +104,7 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
     * ``beam_major``: threads (beam, particle) instead of (particle, beam), so that the 32 threads of a
       GPU warp march one beam of 32 particles (after resampling, copies of the same few poses: they read
       the same nodes) rather than the 32 beams of one particle (32 directions, 32 cache lines). The
-      per-particle sums then add in another order (a last-bit difference)."""
+      rendered ranges are the same either way."""
     step = (far - near) / float(num_samples - 1)
     skip = empty_below > 0.0
     batched = batch > 1 and not skip
@@ -108,8 +113,7 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
     @wp.kernel(module="unique")
     def render(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2,
                res: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-               angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-               out: wp.array2d(dtype=wp.float32), err_sum: wp.array(dtype=wp.float32)):
+               angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
         i, j = wp.tid()
         p = i
         b = j
@@ -163,11 +167,7 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
                 W += w1
                 T *= 1.0 - occ1
                 k += jump
-        r = A / (W + wp.static(eps))
-        out[p, b] = r
-        m = measured[b]
-        if m == m:  # NaN: invalid beam
-            wp.atomic_add(err_sum, p, wp.abs(r - m))
+        out[p, b] = A / (W + wp.static(eps))
 
     return render
 
@@ -204,24 +204,19 @@ class NogRaymarch:
         self.origin, self.res = wp.vec2(*map(float, nog.origin_xy)), float(nog.resolution_m)
         self.num_beams = num_beams
         self.rendered = wp.zeros((num_particles, num_beams), dtype=wp.float32, device=self.device)
-        self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
         self.render_kernel = make_render_kernel(num_samples, near_m, far_m, t_min, empty_below, batch=batch,
                                                 beam_major=beam_major)
         self.beam_major = beam_major
         self.likelihood_kernel = make_likelihood_kernel(sigma_m)
 
-    def _launch(self, particles, T_base_laser, angles, measured):
-        if particles.shape[0] > self.err_sum.shape[0]:
-            raise ValueError(f"nog_raymarch: {particles.shape[0]} particles, built for {self.err_sum.shape[0]}")
+    def render(self, particles: wp.array, T_base_laser, angles: wp.array) -> wp.array:
+        """Rendered ranges [P, B] (the first P rows of the scratch array)."""
+        if particles.shape[0] > self.rendered.shape[0]:
+            raise ValueError(f"nog_raymarch: {particles.shape[0]} particles, built for {self.rendered.shape[0]}")
         dims = (particles.shape[0], angles.shape[0])
         wp.launch(self.render_kernel, dims[::-1] if self.beam_major else dims,
                   [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)),
-                   angles, measured, self.rendered, self.err_sum], device=self.device)
-
-    def render(self, particles: wp.array, T_base_laser, angles: wp.array) -> wp.array:
-        """Rendered ranges [P, B] (the first P rows of the scratch array)."""
-        self._launch(particles, T_base_laser, angles, wp.full(angles.shape[0], np.nan, dtype=wp.float32,
-                                                                  device=self.device))
+                   angles, self.rendered], device=self.device)
         return self.rendered
 
     def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
@@ -229,8 +224,8 @@ class NogRaymarch:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
             raise ValueError(f"nog_raymarch: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                              f"built for {self.num_beams} beams")
-        self._launch(particles, T_base_laser, angles, measured)
-        wp.launch(self.likelihood_kernel, particles.shape[0], [self.err_sum, measured, log_weights],
+        self.render(particles, T_base_laser, angles)
+        wp.launch(self.likelihood_kernel, particles.shape[0], [self.rendered, measured, log_weights],
                   device=self.device)
 
 

@@ -33,7 +33,6 @@ class NofDirect:
         self.num_beams, self.chunk = num_beams, int(chunk_rays)
         self.z = torch.linspace(near_m, far_m, num_samples, device=self.torch_device)
         self.compositor = RENDER.build("composite", normalize=True)
-        self.err_sum = wp.zeros(num_particles, dtype=wp.float32, device=self.device)
         self.likelihood_kernel = make_likelihood_kernel(sigma_m)
 
     def render(self, particles: wp.array, T_base_laser, angles: wp.array):
@@ -61,11 +60,9 @@ class NofDirect:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
             raise ValueError(f"nof_direct: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                              f"built for {self.num_beams} beams")
-        rendered = self.render(particles, T_base_laser, angles)
-        m = wp.to_torch(measured).to(self.torch_device)
-        err = torch.where(torch.isnan(m)[None, :], torch.zeros((), device=m.device), (rendered - m[None, :]).abs())
-        self.err_sum.assign(wp.from_torch(err.sum(1).contiguous().to(wp.device_to_torch(self.device))))
-        wp.launch(self.likelihood_kernel, particles.shape[0], [self.err_sum, measured, log_weights], device=self.device)
+        rendered = self.render(particles, T_base_laser, angles).contiguous().to(wp.device_to_torch(self.device))
+        wp.launch(self.likelihood_kernel, particles.shape[0], [wp.from_torch(rendered), measured, log_weights],
+                  device=self.device)
 
 
 @WEIGHTING.register("nof_direct")
