@@ -130,6 +130,14 @@ class TrainConfig:
     max_time_s: Optional[float] = None  # stop training after this long (epochs still end cleanly)
     steps_per_epoch: Optional[int] = None  # None = one pass over the training rays
     val_scans: int = 100  # validation scans rendered after each epoch (evenly spread)
+    sampler: str = "uniform"  # uniform (every sample through the MLP, the authors') | occupancy (irmcl_warp/nof/occupancy.py)
+    grid_resolution_m: float = 0.1  # occupancy sampler: cell size of the grid of the field's p_occ
+    grid_threshold: float = 0.01  # a cell may be occupied above this p_occ
+    grid_decay: float = 0.8  # value <- max(decay * value, p_occ at a random point of the cell)
+    grid_every: int = 16  # steps between grid updates (the first at step 0)
+    grid_dilate: int = 1  # cells added around every occupied one
+    grid_end: str = "field"  # where a beam's samples end: field (its transmittance, read without gradient) | grid | none
+    grid_t_min: float = 1e-4  # ... once that transmittance is below this
     checkpoint_every_s: float = 120.0
     seed: int = 42
 
@@ -319,7 +327,8 @@ class ConfigError(ValueError):
 CHOICES = {
     "data.format": ("sim", "carmen", "bag"), "data.beam_policy": ("error", "reject", "resample"),
     "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
-    "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"), "mapping.kernel": ("logodds",),
+    "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"),
+    "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),
     "mcl.weighting": ("nog_raymarch", "nof_direct", "likelihood_field", "beam_model"),
     "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.resample": ("low_variance", "multinomial"),
     "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
@@ -340,6 +349,8 @@ RANGES = {
     "train.epochs": (1, None), "train.batch_rays": (1, None), "train.num_samples": (2, None), "train.lr": ("> 0", None),
     "train.weight_decay": (0, None), "train.steps_per_epoch": (1, None), "train.val_scans": (1, None),
     "train.max_time_s": ("> 0", None), "train.checkpoint_every_s": ("> 0", None),
+    "train.grid_resolution_m": ("> 0", None), "train.grid_threshold": (0, 1), "train.grid_decay": (0, 1),
+    "train.grid_every": (1, None), "train.grid_dilate": (0, None), "train.grid_t_min": (0, 1),
     "mcl.num_particles": (1, None), "mcl.num_beams": (1, None), "mcl.num_samples": (2, None), "mcl.near_m": (0, None),
     "mcl.t_min": (0, 1), "mcl.empty_below": (0, 1), "mcl.sigma_m": ("> 0", None), "mcl.estimate_share": ("> 0", 1),
     "mcl.cluster_cell_m": ("> 0", None), "mcl.cluster_yaw_bins": (1, None), "mcl.reduce_to": (0, None),

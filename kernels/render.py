@@ -18,6 +18,12 @@ U_{k-1} = p_k z_k + (1 - p_k) U_k, so nothing is divided by 1 - p):
 
 Early termination (``t_min`` > 0, an ablation): samples with T_k < t_min are skipped in both passes.
 Torch twin and ablation ``render=torch_ref``: irmcl_warp/reference/render.py.
+
+``RENDER["occupied_samples"]`` picks the samples worth asking the NOF about while training
+(``train.sampler=occupancy``, irmcl_warp/nof/occupancy.py): one thread per beam walks its sample points
+and keeps those whose cell of a coarse occupancy grid may be occupied, until the grid's own transmittance
+prod (1 - value) over the kept samples falls below ``t_min``. The samples it drops are given p = 0, so the
+compositing above stays exact wherever the grid is right.
 """
 
 from __future__ import annotations
@@ -129,6 +135,51 @@ class Compositor:
             tensors = [p, z.to(p.dtype), ranges, opacity, grad_r.contiguous(), grad_w.contiguous(), grad_p]
             self._launch(self.kernels(p.dtype)[1], p.shape[0], tensors, p.device)
         return grad_p
+
+
+@wp.kernel
+def occupied_samples_kernel(points: wp.array2d(dtype=wp.vec2), values: wp.array2d(dtype=wp.float32),
+                            occupied: wp.array2d(dtype=wp.uint8), x0: float, y0: float, inv_res: float,
+                            t_min: float, keep: wp.array2d(dtype=wp.uint8)):
+    i = wp.tid()
+    T = float(1.0)
+    for k in range(points.shape[1]):
+        keep[i, k] = wp.uint8(0)
+        if T >= t_min:
+            q = points[i, k]
+            ix = int(wp.floor((q[0] - x0) * inv_res))
+            iy = int(wp.floor((q[1] - y0) * inv_res))
+            if ix >= 0 and ix < values.shape[1] and iy >= 0 and iy < values.shape[0]:
+                if occupied[iy, ix] != wp.uint8(0):
+                    keep[i, k] = wp.uint8(1)
+                    T *= 1.0 - values[iy, ix]
+
+
+class OccupiedSamples:
+    """keep [R, N] (bool) for torch sample points [R, N, 2] on a grid of ``values`` and ``occupied`` [H, W]."""
+
+    def __init__(self, origin_xy, resolution_m: float, t_min: float = 0.0):
+        init_warp()
+        self.x0, self.y0 = (float(c) for c in origin_xy)
+        self.inv_res, self.t_min = 1.0 / float(resolution_m), float(t_min)
+
+    def __call__(self, points: torch.Tensor, values: torch.Tensor, occupied: torch.Tensor) -> torch.Tensor:
+        R, N = points.shape[:2]
+        keep = torch.zeros((R, N), dtype=torch.uint8, device=points.device)
+        if R and N:
+            wp_dev = wp.device_from_torch(points.device)
+            stream = wp.stream_from_torch(points.device) if wp_dev.is_cuda else None
+            wp.launch(occupied_samples_kernel, dim=R, device=wp_dev, stream=stream,
+                      inputs=[wp.from_torch(points.detach().float().contiguous(), dtype=wp.vec2),
+                              wp.from_torch(values.float().contiguous()),
+                              wp.from_torch(occupied.to(torch.uint8).contiguous(), dtype=wp.uint8),
+                              self.x0, self.y0, self.inv_res, self.t_min, wp.from_torch(keep, dtype=wp.uint8)])
+        return keep.bool()
+
+
+@RENDER.register("occupied_samples")
+def occupied_samples(origin_xy, resolution_m: float, t_min: float = 0.0) -> OccupiedSamples:
+    return OccupiedSamples(origin_xy, resolution_m, t_min)
 
 
 @RENDER.register("composite")

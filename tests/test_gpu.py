@@ -39,7 +39,8 @@ def test_slam_on_cuda_replays_its_seed(tmp_path, monkeypatch):
     assert a["trajectory"]["ate_rmse_m"] < 0.5 * a["trajectory_odometry"]["ate_rmse_m"]
 
 
-def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch):
+@pytest.mark.parametrize("preset", ["fast", "guided"])
+def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch, preset):
     import torch
 
     from irmcl_warp.config import ModelConfig
@@ -50,7 +51,7 @@ def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch):
     from irmcl_warp.services.metrics import scan_synthesis_metrics
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg("+exp=sim_office", "train=fast", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=200",
+    cfg = _cfg("+exp=sim_office", f"train={preset}", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=200",
                "train.val_scans=8", "train.max_time_s=null")
     torch.manual_seed(0)
     val = prepare_beams(cfg)["val"].subset(np.arange(8))
@@ -60,3 +61,5 @@ def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch):
     metrics = json.loads((run_train(cfg) / "metrics.json").read_text())
     assert metrics["device"].startswith("cuda") and metrics["epochs_done"] == 2
     assert metrics["val"]["mae_m"] < 0.3 * mae_untrained, (metrics["val"]["mae_m"], mae_untrained)
+    if preset == "guided":  # the occupancy grid skipped most samples
+        assert metrics["history"][-1]["samples_per_beam"] < 0.5 * cfg.train.num_samples, metrics["history"][-1]

@@ -151,3 +151,39 @@ def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
     shutil.rmtree(tmp_path / "outputs" / "fr079" / "stream")  # the one cache of the log (and its split ids)
     with pytest.raises(FileNotFoundError, match="no-data-here"):
         prepare_beams(_cfg(["+exp=fr079"]))
+
+
+def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_does(tmp_path, monkeypatch):
+    """train.sampler=occupancy: the grid (and the RNG its readings draw from) are in last.pt, so a run
+    stopped after its first epoch and resumed gives the same weights and grid, bit for bit, as one that
+    never stopped; and the sampler does skip most samples."""
+    from irmcl_warp.nof.stage import make_validator
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=40", "train=quick", "train.sampler=occupancy",
+                "train.epochs=2", "train.steps_per_epoch=12", "train.grid_every=5", "train.val_scans=2",
+                "train.batch_rays=128", "train.num_samples=64", "render.num_samples=64", "train.max_time_s=null"])
+    sets = prepare_beams(cfg)
+    cpu = torch.device("cpu")
+
+    def trainer(out):
+        torch.manual_seed(cfg.train.seed)
+        validate = make_validator(sets["val"], cfg, 0.02, 20.0, cpu)
+        return Trainer(NOF(ModelConfig(**cfg.model)), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, out, "key",
+                       validate, {})
+
+    straight = trainer(tmp_path / "a")
+    straight.run()
+    first = trainer(tmp_path / "b")
+    first.run_epoch()
+    resumed = trainer(tmp_path / "b")
+    assert resumed.try_resume() and resumed.epoch == 1
+    resumed.run()
+    for k, v in straight.model.state_dict().items():
+        assert torch.equal(v, resumed.model.state_dict()[k]), k
+    assert torch.equal(straight.grid.values, resumed.grid.values)
+    h = straight.history[-1]
+    assert h["samples_per_beam"] < 0.5 * cfg.train.num_samples and h["read_per_beam"] >= h["samples_per_beam"]
+    assert h["mlp_gflop_per_step"] > 0 and 0 < h["grid_occupied_share"] <= 1

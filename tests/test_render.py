@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -84,3 +85,81 @@ def test_renderer_rejects_unknown_names_and_dtypes():
         make_renderer("cuda_magic")
     with pytest.raises(TypeError, match="float32 or float64"):
         make_renderer("warp")(torch.zeros(2, 3, dtype=torch.float16), torch.zeros(2, 3))
+
+
+# --- occupancy-guided sampling (RENDER["occupied_samples"], train.sampler=occupancy) ---------------------------
+
+def _random_grid(rng, H=23, W=31):
+    values = torch.from_numpy(rng.uniform(0.0, 1.0, (H, W)) ** 2).float()
+    occupied = torch.from_numpy(rng.uniform(0.0, 1.0, (H, W)) < 0.6)
+    return values.to(DEV), occupied.to(DEV)
+
+
+@pytest.mark.parametrize("t_min", [0.0, 1e-2, 0.3])
+def test_occupied_samples_match_the_twin(rng, t_min):
+    from irmcl_warp.reference.render import occupied_samples_torch
+    from kernels import RENDER
+
+    values, occupied = _random_grid(rng)
+    origin, res = (-1.3, 0.7), 0.1
+    # beams from inside the grid, many of them leaving it (those samples are never kept)
+    o = torch.from_numpy(np.stack([rng.uniform(-1.2, 1.7, 200), rng.uniform(0.8, 2.9, 200)], 1)).float()
+    a = torch.from_numpy(rng.uniform(-np.pi, np.pi, 200)).float()
+    d = torch.stack([torch.cos(a), torch.sin(a)], 1)
+    z = sample_depths(200, 40, 0.02, 4.0, perturb=True, generator=torch.Generator().manual_seed(rng.seed))
+    points = (o[:, None] + d[:, None] * z[..., None]).to(DEV)
+    keep = RENDER.build("occupied_samples", origin_xy=origin, resolution_m=res, t_min=t_min)(points, values, occupied)
+    twin = occupied_samples_torch(points.cpu(), values.cpu(), occupied.cpu(), origin, res, t_min)
+    assert keep.dtype == torch.bool and keep.shape == (200, 40)
+    assert torch.equal(keep.cpu(), twin), f"seed {rng.seed}: {(keep.cpu() != twin).sum()} samples differ"
+    assert 0 < int(twin.sum()) < twin.numel()  # the inputs exercise both answers
+
+
+def test_occupied_samples_by_hand():
+    from kernels import RENDER
+
+    # one row of cells at x in [0, 0.4): free, then occupied with values 0.5, 0.9, 0.9
+    values = torch.tensor([[0.0, 0.5, 0.9, 0.9]], device=DEV)
+    occupied = torch.tensor([[False, True, True, True]], device=DEV)
+    points = torch.tensor([[[0.05, 0.05], [0.15, 0.05], [0.25, 0.05], [0.35, 0.05], [0.45, 0.05]]], device=DEV)
+    keep = RENDER.build("occupied_samples", origin_xy=(0.0, 0.0), resolution_m=0.1, t_min=0.1)(points, values, occupied)
+    # T before each: 1, 1, 0.5, 0.05 (< 0.1: the beam has ended), and the last point is off the grid
+    assert keep.cpu().tolist() == [[False, True, True, False, False]]
+    no_end = RENDER.build("occupied_samples", origin_xy=(0.0, 0.0), resolution_m=0.1, t_min=0.0)(points, values, occupied)
+    assert no_end.cpu().tolist() == [[False, True, True, True, False]]
+
+
+@pytest.mark.parametrize("end, atol", [("none", 1e-5), ("field", 2e-3)])
+def test_guided_rendering_equals_full_rendering_where_the_grid_is_right(rng, end, atol):
+    """A field that is exactly 0 outside two walls, a grid read from it: the samples skipped in free space
+    are exactly p = 0 (the same ranges to float rounding); ending beams where the grid's transmittance is
+    below t_min drops only weight of that order."""
+    from types import SimpleNamespace
+
+    from irmcl_warp.nof.occupancy import OccupancyGrid
+    from irmcl_warp.nof.render import render_rays
+
+    class Walls(torch.nn.Module):  # p = 0.95 in the walls x in [2, 2.3] and x in [3.5, 3.8], else 0
+        def forward(self, xy):
+            x = xy[:, 0]
+            return 0.95 * (((x >= 2.0) & (x <= 2.3)) | ((x >= 3.5) & (x <= 3.8))).float()
+
+    n = 300
+    o = np.stack([rng.uniform(0.0, 1.5, n), rng.uniform(-1.0, 1.0, n)], 1).astype(np.float32)
+    a = rng.uniform(-0.6, 0.6, n)
+    d = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
+    ends = o + d * ((4.5 - o[:, :1]) / d[:, :1])
+    tc = SimpleNamespace(grid_resolution_m=0.1, grid_threshold=0.01, grid_decay=0.8, grid_dilate=1, grid_end=end,
+                         grid_t_min=1e-4)
+    grid = OccupancyGrid(o, ends, tc, DEV)
+    for _ in range(4):  # a random point per cell: a few readings find every wall cell
+        grid.update(Walls())
+    O, D = torch.from_numpy(o).to(DEV), torch.from_numpy(d).to(DEV)
+    z = sample_depths(n, 128, 0.02, 5.0, perturb=True, device=DEV)
+    keep = grid.keep(O[:, None] + D[:, None] * z[..., None], Walls())
+    render = make_renderer("warp")
+    full, _, _ = render_rays(Walls(), render, O, D, z)
+    guided, _, _ = render_rays(Walls(), render, O, D, z, keep)
+    assert keep.float().sum(1).mean() < (0.2 if end == "field" else 0.4) * z.shape[1]  # most samples skipped
+    assert torch.allclose(guided, full, atol=atol), f"seed {rng.seed}: {(guided - full).abs().max()}"
+    assert abs(grid.occupied_share() - 0.2) < 0.15  # two walls and their dilation, not the whole grid

@@ -55,5 +55,9 @@ class NOF(nn.Module):
             h = self.tail(torch.cat([g, h], -1))
         return torch.sigmoid(self.out(h)).squeeze(-1)
 
+    def flops_per_point(self) -> int:
+        """Multiply-adds x 2 of the linear layers for one point's forward pass (encoding and batch norm left out)."""
+        return sum(2 * m.in_features * m.out_features for m in self.modules() if isinstance(m, nn.Linear))
+
     def config_dict(self) -> dict:
         return asdict(self.cfg)

@@ -82,11 +82,26 @@ def sample_depths(num_rays: int, num_samples: int, near_m: float, far_m: float, 
     return lower + (upper - lower) * u
 
 
-def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor):
-    """Query the model at origins + z * dirs ([R, N, 2]) and composite: (ranges [R], opacity [R], p [R, N])."""
+def sample_points(origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+    """origins + z * dirs: sample points [R, N, 2] of beams [R, 2] at depths [R, N]."""
+    return origins[:, None, :] + dirs[:, None, :] * z[..., None]
+
+
+def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor,
+                keep: torch.Tensor | None = None):
+    """Query the model at the sample points and composite: (ranges [R], opacity [R], p [R, N]).
+
+    ``keep`` [R, N] (occupancy-guided sampling): only those samples go through the model; the others
+    count as p = 0 (free), which leaves the compositing formula unchanged.
+    """
     R, N = z.shape
-    points = origins[:, None, :] + dirs[:, None, :] * z[..., None]
-    p = model(points.reshape(-1, 2)).reshape(R, N).float()
+    points = sample_points(origins, dirs, z).reshape(-1, 2)
+    if keep is None:
+        p = model(points).reshape(R, N).float()
+    else:
+        flat = keep.reshape(-1).nonzero().squeeze(1)
+        p_kept = model(points[flat]).float()
+        p = torch.zeros(R * N, dtype=p_kept.dtype, device=p_kept.device).index_copy(0, flat, p_kept).reshape(R, N)
     ranges, opacity = renderer(p, z)
     return ranges, opacity, p
 

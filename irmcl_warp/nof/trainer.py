@@ -5,6 +5,8 @@ compare with the measured range, and add the occupancy regulariser.
 
 The regulariser (from the authors' code, zero at p = 0 and p = 1, largest at p = 0.5) pushes occupancy
 towards certainty. Invalid (no return / out of range) beams are never in the training rays.
+``train.sampler=occupancy`` asks the MLP only about the samples a coarse grid of the field says may be
+occupied (irmcl_warp/nof/occupancy.py); the loss is the same formula over the same depths.
 Resumable: ``last.pt`` is written at the end of every epoch and every ``checkpoint_every_s``.
 """
 
@@ -19,7 +21,8 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from irmcl_warp.nof.checkpoint import atomic_torch_save
-from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
+from irmcl_warp.nof.occupancy import OccupancyGrid
+from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths, sample_points
 
 
 def opacity_regulariser(p: torch.Tensor) -> torch.Tensor:
@@ -44,6 +47,8 @@ class Trainer:
         self.renderer = make_renderer(rc.name, normalize=rc.normalize, t_min=rc.t_min)
         o, d, r, _ = sets["train"].rays()
         self.origins, self.dirs, self.ranges = (torch.from_numpy(a).to(device) for a in (o, d, r))
+        self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
+        self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
         self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay)
         self.sched = torch.optim.lr_scheduler.MultiStepLR(self.opt, list(tc.lr_milestones), tc.lr_gamma)
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
@@ -57,7 +62,8 @@ class Trainer:
             rng["cuda"] = torch.cuda.get_rng_state_all()
         return {"key": self.key, "model": self.model.state_dict(), "opt": self.opt.state_dict(),
                 "sched": self.sched.state_dict(), "epoch": self.epoch, "step_in_epoch": self.step_in_epoch,
-                "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng}
+                "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng,
+                "grid": None if self.grid is None else self.grid.state_dict()}
 
     def try_resume(self) -> bool:
         path = self.out / "last.pt"
@@ -75,6 +81,8 @@ class Trainer:
         self.sched.load_state_dict(s["sched"])
         self.epoch, self.step_in_epoch, self.history = s["epoch"], s["step_in_epoch"], s["history"]
         self.best, self.train_time_s = s["best"], s["train_time_s"]
+        if self.grid is not None and s.get("grid") is not None:
+            self.grid.load_state_dict(s["grid"])
         torch.set_rng_state(s["rng"]["cpu"].cpu())  # map_location moved it to the device
         if "cuda" in s["rng"] and torch.cuda.is_available():
             torch.cuda.set_rng_state_all([t.cpu() for t in s["rng"]["cuda"]])
@@ -82,13 +90,27 @@ class Trainer:
         return True
 
     # --- one optimisation step -----------------------------------------------------------------
+    def amp(self):
+        if self.tc.amp == "bf16" and self.device.type == "cuda":
+            return torch.autocast("cuda", dtype=torch.bfloat16)
+        return contextlib.nullcontext()
+
     def step(self, idx: torch.Tensor) -> float:
         tc = self.tc
         z = sample_depths(len(idx), tc.num_samples, self.near_m, self.far_m, tc.perturb, device=self.device)
-        amp = (torch.autocast("cuda", dtype=torch.bfloat16) if tc.amp == "bf16" and self.device.type == "cuda"
-               else contextlib.nullcontext())
-        with amp:
-            pred, _, p = render_rays(self.model, self.renderer, self.origins[idx], self.dirs[idx], z)
+        o, d, keep = self.origins[idx], self.dirs[idx], None
+        if self.grid is not None:
+            if (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0:
+                self.grid.update(self.model, self.amp)
+            keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
+            if int(keep.sum()) < 2:  # batch norm needs two samples; let the step see every one
+                keep = None
+            full = torch.tensor(float(tc.num_samples), device=self.device)
+            self.kept.append(keep.sum() / len(idx) if keep is not None else full)
+            self.read.append(self.grid.candidates / len(idx) if keep is not None and tc.grid_end == "field"
+                             else torch.zeros((), device=self.device))
+        with self.amp():
+            pred, _, p = render_rays(self.model, self.renderer, o, d, z, keep)
         loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -112,7 +134,7 @@ class Trainer:
         self.model.train()
         bar = tqdm(range(self.step_in_epoch, self.steps_per_epoch), desc=f"epoch {self.epoch + 1}/{tc.epochs}",
                    unit="step", dynamic_ncols=True, mininterval=1.0)
-        t_epoch, t_ckpt, losses = time.time(), time.time(), []
+        t_epoch, t_ckpt, losses, self.kept, self.read = time.time(), time.time(), [], [], []
         for b in bar:
             losses.append(self.step(perm[b * B:(b + 1) * B]))
             self.step_in_epoch = b + 1
@@ -128,12 +150,24 @@ class Trainer:
                 break
         bar.close()
         steps = self.step_in_epoch - bar.initial
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)  # the epoch's time includes the work still queued
         self.train_time_s += time.time() - t_ckpt
         epoch_s = time.time() - t_epoch
         self.sched.step()
         record = {"epoch": self.epoch + 1, "steps": steps, "loss": float(torch.stack(losses).mean()) if losses else None,
                   "epoch_s": epoch_s, "rays_per_s": steps * B / max(epoch_s, 1e-9), "train_time_s": self.train_time_s,
-                  "lr": self.opt.param_groups[0]["lr"]}
+                  "lr": self.opt.param_groups[0]["lr"],
+                  "samples_per_beam": float(torch.stack(self.kept).float().mean()) if self.kept else self.tc.num_samples}
+        # the MLP's work: forward + backward (~3x a forward) per sample with gradient, a forward per sample read
+        # without (ending the beams), and the grid's readings; against the epoch's time, the rate achieved
+        read = float(torch.stack(self.read).float().mean()) if self.read else 0.0
+        grid_points = 0 if self.grid is None else self.grid.values.numel() * -(-steps // tc.grid_every)
+        flop = self.model.flops_per_point() * ((3 * record["samples_per_beam"] + read) * B * steps + grid_points)
+        record.update({"read_per_beam": read, "mlp_gflop_per_step": flop / max(steps, 1) / 1e9,
+                       "mlp_tflop_per_s": flop / max(epoch_s, 1e-9) / 1e12})
+        if self.grid is not None:
+            record["grid_occupied_share"] = self.grid.occupied_share()
         record["val"] = self.validate(self.model)
         self.epoch, self.step_in_epoch = self.epoch + 1, 0
         self.history.append(record)
@@ -143,7 +177,8 @@ class Trainer:
             atomic_torch_save({**self.meta, "model": self.model.state_dict(), "epoch": record["epoch"],
                                "val": record["val"]}, self.out / "nof.pt")
         print(f"epoch {record['epoch']}: loss {record['loss']:.4f}, val MAE {record['val']['mae_m']:.3f} m, "
-              f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s"
+              f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s, "
+              f"{record['samples_per_beam']:.1f} samples per beam through the MLP"
               + (" (best)" if improved else ""))
         atomic_torch_save(self.state(), self.out / "last.pt")
         return improved

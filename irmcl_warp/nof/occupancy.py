@@ -1,0 +1,106 @@
+"""Occupancy-guided sampling for NOF training (``train.sampler=occupancy``), after nerfacc's occupancy grid.
+
+Most of a training beam's 256 samples lie in free space before the wall or behind it, where the field is
+already ~0 or the beam has already ended; the MLP spends most of a step there. A coarse grid over the
+training rays keeps, per cell, a decaying maximum of the field itself:
+
+    value <- max(decay * value, p_occ(random point in the cell))      every ``grid_every`` steps
+
+A cell may be occupied when its value exceeds ``grid_threshold`` (then dilated by ``grid_dilate`` cells,
+so the rise in front of a wall is sampled). ``RENDER["occupied_samples"]`` keeps the samples in such
+cells. Where a beam ends is decided by ``grid_end``:
+
+* ``field`` (default, nerfacc's way): the field is read without gradient at the kept samples, and those
+  after its transmittance prod (1 - p) has fallen below ``grid_t_min`` are dropped;
+* ``grid``: the kernel stops once the transmittance from each cell's latest reading is below
+  ``grid_t_min``; cheaper, but a cell read inside a wall makes the free part of the cell look opaque,
+  so a beam can end before it reaches the wall (a two-wall test field had beams render 0 m instead of 1.8);
+* ``none``: every sample in an occupied cell.
+
+Only the samples left go through the MLP with gradient; the rest count as p = 0, and the compositing is
+the same exact formula as before. The first update
+runs at step 0 on the untrained field (p ~ 0.5 everywhere), so training starts by sampling everything and
+prunes as the field learns where it is empty. Values are read from the field in eval mode, as
+evaluation reads it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from kernels import RENDER
+
+
+class OccupancyGrid:
+    def __init__(self, origins: np.ndarray, ends: np.ndarray, tc, device):
+        self.res, self.threshold, self.decay, self.dilate = (float(tc.grid_resolution_m), float(tc.grid_threshold),
+                                                             float(tc.grid_decay), int(tc.grid_dilate))
+        pts = np.concatenate([origins, ends])
+        margin = 2 * self.res * (1 + self.dilate)
+        lo = pts.min(0) - margin
+        self.shape = tuple(int(math.ceil(v)) for v in ((pts.max(0) + margin - lo) / self.res)[::-1])  # (H, W)
+        self.origin_xy = (float(lo[0]), float(lo[1]))
+        self.device, self.candidates = device, torch.zeros((), device=device)
+        self.values = torch.zeros(self.shape, dtype=torch.float32, device=device)  # decaying maximum: the mask
+        self.latest = torch.zeros(self.shape, dtype=torch.float32, device=device)  # last reading: the transmittance
+        self.occupied = torch.ones(self.shape, dtype=torch.bool, device=device)
+        self.end, self.t_min = tc.grid_end, float(tc.grid_t_min)
+        self.keep_fn = RENDER.build("occupied_samples", origin_xy=self.origin_xy, resolution_m=self.res,
+                                    t_min=self.t_min if self.end == "grid" else 0.0)
+        H, W = self.shape
+        iy, ix = torch.meshgrid(torch.arange(H, device=device), torch.arange(W, device=device), indexing="ij")
+        self._corners = torch.stack([lo[0] + ix * self.res, lo[1] + iy * self.res], -1).reshape(-1, 2).float()
+
+    @torch.no_grad()
+    def update(self, model, amp=contextlib.nullcontext, chunk: int = 1 << 16) -> None:
+        """Read the field once at a random point of every cell and refresh values and the occupied mask."""
+        pts = self._corners + torch.rand(self._corners.shape, device=self.device) * self.res
+        was_training = model.training
+        model.eval()
+        with amp():
+            p = torch.cat([model(pts[s:s + chunk]).float() for s in range(0, len(pts), chunk)])
+        model.train(was_training)
+        self.latest = p.view(self.shape)
+        self.values = torch.maximum(self.values * self.decay, self.latest)
+        self._refresh_mask()
+
+    def _refresh_mask(self) -> None:
+        occ = (self.values > self.threshold).float()[None, None]
+        if self.dilate:
+            occ = F.max_pool2d(occ, 2 * self.dilate + 1, stride=1, padding=self.dilate)
+        self.occupied = occ[0, 0] > 0
+
+    def keep(self, points: torch.Tensor, model=None, amp=contextlib.nullcontext) -> torch.Tensor:
+        """keep [R, N] for sample points [R, N, 2]: the samples the MLP is asked about (``model`` is read
+        without gradient to end the beams when ``grid_end=field``)."""
+        keep = self.keep_fn(points, self.latest, self.occupied)
+        self.candidates = keep.sum()  # samples read (without gradient when grid_end=field)
+        if self.end != "field" or not self.t_min:
+            return keep
+        with torch.no_grad():
+            flat = keep.reshape(-1).nonzero().squeeze(1)
+            was_training = model.training
+            model.eval()
+            with amp():
+                p_kept = model(points.reshape(-1, 2)[flat]).float() if len(flat) else torch.zeros(0, device=points.device)
+            model.train(was_training)
+            p = torch.zeros(keep.numel(), device=points.device).index_copy(0, flat, p_kept).view(keep.shape)
+            T = torch.cumprod(torch.cat([torch.ones_like(p[:, :1]), 1.0 - p[:, :-1]], 1), 1)
+        return keep & (T >= self.t_min)
+
+    def occupied_share(self) -> float:
+        return float(self.occupied.float().mean())
+
+    def state_dict(self) -> dict:
+        return {"values": self.values, "latest": self.latest, "origin_xy": self.origin_xy, "res": self.res, "shape": self.shape}
+
+    def load_state_dict(self, s: dict) -> None:
+        if tuple(s["shape"]) != self.shape or s["origin_xy"] != self.origin_xy or s["res"] != self.res:
+            raise ValueError("occupancy grid of another extent or resolution in the checkpoint")
+        self.values, self.latest = s["values"].to(self.device), s["latest"].to(self.device)
+        self._refresh_mask()
