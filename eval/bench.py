@@ -1,4 +1,8 @@
 """``python -m eval.bench train [--device cuda] [--batch 1024] [--samples 256] [--steps 10]``
+``python -m eval.bench train --exp fr079 --init outputs/fr079/train-fast/nof.pt [--variants ...] [--profile]``:
+the training step itself (``Trainer.step``) on the experiment's training rays, for each variant of the
+``train=`` settings (default: ``sampler=uniform`` against ``sampler=occupancy``) side by side, from a trained
+NOF (an untrained one is occupied everywhere, so its grid skips nothing).
 (``python -m eval.bench mcl ...``: the MCL step, eval/bench_mcl.py; ``python -m eval.bench slam ...``: the
 GMapping RBPF, eval/bench_slam.py.)
 
@@ -83,10 +87,80 @@ def bench_composite(renderer_name, batch, samples, steps, device, repeats=5) -> 
             "samples": samples, **_timing(r, batch)}
 
 
+def bench_trainer_steps(a, device) -> list[dict]:
+    """Trainer.step on real rays for each variant; the grid is read from the trained field before timing
+    (the warm-up covers one grid period and, with train.compile, the compilation)."""
+    import tempfile
+
+    from irmcl_warp.config import ModelConfig, compose_config
+    from irmcl_warp.nof.checkpoint import load_nof
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import far_bound_m, prepare_beams
+
+    rows = []
+    for variant in a.variants:
+        sets_ = [f"train.{kv}" for kv in variant.split(",")]
+        cfg = compose_config([f"+exp={a.exp}", f"train={a.preset}", *sets_, f"train.batch_rays={a.batch[0]}",
+                              f"device={device}"])
+        sets = {"train": prepare_beams(cfg)["train"]}
+        model, meta = load_nof(a.init, device)
+        if ModelConfig(**meta["model_config"]) != ModelConfig(**cfg.model):
+            raise ValueError(f"{a.init}: made with another network than model= of +exp={a.exp}")
+        torch.manual_seed(0)
+        with tempfile.TemporaryDirectory() as tmp:
+            tr = Trainer(model.train(), sets, cfg.train, cfg.render, cfg.render.near_m, far_bound_m(cfg), device,
+                         Path(tmp), "bench", lambda m: {}, {})
+            gen = torch.Generator().manual_seed(0)
+            batches = [torch.randint(len(tr.ranges), (cfg.train.batch_rays,), generator=gen).to(device)
+                       for _ in range(a.steps)]
+            it = iter(range(1 << 30))
+
+            def step():
+                tr.step_in_epoch = next(it)  # the grid is read every train.grid_every steps, as in training
+                tr.step(batches[tr.step_in_epoch % len(batches)])
+
+            try:
+                r = repeated(step, lambda: _sync(device), a.steps, a.repeats, warmup=max(cfg.train.grid_every, 3))
+            except Exception as e:  # e.g. train.compile without a working compiler on this machine
+                print(f"{variant}: failed ({type(e).__name__}: {str(e)[:300]})")
+                continue
+            kept = float(torch.stack(tr.kept).float().mean()) if tr.kept else float(cfg.train.num_samples)
+            read = float(torch.stack(tr.read).float().mean()) if tr.read else 0.0
+            if a.profile and variant == a.variants[-1]:
+                from torch.profiler import ProfilerActivity, profile
+
+                acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+                with profile(activities=acts) as prof:
+                    for _ in range(a.steps):
+                        step()
+                    _sync(device)
+                key = "cuda_time_total" if device.type == "cuda" else "cpu_time_total"
+                print(prof.key_averages().table(sort_by=key, row_limit=25))
+        flop = model.flops_per_point() * (3 * kept + read) * cfg.train.batch_rays
+        rows.append({"what": f"Trainer.step {a.exp}", "model": a.preset, "renderer": f"{cfg.render.name}, {variant}",
+                     "amp": cfg.train.amp, "batch_rays": cfg.train.batch_rays, "samples": cfg.train.num_samples,
+                     "samples_with_grad": kept, "samples_read": read, "mlp_gflop_per_step": flop / 1e9,
+                     **_timing(r, cfg.train.batch_rays)})
+        rows[-1]["mlp_tflop_per_s"] = flop / (1e-3 * rows[-1]["step_ms"]) / 1e12
+    for x in rows:
+        print(f"{x['renderer']}: {x['step_ms']:.2f} ms/step [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}], "
+              f"{x['samples_with_grad']:.1f} samples per beam with gradient, {x['samples_read']:.1f} read without, "
+              f"{x['mlp_gflop_per_step']:.0f} GFLOP per step, {x['mlp_tflop_per_s']:.1f} TFLOP/s")
+    return rows
+
+
 def run_train_bench(a) -> list[dict]:
     device = torch.device(a.device or ("cuda" if torch.cuda.is_available() else "cpu"))
     if device.type == "cuda" and a.tf32:
         torch.backends.cuda.matmul.allow_tf32 = True
+    if a.exp:
+        rows = bench_trainer_steps(a, device)
+        name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
+        out = Path(a.out) / f"train-steps-{a.exp}-{device.type}.json"
+        write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a),
+                         "rows": rows})
+        print(f"-> {out}")
+        return rows
     rows = []
     for batch in a.batch:
         for r in ("warp", "torch_ref"):
@@ -123,11 +197,19 @@ def main(argv=None):
     t.add_argument("--tf32", action="store_true")
     t.add_argument("--repeats", type=int, default=5, help="timings of --steps steps each; the table shows their median")
     t.add_argument("--out", default="outputs/bench")
+    t.add_argument("--exp", default=None, help="time Trainer.step on this experiment's rays (uniform vs occupancy)")
+    t.add_argument("--init", default=None, help="with --exp: the trained nof.pt the steps start from")
+    t.add_argument("--preset", default="guided", help="with --exp: the train= preset the variants change")
+    t.add_argument("--profile", action="store_true", help="with --exp: torch profile of the last variant's steps")
+    t.add_argument("--variants", nargs="+", default=["sampler=uniform", "sampler=occupancy"],
+                   help="with --exp: train settings per variant, comma-separated (e.g. sampler=occupancy,grid_end=none)")
     bench_mcl.add_parser(sub)
     bench_slam.add_parser(sub)
     bench_globloc.add_parser(sub)
     a = ap.parse_args(argv)
     if a.what == "train":
+        if a.exp and not a.init:
+            ap.error("--exp needs --init <trained nof.pt>")
         run_train_bench(a)
     elif a.what == "mcl":
         bench_mcl.run_mcl_bench(a)

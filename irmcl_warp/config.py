@@ -130,6 +130,8 @@ class TrainConfig:
     max_time_s: Optional[float] = None  # stop training after this long (epochs still end cleanly)
     steps_per_epoch: Optional[int] = None  # None = one pass over the training rays
     val_scans: int = 100  # validation scans rendered after each epoch (evenly spread)
+    compile: bool = False  # torch.compile the network for the training pass (dynamic shapes; compiling counts as training time)
+    fused_adam: bool = False  # CUDA: Adam's update in one fused kernel (the same formula; ~1 ms less per step on an H100)
     sampler: str = "uniform"  # uniform (every sample through the MLP, the authors') | occupancy (irmcl_warp/nof/occupancy.py)
     grid_resolution_m: float = 0.1  # occupancy sampler: cell size of the grid of the field's p_occ
     grid_threshold: float = 0.01  # a cell may be occupied above this p_occ

@@ -92,14 +92,15 @@ def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: t
     """Query the model at the sample points and composite: (ranges [R], opacity [R], p [R, N]).
 
     ``keep`` [R, N] (occupancy-guided sampling): only those samples go through the model; the others
-    count as p = 0 (free), which leaves the compositing formula unchanged.
+    count as p = 0 (free), which leaves the compositing formula unchanged. (Fewer than two kept: every
+    sample goes through, as batch norm needs two.)
     """
     R, N = z.shape
     points = sample_points(origins, dirs, z).reshape(-1, 2)
-    if keep is None:
+    flat = None if keep is None else keep.reshape(-1).nonzero().squeeze(1)
+    if flat is None or len(flat) < 2:
         p = model(points).reshape(R, N).float()
     else:
-        flat = keep.reshape(-1).nonzero().squeeze(1)
         p_kept = model(points[flat]).float()
         p = torch.zeros(R * N, dtype=p_kept.dtype, device=p_kept.device).index_copy(0, flat, p_kept).reshape(R, N)
     ranges, opacity = renderer(p, z)

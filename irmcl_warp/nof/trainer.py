@@ -47,9 +47,12 @@ class Trainer:
         self.renderer = make_renderer(rc.name, normalize=rc.normalize, t_min=rc.t_min)
         o, d, r, _ = sets["train"].rays()
         self.origins, self.dirs, self.ranges = (torch.from_numpy(a).to(device) for a in (o, d, r))
+        # the training pass may run compiled; the grid's readings (eval mode, no gradient) use the module as is
+        self.net = torch.compile(self.model, dynamic=True) if tc.compile else self.model
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
-        self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay)
+        self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay,
+                                    fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None)
         self.sched = torch.optim.lr_scheduler.MultiStepLR(self.opt, list(tc.lr_milestones), tc.lr_gamma)
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
         # an epoch is one pass over the rays, or ``steps_per_epoch`` batches (fewer or more than a pass)
@@ -103,14 +106,11 @@ class Trainer:
             if (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0:
                 self.grid.update(self.model, self.amp)
             keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
-            if int(keep.sum()) < 2:  # batch norm needs two samples; let the step see every one
-                keep = None
-            full = torch.tensor(float(tc.num_samples), device=self.device)
-            self.kept.append(keep.sum() / len(idx) if keep is not None else full)
-            self.read.append(self.grid.candidates / len(idx) if keep is not None and tc.grid_end == "field"
+            self.kept.append(keep.sum() / len(idx))
+            self.read.append(self.grid.candidates / len(idx) if tc.grid_end == "field"
                              else torch.zeros((), device=self.device))
         with self.amp():
-            pred, _, p = render_rays(self.model, self.renderer, o, d, z, keep)
+            pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep)
         loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
