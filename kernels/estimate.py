@@ -2,7 +2,7 @@
 
 * ``ESTIMATE["top_share"]``: IR-MCL's estimate, the weighted mean of the particles with the highest
   weights (80 % of them). The particles are ranked by Warp's radix sort of their log-weights; the sums
-  are atomic adds over the first K ranks.
+  are partial sums over the first K ranks, added in a fixed order (PartialSums).
 * ``ESTIMATE["best_cluster"]``: the weighted mean of the heaviest cluster, in the spirit of AMCL (which
   reports the mean of its heaviest kd-tree cluster): weights are binned on a coarse (x, y, yaw) histogram
   (``cell_m``, ``yaw_bins``), each bin's mass is summed with its 26 neighbours (yaw wraps), and the
@@ -19,7 +19,7 @@ import numpy as np
 import warp as wp
 
 from kernels.resample import max_kernel
-from kernels.registry import ESTIMATE, launch_reduction, pick_device
+from kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device
 
 
 @wp.kernel
@@ -46,21 +46,22 @@ def mean_pose(sums: np.ndarray) -> np.ndarray:
 
 
 @wp.func
-def add_moments(sums: wp.array(dtype=wp.float32), acc: vec5):
+def leave_moments(partials: wp.array2d(dtype=wp.float32), t: int, acc: vec5):
+    """Thread t's five partial sums into row t (PartialSums adds the rows in a fixed order)."""
     for c in range(5):
-        wp.atomic_add(sums, c, acc[c])
+        partials[t, c] = acc[c]
 
 
 @wp.kernel
 def top_sums_kernel(order: wp.array(dtype=wp.int32), sorted_keys: wp.array(dtype=wp.float32),
-                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32),
-                    k: int, stride: int):
+                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3),
+                    partials: wp.array2d(dtype=wp.float32), k: int, stride: int):
     """Sums over the first k ranks; sorted_keys[0] = -(largest log-weight) makes the exp stable."""
     acc = vec5()
     for r in range(wp.tid(), k, stride):
         j = order[r]
         acc += pose_moments(wp.exp(log_w[j] + sorted_keys[0]), particles[j])
-    add_moments(sums, acc)
+    leave_moments(partials, wp.tid(), acc)
 
 
 class TopShareMean:
@@ -72,6 +73,7 @@ class TopShareMean:
         self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N
         self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
+        self.partial = PartialSums(5, self.device)
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
         """[x, y, yaw] from the top ``share`` of the particles by weight."""
@@ -82,9 +84,9 @@ class TopShareMean:
         """Rank and sum on the device, nothing read back (the filter reads once per step)."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
-        self.sums.zero_()
-        launch_reduction(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles, self.sums, self.k],
-                         self.device)
+        threads = launch_reduction(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles,
+                                                             self.partial.partials, self.k], self.device)
+        self.partial.finish(threads, self.sums)
 
     def result(self, sums: np.ndarray | None = None) -> np.ndarray:
         """[x, y, yaw] from the five sums (``sums``: a copy already read back)."""
@@ -112,7 +114,7 @@ def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=w
 @wp.kernel
 def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
                         top: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, yaw_radius: float,
-                        sums: wp.array(dtype=wp.float32), stride: int):
+                        partials: wp.array2d(dtype=wp.float32), stride: int):
     acc = vec5()
     for i in range(wp.tid(), particles.shape[0], stride):
         p = particles[i]
@@ -121,7 +123,7 @@ def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtyp
         da = wp.atan2(wp.sin(p[2] - centre[2]), wp.cos(p[2] - centre[2]))
         if dx * dx + dy * dy <= radius * radius and wp.abs(da) <= yaw_radius:
             acc += pose_moments(wp.exp(log_w[i] - top[0]), p)
-    add_moments(sums, acc)
+    leave_moments(partials, wp.tid(), acc)
 
 
 def heaviest_bin(hist: np.ndarray) -> tuple[int, int, int]:
@@ -143,12 +145,12 @@ class BestCluster:
         self.hist = wp.zeros(self.nyaw * self.ny * self.nx, dtype=wp.float32, device=self.device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
+        self.partial = PartialSums(5, self.device)
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
         n, d = particles.shape[0], self.device
         self.top.fill_(-3.0e38)
         self.hist.zero_()
-        self.sums.zero_()
         launch_reduction(max_kernel, n, [log_w, self.top], d)
         wp.launch(histogram_kernel, n, [particles, log_w, self.top, self.lo, self.cell, self.nx, self.ny, self.nyaw,
                                         self.hist], device=d)
@@ -156,8 +158,9 @@ class BestCluster:
         bin_yaw = 2 * np.pi / self.nyaw
         centre = wp.vec3(self.lo[0] + (ix + 0.5) * self.cell, self.lo[1] + (iy + 0.5) * self.cell,
                          -np.pi + (ia + 0.5) * bin_yaw)
-        launch_reduction(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell, 1.5 * bin_yaw,
-                                                  self.sums], d)
+        threads = launch_reduction(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell,
+                                                            1.5 * bin_yaw, self.partial.partials], d)
+        self.partial.finish(threads, self.sums)
         return self.result()
 
     def launch(self, particles: wp.array, log_w: wp.array) -> None:

@@ -61,15 +61,63 @@ def pick_device(requested: str = "auto") -> str:
 
 
 REDUCE_THREADS = 4096  # threads of a reduction launch (see launch_reduction)
+REDUCE_GROUP = 64  # a GPU adds the threads' partial sums in REDUCE_GROUP groups of REDUCE_GROUP (PartialSums)
 
 
-def launch_reduction(kernel, n: int, inputs: list, device: str) -> None:
-    """Launch a reduction over n items on min(n, REDUCE_THREADS) threads; the kernel's last argument is the
-    stride: thread t accumulates items t, t + stride, ... in registers and then makes one atomic add per
-    output. (One atomic per item on one address serialises: 8 sums over 1M particles cost ~20 ms on an
-    H100, measured by eval.bench mcl.)"""
+def launch_reduction(kernel, n: int, inputs: list, device: str) -> int:
+    """Launch a reduction over n items on min(n, REDUCE_THREADS) threads and return that number; the kernel's
+    last argument is the stride: thread t accumulates items t, t + stride, ... in registers and then
+    writes its partial sums to row t of a ``PartialSums`` (or, for a maximum, makes one atomic max: any
+    order gives the same bits). (One atomic per item on one address serialises: 8 sums over 1M particles
+    cost ~20 ms on an H100, measured by eval.bench mcl.)"""
     threads = max(1, min(int(n), REDUCE_THREADS))
     wp.launch(kernel, threads, [*inputs, threads], device=device)
+    return threads
+
+
+@wp.kernel
+def _sum_rows(partials: wp.array2d(dtype=wp.float32), rows: int, out: wp.array(dtype=wp.float32)):
+    c = wp.tid()
+    s = float(0.0)
+    for r in range(rows):
+        s += partials[r, c]
+    out[c] = s
+
+
+@wp.kernel
+def _sum_row_groups(partials: wp.array2d(dtype=wp.float32), rows: int, group: int,
+                    out: wp.array2d(dtype=wp.float32)):
+    g, c = wp.tid()
+    s = float(0.0)
+    for r in range(g * group, wp.min((g + 1) * group, rows)):
+        s += partials[r, c]
+    out[g, c] = s
+
+
+class PartialSums:
+    """C sums over many items, the same bits on every run: a reduction kernel's thread t leaves its C
+    partial sums in row t of ``partials`` [REDUCE_THREADS, C], and ``finish(threads, out)`` adds the rows
+    in a fixed order into ``out`` [C]. (Atomic adds from GPU threads come in a different order each run,
+    and the last bits of a sum with them; resampling can turn those into different particles.)
+
+    On the CPU the rows are added one after another: the order in which its threads used to add
+    atomically, so CPU results are what they were. On a GPU, REDUCE_GROUP groups of rows first (one
+    thread each), then the group sums; a run repeats itself, and a GPU and a CPU still differ in rounding.
+    """
+
+    def __init__(self, num_sums: int, device: str):
+        self.device, self.num_sums = device, int(num_sums)
+        self.partials = wp.zeros((REDUCE_THREADS, self.num_sums), dtype=wp.float32, device=device)
+        self.groups = wp.zeros((REDUCE_GROUP, self.num_sums), dtype=wp.float32, device=device)
+        self.on_gpu = wp.get_device(device).is_cuda
+
+    def finish(self, threads: int, out: wp.array) -> None:
+        if self.on_gpu:
+            wp.launch(_sum_row_groups, (REDUCE_GROUP, self.num_sums), [self.partials, threads, REDUCE_GROUP,
+                                                                      self.groups], device=self.device)
+            wp.launch(_sum_rows, self.num_sums, [self.groups, REDUCE_GROUP, out], device=self.device)
+        else:
+            wp.launch(_sum_rows, self.num_sums, [self.partials, threads, out], device=self.device)
 
 
 RAYCAST = Registry("raycast")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import RESAMPLE, launch_reduction, pick_device
+from kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device
 
 
 @wp.kernel
@@ -35,7 +35,7 @@ vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 @wp.kernel
 def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
-               sums: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2, stride: int):
+               partials: wp.array2d(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2, stride: int):
     """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w, sum w x^2,
     sum w y^2], x and y taken relative to ``centre`` (so that the spread does not cancel in float32)."""
     acc = vec8()
@@ -47,7 +47,7 @@ def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32
         y = p[1] - centre[1]
         acc += vec8(v * v, v * x, v * y, v * wp.cos(p[2]), v * wp.sin(p[2]), v, v * x * x, v * y * y)
     for c in range(8):
-        wp.atomic_add(sums, c, acc[c])
+        partials[wp.tid(), c] = acc[c]
 
 
 @wp.func
@@ -111,15 +111,16 @@ class ParticleWeights:
         self.cdf = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
         self.sums = wp.zeros(8, dtype=wp.float32, device=d)
+        self.partial = PartialSums(8, d)
 
     def update(self, log_w: wp.array, particles: wp.array) -> None:
         if log_w.shape[0] != self.w.shape[0]:
             raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
         self.top.fill_(-3.0e38)
-        self.sums.zero_()
         launch_reduction(max_kernel, log_w.shape[0], [log_w, self.top], self.device)
-        launch_reduction(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.sums, particles, self.centre],
-                         self.device)
+        threads = launch_reduction(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.partial.partials,
+                                                                particles, self.centre], self.device)
+        self.partial.finish(threads, self.sums)
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
     def summary(self, sums: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
@@ -195,16 +196,16 @@ def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=w
 
 @wp.kernel
 def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32),
-                        top: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32), stride: int):
-    """out = [sum of exp(log_lik - top), count] over the particles not marked in ``skip``."""
+                        top: wp.array(dtype=wp.float32), partials: wp.array2d(dtype=wp.float32), stride: int):
+    """Row t of partials = [sum of exp(log_lik - top), count] over thread t's particles not marked in ``skip``."""
     total = float(0.0)
     count = float(0.0)
     for i in range(wp.tid(), log_lik.shape[0], stride):
         if skip[i] == 0:
             total += wp.exp(log_lik[i] - top[0])
             count += 1.0
-    wp.atomic_add(out, 0, total)
-    wp.atomic_add(out, 1, count)
+    partials[wp.tid(), 0] = total
+    partials[wp.tid(), 1] = count
 
 
 @wp.kernel
@@ -231,6 +232,7 @@ class LogMeanLikelihood:
         self.device = pick_device(device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
         self.acc = wp.zeros(2, dtype=wp.float32, device=self.device)
+        self.partial = PartialSums(2, self.device)
         self.none = None
 
     def __call__(self, log_lik: wp.array, skip: wp.array | None = None) -> float:
@@ -239,9 +241,10 @@ class LogMeanLikelihood:
                 self.none = wp.zeros(log_lik.shape[0], dtype=wp.int32, device=self.device)
             skip = self.none
         self.top.fill_(-3.0e38)
-        self.acc.zero_()
         launch_reduction(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], self.device)
-        launch_reduction(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top, self.acc], self.device)
+        threads = launch_reduction(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top,
+                                                                           self.partial.partials], self.device)
+        self.partial.finish(threads, self.acc)
         acc = self.acc.numpy()
         if acc[1] == 0:
             return -np.inf

@@ -239,25 +239,28 @@ def make_likelihood_field_kernel(z_hit: float, z_rand: float, sigma_hit: float, 
     def field(dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
               T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
               log_lik: wp.array(dtype=wp.float32)):
-        p, b = wp.tid()
-        m = measured[b]
-        if not (m == m):
-            return
-        end = beam_origin(particles[p], T_base_laser) + m * beam_direction(particles[p], T_base_laser, angles[b])
-        ix = int(wp.floor((end[0] - origin[0]) / res))
-        iy = int(wp.floor((end[1] - origin[1]) / res))
-        d = wp.static(max_dist)
-        if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
-            d = wp.min(dist[iy, ix], wp.static(max_dist))
-        q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(z_rand / max_range)
-        wp.atomic_add(log_lik, p, wp.log(q))
+        p = wp.tid()
+        s = float(0.0)
+        for b in range(angles.shape[0]):
+            m = measured[b]
+            if m == m:  # NaN: invalid beam
+                end = beam_origin(particles[p], T_base_laser) + m * beam_direction(particles[p], T_base_laser, angles[b])
+                ix = int(wp.floor((end[0] - origin[0]) / res))
+                iy = int(wp.floor((end[1] - origin[1]) / res))
+                d = wp.static(max_dist)
+                if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
+                    d = wp.min(dist[iy, ix], wp.static(max_dist))
+                q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(z_rand / max_range)
+                s += wp.log(q)
+        log_lik[p] = s
 
     return field
 
 
 class _GridModel:
-    """Shared by the grid baselines: the grid on the device, its frame, and one (particle x beam) launch
-    that adds each valid beam's log q into ``log_lik``."""
+    """Shared by the grid baselines: the grid on the device, its frame, and one launch, a thread per
+    particle adding its valid beams' log q in beam order into ``log_lik`` (no atomics: the same bits on
+    every run; on the CPU the order the earlier thread-per-beam atomics took, so results are unchanged)."""
 
     name = "grid model"
     capturable = True  # launches only: a filter step may capture it in a graph
@@ -271,8 +274,7 @@ class _GridModel:
         return occupancy
 
     def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
-        log_lik.zero_()
-        wp.launch(self.kernel, (particles.shape[0], angles.shape[0]),
+        wp.launch(self.kernel, particles.shape[0],
                   [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
                    log_lik], device=self.device)
 
@@ -281,7 +283,7 @@ class LikelihoodField(_GridModel):
     """The likelihood-field model (Thrun et al. Table 6.3; AMCL's default): each beam's end point scores by
     its distance d to the nearest occupied cell, q = z_hit N(d; 0, sigma_hit) + z_rand / max_range (the
     Gaussian unnormalised, as AMCL), d capped at ``max_dist_m``; log w = sum over valid beams of log q.
-    End points off the map count as ``max_dist_m`` away. One thread per (particle, beam), atomic sums."""
+    End points off the map count as ``max_dist_m`` away. One thread per particle, beams in order."""
 
     name = "likelihood_field"
 
@@ -304,22 +306,24 @@ def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_shor
     def beam(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
              T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
              log_lik: wp.array(dtype=wp.float32)):
-        p, b = wp.tid()
-        z = measured[b]
-        if not (z == z):
-            return
-        expected = dda_range(occ, origin, res, beam_origin(particles[p], T_base_laser),
-                             beam_direction(particles[p], T_base_laser, angles[b]),
-                             wp.static(max_range), wp.static(occ_threshold))
-        e = z - expected
-        q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
-        if z < expected:
-            q += wp.static(z_short) * wp.static(lambda_short) * wp.exp(-wp.static(lambda_short) * z)
-        if z >= wp.static(max_range):
-            q += wp.static(z_max)
-        else:
-            q += wp.static(z_rand / max_range)
-        wp.atomic_add(log_lik, p, wp.log(q))
+        p = wp.tid()
+        s = float(0.0)
+        for b in range(angles.shape[0]):
+            z = measured[b]
+            if z == z:  # NaN: invalid beam
+                expected = dda_range(occ, origin, res, beam_origin(particles[p], T_base_laser),
+                                     beam_direction(particles[p], T_base_laser, angles[b]),
+                                     wp.static(max_range), wp.static(occ_threshold))
+                e = z - expected
+                q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
+                if z < expected:
+                    q += wp.static(z_short) * wp.static(lambda_short) * wp.exp(-wp.static(lambda_short) * z)
+                if z >= wp.static(max_range):
+                    q += wp.static(z_max)
+                else:
+                    q += wp.static(z_rand / max_range)
+                s += wp.log(q)
+        log_lik[p] = s
 
     return beam
 
