@@ -108,6 +108,23 @@ def matcher_table() -> str:
     return "\n".join(rows)
 
 
+def neff_table() -> str:
+    rows = ["| log | our runs | resamplings per run: released / ours (medians; Mann-Whitney p) | N_eff quartiles on the "
+            "scans not resampled: released / ours (KS p) |", "|---|---|---|---|"]
+    for ds in ("fr079", "intel", "mit_csail"):
+        p = REPO / "results" / "checks" / f"gmapping_neff_gmapping_{ds}.json"
+        if not p.is_file():
+            rows.append(f"| {ds} | not run | | |")
+            continue
+        r = json.loads(p.read_text())
+        q = lambda v: ", ".join(f"{x:.1f}" for x in v)  # noqa: E731
+        variant = "the wrapper's beam layout" if any("amin" in n for n in r["our_runs"]) else "the log's beam layout"
+        rows.append(f"| {ds} | {len(r['our_runs'])} x `gmapping_code`, {variant} | {r['resamplings_median'][0]:g} / "
+                    f"{r['resamplings_median'][1]:g} (p {r['resamplings_mannwhitney_p']:.2f}) | "
+                    f"{q(r['neff_quartiles_released'])} / {q(r['neff_quartiles_ours'])} (p {r['neff_ks_p']:.2g}) |")
+    return "\n".join(rows)
+
+
 def slam_table() -> str:
     slam, reference = collect_slam(outputs=None), collect_slam_reference(outputs=None)  # kept runs only
     rows = ["| log | released C++ (wrapper's settings) | ours, `gmapping_code` | ours, `gmapping_code`, the wrapper's "
@@ -200,8 +217,19 @@ Ours are the numpy twins of the kernels, which the kernel parity tests tie to th
 {matcher_table()}
 
 The score, the likelihood and the hill climber agree to float rounding. The fr079 gap is not in the matcher
-model. What is left to compare is the proposal's Gaussian, the weights and N_eff along a run, and the
-resampling decisions.
+model.
+
+**Weights, N_eff and resampling along whole runs** (`python -m eval.reference.gmapping +exp=gmapping_<log>
+--neff [GLOB]`; results/checks/gmapping_neff_*.json). Our `gmapping_code` runs are set against the released
+code's, 10 seeds each, on the same log.
+- The released driver logs N_eff after `processScan`. That value is normalised again after resampling, so a
+  resampled scan reads exactly N; that is how its resamplings are counted.
+- The runs are stochastic and drift apart, so what is compared are distributions.
+- The scans of a run are correlated, so the KS p-value overstates the evidence.
+
+{neff_table()}
+
+Left to compare: the proposal's Gaussian (ours `paper`; the released code takes the matched pose).
 
 - **A trap in the released code.** The `ScanMatcher` constructor leaves `generateMap` unset: the line that
   would set it sits inside a comment block. A first version of our driver did not set it. Its matcher then

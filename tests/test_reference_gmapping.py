@@ -57,3 +57,22 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
     # the no-return beams go out as the log's no-return value, every beam of every scan
     first = scans.read_text().splitlines()[0].split()
     assert int(first[4]) == 24 and len(first) == 5 + 24
+
+
+def test_neff_check_reads_the_released_resamplings_from_its_post_resampling_trace(tmp_path):
+    """The released driver logs N_eff after resampling (a resampled scan reads N); ours logs it before, with a
+    resampled flag. Two released runs (3 and 1 resamplings) against two of ours (2 and 2)."""
+    exp = tmp_path / "gmapping_x"
+    traces = {0: [30, 22.5, 30, 18.0, 30, 30], 1: [30, 25.0, 30, 21.0, 19.5, 17.0]}
+    for seed, values in traces.items():
+        d = exp / f"reference-gmapping-30p-seed{seed}"
+        d.mkdir(parents=True)
+        np.savetxt(d / "neff.txt", np.column_stack([np.arange(len(values)), values]), fmt="%.6f")
+        ours = exp / f"slam-gmapping_code-selective-30p-seed{seed}"
+        ours.mkdir()
+        (ours / "neff.csv").write_text("scan,neff,resampled,match_rounds\n" + "".join(
+            f"{k},{v},{int(v < 15)},3\n" for k, v in enumerate([29.0, 12.0, 24.0, 11.0, 20.0])))
+    r = ref.neff_check("gmapping_x", outputs=tmp_path)
+    assert sorted(r["resamplings_released"]) == [1, 3] and r["resamplings_ours"] == [2, 2]
+    assert r["scans_released"] == 6 and r["scans_ours"] == 6  # 2 + 4 not resampled; 3 + 3 of ours
+    assert r["neff_quartiles_ours"][1] == 24.0 and 0 <= r["neff_ks_p"] <= 1

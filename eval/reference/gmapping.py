@@ -10,6 +10,7 @@ seeds (``seed`` k seeds drand48 with k + 1: 0 would leave it unseeded), and scor
 runs: a pose at every scan (the best particle's pose at the last processed scan plus the odometry since),
 the relations on the laser's path. Runs go to ``outputs/<exp>/reference-gmapping-<N>p[-<settings>]-seed<k>/`` (metrics.json,
 trajectory.tum, neff.txt); ``--keep`` merges them into ``results/slam/reference/<exp>.json``.
+``--matcher``, ``--motion`` and ``--neff`` compare one part of ours with the released code's instead.
 
 Settings left at the wrapper's defaults unless given with ``--set key=value`` (the driver's parameter names).
 """
@@ -207,6 +208,43 @@ def matcher_check(log, registered: int = 20, queries: int = 10, usable_m: float 
                                                   for c in climbs))}
 
 
+def neff_check(exp: str, ours: str = "slam-gmapping_code-selective-30p-seed*", released: str = "reference-gmapping-30p-seed*",
+               outputs: Path = REPO / "outputs") -> dict:
+    """The resampling decisions and N_eff along whole runs, ours (``neff.csv`` of the slam runs matching
+    ``ours``) against the released code's (``neff.txt`` of the runs matching ``released``), both in
+    ``outputs/<exp>/``. The released driver logs N_eff after ``processScan``, which normalises again after
+    resampling: a scan it resampled reads exactly N (30), so those are its resamplings (the first scan, which
+    registers, also reads N). The runs are stochastic and drift apart, so the comparison is of distributions:
+    resamplings per run (Mann-Whitney) and N_eff on the scans that were not resampled (quartiles, KS; the
+    scans of a run are correlated, so its p-value is an upper bound on the evidence)."""
+    from scipy.stats import ks_2samp, mannwhitneyu
+
+    root = Path(outputs) / exp
+    rel_runs, our_runs = sorted(root.glob(f"{released}/neff.txt")), sorted(root.glob(f"{ours}/neff.csv"))
+    if not rel_runs or not our_runs:
+        raise FileNotFoundError(f"{root}: need runs of both ({released}/neff.txt: {len(rel_runs)}, "
+                                f"{ours}/neff.csv: {len(our_runs)})")
+    rel_counts, rel_neff, our_counts, our_neff = [], [], [], []
+    for f in rel_runs:
+        a = np.loadtxt(f, ndmin=2)[:, 1]
+        n = float(np.max(a))  # the particle count: what a fresh or resampled set reads
+        resampled = np.abs(a[1:] - n) < 1e-4
+        rel_counts.append(int(resampled.sum()))
+        rel_neff.append(a[1:][~resampled])
+    for f in our_runs:
+        o = np.genfromtxt(f, delimiter=",", names=True)
+        our_counts.append(int(o["resampled"].sum()))
+        our_neff.append(o["neff"][o["resampled"] == 0])
+    r, o = np.concatenate(rel_neff), np.concatenate(our_neff)
+    return {"exp": exp, "released_runs": [f.parent.name for f in rel_runs], "our_runs": [f.parent.name for f in our_runs],
+            "resamplings_released": rel_counts, "resamplings_ours": our_counts,
+            "resamplings_median": [float(np.median(rel_counts)), float(np.median(our_counts))],
+            "resamplings_mannwhitney_p": float(mannwhitneyu(rel_counts, our_counts).pvalue),
+            "neff_quartiles_released": np.quantile(r, [0.25, 0.5, 0.75]).tolist(),
+            "neff_quartiles_ours": np.quantile(o, [0.25, 0.5, 0.75]).tolist(),
+            "neff_ks_p": float(ks_2samp(r, o).pvalue), "scans_released": int(len(r)), "scans_ours": int(len(o))}
+
+
 def seeds_of(text: str) -> list[int]:
     if "-" in text:
         lo, hi = text.split("-")
@@ -226,7 +264,20 @@ def main(argv=None):
                     "and hill climbing against the released one's on the log's scans (results/checks/gmapping_matcher_<exp>.json)")
     ap.add_argument("--motion", action="store_true", help="run nothing else: our motion model against the "
                     "released one's samples (results/checks/gmapping_motion.json)")
+    ap.add_argument("--neff", metavar="GLOB", nargs="?", const="slam-gmapping_code-selective-30p-seed*",
+                    help="run nothing else: resamplings and N_eff of our runs outputs/<exp>/GLOB against the released "
+                    "code's (results/checks/gmapping_neff_<exp>.json)")
     a = ap.parse_args(argv)
+    if a.neff:
+        exp = a.exp.removeprefix("+exp=")
+        r = neff_check(exp, a.neff)
+        print(f"{exp}: resamplings per run, released {sorted(r['resamplings_released'])} (median "
+              f"{r['resamplings_median'][0]:g}), ours {sorted(r['resamplings_ours'])} (median {r['resamplings_median'][1]:g}); "
+              f"Mann-Whitney p {r['resamplings_mannwhitney_p']:.2g}")
+        print(f"N_eff on scans not resampled, quartiles: released {np.round(r['neff_quartiles_released'], 2).tolist()}, "
+              f"ours {np.round(r['neff_quartiles_ours'], 2).tolist()}; KS p {r['neff_ks_p']:.2g}")
+        write_json(REPO / "results" / "checks" / f"gmapping_neff_{exp}.json", r)
+        return 0
     if a.motion:
         r = motion_check()
         print("| step | x mean: released / ours | y mean | theta mean | std ratio ours/released (x, y, theta) | agree |")
