@@ -36,6 +36,17 @@ import torch.nn.functional as F
 from kernels import RENDER
 
 
+@contextlib.contextmanager
+def evaluating(model):
+    """The model in eval mode (batch norm from its running statistics, as evaluation reads it) for a block."""
+    was_training = model.training
+    model.eval()
+    try:
+        yield model
+    finally:
+        model.train(was_training)
+
+
 class OccupancyGrid:
     def __init__(self, origins: np.ndarray, ends: np.ndarray, tc, device):
         self.res, self.threshold, self.decay, self.dilate = (float(tc.grid_resolution_m), float(tc.grid_threshold),
@@ -60,11 +71,8 @@ class OccupancyGrid:
     def update(self, model, amp=contextlib.nullcontext, chunk: int = 1 << 16) -> None:
         """Read the field once at a random point of every cell and refresh values and the occupied mask."""
         pts = self._corners + torch.rand(self._corners.shape, device=self.device) * self.res
-        was_training = model.training
-        model.eval()
-        with amp():
+        with evaluating(model), amp():
             p = torch.cat([model(pts[s:s + chunk]).float() for s in range(0, len(pts), chunk)])
-        model.train(was_training)
         self.latest = p.view(self.shape)
         self.values = torch.maximum(self.values * self.decay, self.latest)
         self._refresh_mask()
@@ -84,11 +92,8 @@ class OccupancyGrid:
             return keep
         with torch.no_grad():
             flat = keep.reshape(-1).nonzero().squeeze(1)
-            was_training = model.training
-            model.eval()
-            with amp():
+            with evaluating(model), amp():
                 p_kept = model(points.reshape(-1, 2)[flat]).float() if len(flat) else torch.zeros(0, device=points.device)
-            model.train(was_training)
             p = torch.zeros(keep.numel(), device=points.device).index_copy(0, flat, p_kept).view(keep.shape)
             T = torch.cumprod(torch.cat([torch.ones_like(p[:, :1]), 1.0 - p[:, :-1]], 1), 1)
         return keep & (T >= self.t_min)

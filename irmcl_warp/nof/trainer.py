@@ -50,6 +50,11 @@ class Trainer:
         # the training pass may run compiled; the grid's readings (eval mode, no gradient) use the module as is
         self.net = torch.compile(self.model, dynamic=True) if tc.compile else self.model
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
+        if self.grid is not None:  # its readings grow with the map's area: say what they cost
+            cells = self.grid.values.numel()
+            print(f"occupancy grid: {self.grid.shape[0]} x {self.grid.shape[1]} cells of {tc.grid_resolution_m} m, "
+                  f"read every {tc.grid_every} steps ({cells:,} points, {cells / (tc.batch_rays * tc.num_samples):.0%} "
+                  f"of a batch's samples)")
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
         self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay,
                                     fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None)
