@@ -56,7 +56,7 @@ class OccupancyGrid:
         lo = pts.min(0) - margin
         self.shape = tuple(int(math.ceil(v)) for v in ((pts.max(0) + margin - lo) / self.res)[::-1])  # (H, W)
         self.origin_xy = (float(lo[0]), float(lo[1]))
-        self.device, self.candidates = device, torch.zeros((), device=device)
+        self.device, self.read = device, torch.zeros((), device=device)  # samples the last keep() read without gradient
         self.values = torch.zeros(self.shape, dtype=torch.float32, device=device)  # decaying maximum: the mask
         self.latest = torch.zeros(self.shape, dtype=torch.float32, device=device)  # last reading: the transmittance
         self.occupied = torch.ones(self.shape, dtype=torch.bool, device=device)
@@ -87,9 +87,10 @@ class OccupancyGrid:
         """keep [R, N] for sample points [R, N, 2]: the samples the MLP is asked about (``model`` is read
         without gradient to end the beams when ``grid_end=field``)."""
         keep = self.keep_fn(points, self.latest, self.occupied)
-        self.candidates = keep.sum()  # samples read (without gradient when grid_end=field)
         if self.end != "field" or not self.t_min:
+            self.read = torch.zeros((), device=points.device)
             return keep
+        self.read = keep.sum()
         with torch.no_grad():
             flat = keep.reshape(-1).nonzero().squeeze(1)
             with evaluating(model), amp():

@@ -112,8 +112,7 @@ class Trainer:
                 self.grid.update(self.model, self.amp)
             keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
             self.kept.append(keep.sum() / len(idx))
-            self.read.append(self.grid.candidates / len(idx) if tc.grid_end == "field" and tc.grid_t_min > 0
-                             else torch.zeros((), device=self.device))
+            self.read.append(self.grid.read / len(idx))
         with self.amp():
             pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep)
         loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
