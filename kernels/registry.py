@@ -76,15 +76,6 @@ def launch_reduction(kernel, n: int, inputs: list, device: str) -> int:
 
 
 @wp.kernel
-def _sum_rows(partials: wp.array2d(dtype=wp.float32), rows: int, out: wp.array(dtype=wp.float32)):
-    c = wp.tid()
-    s = float(0.0)
-    for r in range(rows):
-        s += partials[r, c]
-    out[c] = s
-
-
-@wp.kernel
 def _sum_row_groups(partials: wp.array2d(dtype=wp.float32), rows: int, group: int,
                     out: wp.array2d(dtype=wp.float32)):
     g, c = wp.tid()
@@ -112,12 +103,12 @@ class PartialSums:
         self.on_gpu = wp.get_device(device).is_cuda
 
     def finish(self, threads: int, out: wp.array) -> None:
+        rows, total = self.partials, out.reshape((1, self.num_sums))  # the sums as one group of all rows
         if self.on_gpu:
             wp.launch(_sum_row_groups, (REDUCE_GROUP, self.num_sums), [self.partials, threads, REDUCE_GROUP,
                                                                       self.groups], device=self.device)
-            wp.launch(_sum_rows, self.num_sums, [self.groups, REDUCE_GROUP, out], device=self.device)
-        else:
-            wp.launch(_sum_rows, self.num_sums, [self.partials, threads, out], device=self.device)
+            rows, threads = self.groups, REDUCE_GROUP
+        wp.launch(_sum_row_groups, (1, self.num_sums), [rows, threads, threads, total], device=self.device)
 
 
 RAYCAST = Registry("raycast")
