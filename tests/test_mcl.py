@@ -259,22 +259,17 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
     """mcl.step_graph=on (one captured graph per step; Warp's CPU graph here, a CUDA graph on a GPU) against
     off: the same estimates, N_eff and particles bit for bit, through selective resampling (both ways) and a
     reduce() that reallocates every array the graphs were captured on."""
+    from eval.determinism import run
+
     log, nog = _world_and_map(duration_s=4.0)
     corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
     maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
     seed = int(rng.integers(1 << 16))
     runs = {}
     for mode in ("off", "on"):
-        cfg = MCLConfig(num_particles=600, num_samples=64, seed=seed, weighting=weighting, step_graph=mode)
-        pf = build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, maps)
-        pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
-        out = []
-        for k in range(1, len(log)):
-            if k == len(log) // 2:
-                pf.reduce(300)
-            out.append(pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k]))
+        poses, neffs, pf = run(log, nog, maps, weighting, seed, mode, DEVICE)  # the run eval.determinism repeats
         assert pf.use_graph == (mode == "on") and len(pf.graphs) == (2 if mode == "on" else 0)
-        runs[mode] = (np.array([o[0] for o in out]), np.array([o[1] for o in out]), pf.particles.numpy())
+        runs[mode] = (poses, neffs, pf.particles.numpy())
     neffs = runs["off"][1]
     assert (neffs < 0.5 * 600).any() and (neffs >= 0.5 * 300).any(), "both resampling decisions taken"
     # no float atomics in a step (sums in a fixed order, PartialSums): bit for bit on a GPU as on the CPU
