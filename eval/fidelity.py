@@ -92,37 +92,38 @@ def _fmt(errs) -> str:
     return f"{k}/{n}" + (f", {conv:.3f} m" if conv is not None else "") + f" (all runs {mean:.3f} m)"
 
 
-def matcher_table() -> str:
-    rows = ["| log | scans registered / scored | poses scored | score: largest relative difference | log-likelihood | "
-            "hill climbing from perturbed poses: largest pose difference (m) / score difference |",
-            "|---|---|---|---|---|---|"]
+def check_table(check: str, header: str, row) -> str:
+    """One row per log from results/checks/gmapping_<check>_gmapping_<log>.json (``row(log, result)``), or
+    "not run"; ``header``: the column titles, "|"-separated."""
+    columns = header.count("|") - 1
+    rows = [header, "|" + "---|" * columns]
     for ds in ("fr079", "intel", "mit_csail"):
-        p = REPO / "results" / "checks" / f"gmapping_matcher_gmapping_{ds}.json"
-        if not p.is_file():
-            rows.append(f"| {ds} | not run | | | | |")
-            continue
-        r = json.loads(p.read_text())
-        rows.append(f"| {ds} | {len(r['registered_scans'])} / {len(r['query_scans'])} | {len(r['scores'])} | "
-                    f"{r['score_rel_diff_max']:.1e} | {r['loglik_rel_diff_max']:.1e} | "
-                    f"{r['climb_pose_diff_m_max']:.1e} / {r['climb_score_rel_diff_max']:.1e} |")
+        p = REPO / "results" / "checks" / f"gmapping_{check}_gmapping_{ds}.json"
+        rows.append(row(ds, json.loads(p.read_text())) if p.is_file() else f"| {ds} | not run |" + " |" * (columns - 2))
     return "\n".join(rows)
+
+
+def matcher_table() -> str:
+    return check_table(
+        "matcher", "| log | scans registered / scored | poses scored | score: largest relative difference | log-likelihood | "
+        "hill climbing from perturbed poses: largest pose difference (m) / score difference |",
+        lambda ds, r: f"| {ds} | {len(r['registered_scans'])} / {len(r['query_scans'])} | {len(r['scores'])} | "
+                      f"{r['score_rel_diff_max']:.1e} | {r['loglik_rel_diff_max']:.1e} | "
+                      f"{r['climb_pose_diff_m_max']:.1e} / {r['climb_score_rel_diff_max']:.1e} |")
+
+
+def neff_row(ds: str, r: dict) -> str:
+    q = ", ".join
+    variant = "the wrapper's beam layout" if any("amin" in n for n in r["our_runs"]) else "the log's beam layout"
+    return (f"| {ds} | {len(r['our_runs'])} x `gmapping_code`, {variant} | {r['resamplings_median'][0]:g} / "
+            f"{r['resamplings_median'][1]:g} (p {r['resamplings_mannwhitney_p']:.2f}) | "
+            f"{q(f'{x:.1f}' for x in r['neff_quartiles_released'])} / {q(f'{x:.1f}' for x in r['neff_quartiles_ours'])} "
+            f"(p {r['neff_ks_p']:.2g}) |")
 
 
 def neff_table() -> str:
-    rows = ["| log | our runs | resamplings per run: released / ours (medians; Mann-Whitney p) | N_eff quartiles on the "
-            "scans not resampled: released / ours (KS p) |", "|---|---|---|---|"]
-    for ds in ("fr079", "intel", "mit_csail"):
-        p = REPO / "results" / "checks" / f"gmapping_neff_gmapping_{ds}.json"
-        if not p.is_file():
-            rows.append(f"| {ds} | not run | | |")
-            continue
-        r = json.loads(p.read_text())
-        q = lambda v: ", ".join(f"{x:.1f}" for x in v)  # noqa: E731
-        variant = "the wrapper's beam layout" if any("amin" in n for n in r["our_runs"]) else "the log's beam layout"
-        rows.append(f"| {ds} | {len(r['our_runs'])} x `gmapping_code`, {variant} | {r['resamplings_median'][0]:g} / "
-                    f"{r['resamplings_median'][1]:g} (p {r['resamplings_mannwhitney_p']:.2f}) | "
-                    f"{q(r['neff_quartiles_released'])} / {q(r['neff_quartiles_ours'])} (p {r['neff_ks_p']:.2g}) |")
-    return "\n".join(rows)
+    return check_table("neff", "| log | our runs | resamplings per run: released / ours (medians; Mann-Whitney p) | "
+                       "N_eff quartiles on the scans not resampled: released / ours (KS p) |", neff_row)
 
 
 def neff_verdict() -> str:
