@@ -97,12 +97,12 @@ def bench_trainer_steps(a, device) -> list[dict]:
     from irmcl_warp.nof.trainer import Trainer
     from irmcl_warp.services.data import far_bound_m, prepare_beams
 
-    rows = []
+    rows, sets = [], None
     for variant in a.variants:
         sets_ = [f"train.{kv}" for kv in variant.split(",")]
         cfg = compose_config([f"+exp={a.exp}", f"train={a.preset}", *sets_, f"train.batch_rays={a.batch[0]}",
                               f"device={device}"])
-        sets = {"train": prepare_beams(cfg)["train"]}
+        sets = sets or {"train": prepare_beams(cfg)["train"]}  # the rays do not depend on train= settings
         model, meta = load_nof(a.init, device)
         if ModelConfig(**meta["model_config"]) != ModelConfig(**cfg.model):
             raise ValueError(f"{a.init}: made with another network than model= of +exp={a.exp}")
