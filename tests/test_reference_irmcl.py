@@ -101,3 +101,25 @@ def test_their_printed_summary_and_step_times_are_read_back():
     # their evaluation failing after the header leaves no summary instead of a wrong one
     broken = ref.parse_their_log("  location_rmse\t location_ptc5\nTraceback (most recent call last):\n")
     assert "their_summary" not in broken
+
+
+def test_a_split_goes_out_as_their_dataset_reads_it(tmp_path):
+    """Their loader takes transform_matrix[:2, :3] as [R | t] and marks beams >= max_range invalid."""
+    from irmcl_warp.nof.beams import BeamSet
+    rng = np.random.default_rng(3)
+    poses = np.column_stack([rng.uniform(-5, 5, 4), rng.uniform(-5, 5, 4), rng.uniform(-3, 3, 4)])
+    ranges = rng.uniform(0.5, 9.0, (4, 7)).astype(np.float32)
+    ranges[1, 2] = np.nan
+    valid = np.isfinite(ranges)
+    valid[2, 5] = False  # a beam ours does not score
+    angles = np.linspace(-1.5, 1.5, 7)
+    ref.export_split(BeamSet(np.arange(4.0), poses, ranges, angles, valid, "test"), 10.0, tmp_path / "test.json")
+    doc = json.loads((tmp_path / "test.json").read_text())
+    n = len(np.arange(doc["angle_min"], doc["angle_max"], doc["angle_res"]))  # their directions
+    assert n == 7 and doc["max_range"] == 10.0
+    for (x, y, yaw), scan, r, v in zip(poses, doc["scans"], ranges, valid):
+        Rt = np.asarray(scan["transform_matrix"])[:2, :3]
+        np.testing.assert_allclose(Rt, [[np.cos(yaw), -np.sin(yaw), x], [np.sin(yaw), np.cos(yaw), y]], atol=1e-12)
+        got = np.asarray(scan["range_readings"])
+        np.testing.assert_allclose(got[v], r[v], atol=1e-4)
+        assert (got[~v] >= doc["max_range"]).all()  # invalid there

@@ -10,7 +10,8 @@
 #   venv/  Python with what their MCL imports (torch CPU, numpy, scipy, matplotlib, evo, pyyaml)
 #   their particle-filter library (motion model and resampling, C++), built in src/mcl/ with a ctypes binding
 #   of ours (irmcl_pf_shim.cpp, irmcl_pf_binding.py) in place of their pybind11 module
-# Needs g++ and Eigen 3 (Debian: apt-get install libeigen3-dev).
+# Needs g++ and Eigen 3 (Debian: apt-get install libeigen3-dev). WITH_EVAL=1 also installs what their eval.py
+# needs (open3d, about 400 MB) for python -m eval.reference.irmcl --stage synthesis.
 set -euo pipefail
 PIN=aab8c91  # "Merge pull request #1 from PRBonn/dev", the newest commit of the repository
 SRC=${1:-${IRMCL_SRC:?give the ir-mcl clone as an argument or in IRMCL_SRC}}
@@ -28,6 +29,9 @@ if [ ! -x "$OUT/venv/bin/python" ]; then
   python3 -m venv "$OUT/venv"
   "$OUT/venv/bin/pip" install -q torch==2.13.0  # the CPU build (a local file on the project's machines)
   "$OUT/venv/bin/pip" install -q numpy scipy matplotlib pyyaml evo==1.30.6  # their utils.py passes max_diff positionally, which evo 1.38 refuses
+fi
+if [ "${WITH_EVAL:-0}" = 1 ]; then  # their eval.py (Table I's metrics): open3d for the Chamfer distance, tqdm
+  "$OUT/venv/bin/pip" install -q open3d tqdm
 fi
 PY="$OUT/venv/bin/python"
 LIB="$OUT/src/mcl/srrg_utils/pf_library"

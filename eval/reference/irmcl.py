@@ -43,11 +43,11 @@ from irmcl_warp.io import write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mcl.stage import start_indices
 from irmcl_warp.mcl.folders import particles_tag
-from irmcl_warp.nof.folders import train_folder
+from irmcl_warp.nof.folders import synthesis_folder, train_folder
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import localization_metrics
-from irmcl_warp.services.outputs import stage_dir, write_json
+from irmcl_warp.services.outputs import file_digest, stage_dir, write_json
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD = REPO / "outputs" / "reference" / "irmcl"
@@ -81,6 +81,25 @@ def their_checkpoint(nof_pt: Path) -> dict:
     return {"state_dict": out}
 
 
+def our_checkpoint(their_ckpt: Path, near_m: float, far_m: float) -> dict:
+    """Their checkpoint's network (their names, as their train.py saves it through pytorch-lightning) as our
+    nof.pt: the inverse of ``their_checkpoint``."""
+    sd = torch.load(their_ckpt, map_location="cpu", weights_only=False)
+    sd = sd.get("state_dict", sd)
+    model = {}
+    for key, value in sd.items():
+        if not key.startswith("nof."):
+            continue
+        part, *rest = key.removeprefix("nof.").split(".")
+        if part in ("layer1", "layer2"):
+            block, sub = divmod(int(rest[0]), 3)
+            model[f"{'head' if part == 'layer1' else 'tail'}.{block}.{sub}.{rest[1]}"] = value
+        elif part == "occ_out":
+            model[f"out.{rest[1]}"] = value
+    return {"model": model, "model_config": {"num_freqs": 10, "width": 256, "depth": 8, "skip_after": 4},
+            "near_m": near_m, "far_m": far_m, "train_preset": "the authors' train.py", "source": str(their_ckpt)}
+
+
 def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
     """Their sequence file of the scans ``idx`` into ``folder``; returns their start index (the first scan
     with ground truth: they start the particles around it)."""
@@ -105,6 +124,26 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
     known = idx[gt_known]
     write_tum(folder / "gt.tum", log.stamps[known] - t0, log.ground_truth[known])
     return int(np.flatnonzero(gt_known)[0])
+
+
+def export_split(test, far: float, path: Path) -> None:
+    """One of our splits (a BeamSet) as their dataset's <split>.json: per scan the laser's 3x3 pose
+    (``transform_matrix``) and the ranges, every beam ours does not score (no return, beyond far) at
+    ``max_range`` = far, which their loader marks invalid (>= max_range). ``angle_max`` lies half a step
+    below the end, so that their ``arange(angle_min, angle_max, angle_res)`` has one direction per beam."""
+    a = test.angles_rad
+    res = float(np.median(np.diff(a)))
+    ranges = np.where(test.valid & np.isfinite(test.ranges_m), test.ranges_m, far)
+    scans = []
+    for (x, y, yaw), r in zip(test.T_map_laser, ranges):
+        # a 2D homogeneous transform: their loader takes [:2, :3] as [R | t]
+        T = [[float(np.cos(yaw)), float(-np.sin(yaw)), float(x)], [float(np.sin(yaw)), float(np.cos(yaw)), float(y)],
+             [0.0, 0.0, 1.0]]
+        scans.append({"transform_matrix": T, "odom": [0.0, 0.0, 0.0], "range_readings": [round(float(v), 4) for v in r]})
+    doc = {"num_beams": int(len(a)), "angle_min": float(a[0]), "angle_max": float(a[0] + res * (len(a) - 0.5)),
+           "angle_res": res, "max_range": float(far), "scans": scans}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, json.dumps(doc).encode())
 
 
 def parse_their_log(text: str) -> dict:
@@ -144,7 +183,8 @@ def prepare(cfg) -> Path:
         raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
     far, out, src = far_bound_m(cfg), out_folder(cfg), BUILD / "src"
     out.mkdir(parents=True, exist_ok=True)
-    torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
+    if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
+        torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
     # their NOG is a box of cells around the training path, the far bound and 2 m more on every side, so that
     # no sample of a ray from a particle near the path falls outside it (their lookup does not clip)
     origins = prepare_beams(cfg)["train"].T_map_laser[:, :2]
@@ -213,6 +253,123 @@ def score(cfg) -> Path:
     return out
 
 
+def our_synthesis(cfg, nof_pt: Path) -> tuple[dict | None, str | None]:
+    """Our eval.synthesis figures of this very field: from its run folder, else from the kept results
+    (results/nof/<exp>.json) when the kept training run's validation figures are the checkpoint's own."""
+    folder = stage_dir(cfg, synthesis_folder(cfg)) / "metrics.json"
+    if folder.is_file():
+        doc, where = json.loads(folder.read_text()), str(folder)
+    else:
+        kept = REPO / "results" / "nof" / f"{cfg.exp}.json"
+        runs = json.loads(kept.read_text())["runs"] if kept.is_file() else {}
+        train, synth = runs.get(train_folder(cfg)), runs.get(synthesis_folder(cfg))
+        val = torch.load(nof_pt, map_location="cpu", weights_only=False).get("val")
+        if not (train and synth and val and train["metrics"].get("val") == val):
+            return None, None
+        doc, where = synth["metrics"], f"{kept.relative_to(REPO)} ({synthesis_folder(cfg)}; same validation figures as {nof_pt})"
+    nof = next((m for m in doc["methods"].values() if m.get("kind") == "nof"), None)
+    return ({k: nof[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")} if nof else None), where
+
+
+def their_evaluation(cfg, ckpt: Path, out: Path) -> dict:
+    """Their dataset class, render_rays and error_metrics on our test split, with the field ``ckpt`` (their
+    checkpoint format), through our driver (their eval.py prints 2 decimals); CPU or GPU, as torch finds."""
+    done_file = out / "their_eval.json"
+    if done_file.is_file() and json.loads(done_file.read_text()).get("checkpoint_sha256") == file_digest(ckpt):
+        print(f"{done_file}: their evaluation of this checkpoint is there (made here or on a GPU machine): kept")
+        return {k: v for k, v in json.loads(done_file.read_text()).items() if k != "per_scan"}
+    export_split(prepare_beams(cfg)["test"], far_bound_m(cfg), out / "data" / "test.json")
+    # their dataset class, render_rays and error_metrics through our driver (their eval.py prints 2 decimals)
+    driver = BUILD / "src" / "irmcl_eval_driver.py"
+    atomic_write_bytes(driver, Path(__file__).with_name("irmcl_eval_driver.py").read_bytes())
+    args = [str(BUILD / "venv" / "bin" / "python"), driver.name, str(out / "data"), str(ckpt), str(out / "their_eval.json")]
+    done = subprocess.run(args, cwd=BUILD / "src", capture_output=True, text=True)
+    (out / "eval.log").write_text(done.stdout + done.stderr)
+    if done.returncode != 0 or not (out / "their_eval.json").is_file():
+        raise RuntimeError(f"their evaluation failed (exit {done.returncode}); see {out / 'eval.log'}")
+    doc = json.loads(done_file.read_text())
+    atomic_write_bytes(done_file, json.dumps({**doc, "checkpoint_sha256": file_digest(ckpt)}).encode())
+    return {k: v for k, v in doc.items() if k != "per_scan"}
+
+
+def their_synthesis(cfg) -> Path:
+    """Their evaluation (eval.py's metrics, the paper's Table I) on our test split with our field, on the CPU:
+    outputs/<exp>/reference-irmcl-synthesis-<preset>/metrics.json holds their four figures beside our
+    eval.synthesis's figures of the same field and split (from its metrics.json, when it was run)."""
+    nof_pt = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
+    if not nof_pt.is_file():
+        raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
+    out = stage_dir(cfg, f"reference-irmcl-synthesis-{cfg.train.name}").resolve()
+    far = far_bound_m(cfg)
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
+        torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
+    theirs = their_evaluation(cfg, out / "nof.ckpt", out)
+    ours, ours_from = our_synthesis(cfg, nof_pt)
+    doc = {"dataset": cfg.data.name, "nof": str(nof_pt), "far_m": far, "their_eval": theirs,
+           "ours": ours,
+           "ours_from": ours_from}
+    write_json(out / "metrics.json", doc)
+    print(f"{cfg.data.name}, {cfg.train.name}: their eval.py MAE {theirs['mae_m']:.3f} m, Chamfer {theirs['chamfer_m']:.3f} m, "
+          f"F {theirs['fscore_pct']:.1f} %" + (f"; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m, "
+                                               f"F {ours['fscore_pct']:.1f} %" if ours else "; ours not run") + f" -> {out}")
+    return out
+
+
+def nof_folder(cfg) -> Path:
+    return stage_dir(cfg, "reference-irmcl-nof").resolve()
+
+
+def nof_data(cfg) -> Path:
+    """Our split as their training data (data/train.json, val.json: our trainer's evenly spread validation
+    scans, test.json) for eval/reference/train_irmcl.sh."""
+    out, far, sets = nof_folder(cfg), far_bound_m(cfg), prepare_beams(cfg)
+    val = sets["val"]
+    val = val.subset(np.linspace(0, len(val) - 1, min(len(val), cfg.train.val_scans)).round().astype(int))
+    for name, beams in (("train", sets["train"]), ("val", val), ("test", sets["test"])):
+        export_split(beams, far, out / "data" / f"{name}.json")
+    print(f"{cfg.data.name}: their training data ({len(sets['train'])} / {len(val)} / {len(sets['test'])} scans) in {out / 'data'}")
+    return out
+
+
+def their_val_curve(log_text: str) -> list[dict]:
+    """Per epoch, the validation figures their progress bar shows at the epoch's end (3 decimals)."""
+    last = {}
+    for line in log_text.replace("\r", "\n").splitlines():
+        m = re.search(r"Epoch (\d+): 100%.*val/avg_error=([0-9.]+).*val/cd=([0-9.]+).*val/fscore=([0-9.na]+)", line)
+        if m:
+            last[int(m.group(1))] = {"epoch": int(m.group(1)) + 1, "val_mae_m": float(m.group(2)), "val_chamfer_m": float(m.group(3)),
+                                     "val_fscore": float(m.group(4)) if m.group(4) != "nan" else None}
+    return [last[k] for k in sorted(last)]
+
+
+def nof_score(cfg) -> Path:
+    """Their trained field (logs/nof/version_0/checkpoints/best.ckpt, brought back from train_irmcl.sh) scored
+    on our test split by their evaluation and by ours (eval.synthesis's renderer and metrics)."""
+    from irmcl_warp.nof.synthesis import nof_ranges
+    from irmcl_warp.services.metrics import scan_synthesis_metrics
+
+    out = nof_folder(cfg)
+    ckpts = sorted(out.glob("logs/nof/version_*/checkpoints/best.ckpt"))
+    if not ckpts:
+        raise FileNotFoundError(f"{out}/logs: no best.ckpt (run bash eval/reference/train_irmcl.sh {out / 'data'} EPOCHS)")
+    ckpt = ckpts[-1]
+    theirs = their_evaluation(cfg, ckpt, out)
+    test, far = prepare_beams(cfg)["test"], far_bound_m(cfg)
+    ours_pt = out / "nof.pt"
+    torch.save(our_checkpoint(ckpt, 0.02, far), ours_pt)
+    pred, _ = nof_ranges(ours_pt, test, cfg)
+    ours = scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad)
+    meta = torch.load(ckpt, map_location="cpu", weights_only=False)
+    log = out / "train.log"  # what train_irmcl.sh printed (brought back with the checkpoints)
+    doc = {"dataset": cfg.data.name, "checkpoint": str(ckpt), "best_epoch": int(meta.get("epoch", -1)) + 1,
+           "their_val_per_epoch": their_val_curve(log.read_text()) if log.is_file() else None, "their_eval": theirs, "our_eval": {k: ours[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")}}
+    write_json(out / "metrics.json", doc)
+    print(f"{cfg.data.name}, their recipe (best epoch {doc['best_epoch']}): their evaluation MAE {theirs['mae_m']:.3f} m, "
+          f"Chamfer {theirs['chamfer_m']:.3f} m; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m -> {out}")
+    return out
+
+
 KEPT = REPO / "results" / "checks" / "irmcl_reference"
 KEEP_FILES = ("metrics.json", "config.yaml", "yaw_lag.json")
 
@@ -220,7 +377,8 @@ KEEP_FILES = ("metrics.json", "config.yaml", "yaw_lag.json")
 def keep(cfg, also: list[Path]) -> list[Path]:
     """Copy their scored run and the runs of ours it is set beside (``also``: localize folders) into
     results/checks/irmcl_reference/<exp>/<folder>/: metrics.json, config.yaml and yaw_lag.json (run
-    ``python -m eval.yaw_lag`` on them first), which is what docs/fidelity.md reads."""
+    ``python -m eval.yaw_lag`` on them first), which is what docs/fidelity.md reads; and the metrics.json of
+    the log's field checks (``--stage synthesis``, ``nof-score``) when they were made."""
     kept = []
     for run in [out_folder(cfg), *also]:
         missing = [n for n in KEEP_FILES if not (run / n).is_file()]
@@ -232,16 +390,28 @@ def keep(cfg, also: list[Path]) -> list[Path]:
             atomic_write_bytes(dest / name, (run / name).read_bytes())
         kept.append(dest)
         print(f"kept {run} -> {dest.relative_to(REPO)}")
+    # the field checks of this log, when made: their evaluation of our field, their recipe's field
+    for run in [*stage_dir(cfg, "x").resolve().parent.glob("reference-irmcl-synthesis-*"), nof_folder(cfg)]:
+        if (run / "metrics.json").is_file():
+            dest = KEPT / cfg.exp / run.name
+            dest.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(dest / "metrics.json", (run / "metrics.json").read_bytes())
+            kept.append(dest)
+            print(f"kept {run / 'metrics.json'} -> {dest.relative_to(REPO)}")
     return kept
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides: +exp=<name> train=<preset> localize.* mcl.num_particles=...")
-    ap.add_argument("--stage", choices=["prepare", "run", "score", "all", "keep"], default="all",
+    ap.add_argument("--stage", choices=["prepare", "run", "score", "all", "keep", "synthesis", "nof-data", "nof-score"],
+                    default="all",
                     help="prepare: write their inputs; run: their main.py here (eval/reference/run_irmcl.sh, which a GPU "
                          "machine runs instead); score: read their estimates back; all: the three in turn; keep: copy the "
-                         "scored run and the --also runs into results/checks/irmcl_reference/<exp>/")
+                         "scored run and the --also runs into results/checks/irmcl_reference/<exp>/; synthesis: their evaluation "
+                         "(eval.py's metrics, Table I) on our test split with our field (CPU; needs open3d in their venv); nof-data: "
+                         "our split as their training data (for train_irmcl.sh); nof-score: their trained field on our "
+                         "test split, by their evaluation and ours")
     ap.add_argument("--also", nargs="*", type=Path, default=[], help="with --stage keep: our localize runs to keep beside theirs")
     args = ap.parse_args(argv)
     if not any(o.startswith("+exp=") for o in args.overrides):
@@ -255,6 +425,12 @@ def main(argv=None) -> None:
         score(cfg)
     if args.stage == "keep":
         keep(cfg, args.also)
+    if args.stage == "synthesis":
+        their_synthesis(cfg)
+    if args.stage == "nof-data":
+        nof_data(cfg)
+    if args.stage == "nof-score":
+        nof_score(cfg)
 
 
 if __name__ == "__main__":
