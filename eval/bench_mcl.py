@@ -90,11 +90,14 @@ def host_profile(fn, sync, steps: int, what: str) -> None:
 
 
 def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on",
-                 profile=False) -> dict:
+                 profile=False, around=None) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
-    pf.init_uniform()
+    if around is None:
+        pf.init_uniform()
+    else:  # a converged filter: a Gaussian around the pose the scan was taken from (pose, std)
+        pf.init_gaussian(*around)
     u = (0.01, 0.05, -0.01)
     sync = lambda: _sync(device)  # noqa: E731
     step = repeated(lambda: pf.step(u, measured), sync, steps, repeats)  # median and spread of ``repeats``
@@ -135,7 +138,7 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
     return {"method": "torch (authors' formulation)", "particles": n, "step_ms": None, "weighting_ms": 1e3 * s}
 
 
-def measured_scan(nog, far, device, seed=0):
+def measured_scan(nog, far, device, seed=0, with_pose=False):
     """360 beams rendered from a free pose on the NOG, plus 2 cm noise."""
     rng = np.random.default_rng(seed)
     free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
@@ -145,20 +148,22 @@ def measured_scan(nog, far, device, seed=0):
     r = w.render(wp.array(pose[None], dtype=wp.vec3, device=w.device), (0, 0, 0),
                  wp.array(angles, dtype=wp.float32, device=w.device)).numpy()[0]
     r = r + rng.normal(0, 0.02, r.shape)
-    return angles, np.where((r > 0.05) & (r < far - 0.5), r, np.nan).astype(np.float32)
+    scan = np.where((r > 0.05) & (r < far - 0.5), r, np.nan).astype(np.float32)
+    return (angles, scan, pose) if with_pose else (angles, scan)
 
 
 def run_mcl_bench(a) -> list[dict]:
     device = pick_device(a.device or "auto")
     nog = NOG.load(Path(a.nog)) if a.nog else simulator_nog(device=device)
     far = a.far
-    angles, measured = measured_scan(nog, far, device)
+    angles, measured, pose = measured_scan(nog, far, device, with_pose=True)
+    around = (pose, tuple(a.around)) if a.around else None
     rows = []
     for n in a.particles:
         for v in a.variants:
             for graph in (["on", "off"] if a.step_graph == "both" else [a.step_graph]):
                 rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats,
-                                         graph=graph, profile=a.profile))
+                                         graph=graph, profile=a.profile, around=around))
                 print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
@@ -183,6 +188,8 @@ def run_mcl_bench(a) -> list[dict]:
     out = Path(a.out) / f"mcl-{device.split(':')[0]}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "nog": src, "nog_shape": list(nog.shape), "far_m": far,
+                     "particles_start": "uniform over the free cells" if around is None else
+                     f"Gaussian around the scan's pose, std {list(a.around)}",
                      "argv": vars(a), "rows": rows})
     print(f"-> {out}")
     return rows
@@ -199,6 +206,9 @@ def add_parser(sub) -> None:
     p.add_argument("--profile", action="store_true", help="also print where the host time of a step goes (cProfile)")
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
+    p.add_argument("--around", type=float, nargs=3, metavar=("SX", "SY", "SYAW"),
+                   help="start the particles as a Gaussian (std in m, m, rad) around the pose the scan was taken from, "
+                        "as a converged filter holds them, instead of uniform over the free cells")
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--repeats", type=int, default=5, help="timings of --steps steps each; the table shows their median")
     p.add_argument("--out", default="outputs/bench")
