@@ -102,7 +102,37 @@ def _real_vs_bench(variant: str) -> str:
     real = b["real"]["summary"].get("ms_per_step_median")
     if micro is None or real is None:
         return ""
-    return f"; a real fr079 run {real:.2f} ms per step against {micro:.2f} ms from the benchmark on its NOG ({real / micro:.2f}x)"
+    text = f"; a real fr079 run {real:.2f} ms per step against {micro:.2f} ms from the benchmark on its NOG ({real / micro:.2f}x)"
+    around = next((r["step_ms"] for r in b.get("bench_around", {}).get("rows", []) if r.get("variant") == variant
+                   and r.get("graph") and r["particles"] == 100000), None)
+    if around is not None:  # particles started as a converged filter holds them (eval.bench mcl --around)
+        text += f", {around:.2f} ms with the particles around the scan's pose ({real / around:.2f}x)"
+    return text
+
+
+def _their_recipe_note() -> str:
+    """The authors' training script and evaluation on our fr079 split (eval.reference.irmcl), when kept."""
+    p = REPO / "results" / "checks" / "irmcl_reference" / "fr079" / "reference-irmcl-nof" / "metrics.json"
+    if not p.is_file():
+        return ""
+    m = json.loads(p.read_text())
+    epochs = len(m.get("their_val_per_epoch") or [])
+    return (f"; the authors' code on our split: MAE {m['their_eval']['mae_m']:.3f} m after {epochs} of their 32 epochs "
+            "(docs/fidelity.md)")
+
+
+def _theirs_note(ds: str) -> str:
+    """What the authors' own code did on this log with our field (eval.reference.irmcl, pose tracking), set
+    beside our NOG and likelihood field with their motion model, when those runs are kept."""
+    checks = REPO / "results" / "checks"
+    ours_dir = checks / "fr079_yaw" if ds == "fr079" else checks / "irmcl_reference" / ds
+    paths = [checks / "irmcl_reference" / ds / "reference-irmcl-tracking-10k", ours_dir / "localize-nog_raymarch-tracking-10k-5cm-irmcl",
+             ours_dir / "localize-likelihood_field-tracking-10k-5cm-irmcl"]
+    if not all((p / "metrics.json").is_file() for p in paths):
+        return ""
+    theirs, nog, lf = (json.loads((p / "metrics.json").read_text())["summary"]["yaw_rmse_deg_mean"] for p in paths)
+    return (f"; the authors' code, run on this log with our field (pose tracking), errs {theirs:.2f} deg in heading, "
+            f"our NOG {nog:.2f}, our likelihood field {lf:.2f}")
 
 
 def _bench(name):
@@ -119,7 +149,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
     rows.append(("IR-MCL", "the NOF synthesises fr079's test scans better than occupancy grids (Table I)",
                  "MAE 0.250 m, F-score 97.4 % (authors' code and recipe)",
                  f"MAE {s['mae_m']:.3f} m, F-score {s['fscore_pct']:.1f} %" + (f"; 5 cm grid {g5['mae_m']:.3f} m" if g5 else "")
-                 if s else "not run",
+                 + _their_recipe_note() if s else "not run",
                  NOT_RUN if not s else "reproduced" if s["mae_m"] <= 1.10 * 0.250 and s["fscore_pct"] >= 97.4 - 1.0 else
                  f"partly: MAE {100 * (s['mae_m'] / 0.250 - 1):+.0f} % against the authors'",
                  "python -m irmcl_warp.train +exp=fr079 train=paper && python -m eval.synthesis +exp=fr079 train=paper"))
@@ -137,7 +167,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
                          n["location_rmse_cm_mean"] <= lf["location_rmse_cm_mean"]
                          and n["yaw_rmse_deg_mean"] <= lf["yaw_rmse_deg_mean"]) else
                      "not reproduced on this log: the likelihood field is more accurate; the NOG's heading likelihood is "
-                     "wider (docs/fidelity.md)",
+                     f"wider{_theirs_note(ds)} (docs/fidelity.md)",
                      f"python -m irmcl_warp.localize +exp={ds} train=<preset> mcl.weighting=nog_raymarch,likelihood_field -m"))
     b = _bench("mcl-cuda-h100.json")
     from eval.bench_mcl import DEFAULT_VARIANT
@@ -243,6 +273,18 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
     if ours:
         out["intel_code_processed"] = "/".join(str(p) for p in ours)
     count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
+    checks = REPO / "results" / "checks"
+    for ds in ("fr079", "intel"):  # the authors' MCL with our field beside our likelihood field (pose tracking)
+        ours_dir = checks / "fr079_yaw" if ds == "fr079" else checks / "irmcl_reference" / ds
+        for name, run in ((f"irmcl_theirs_yaw_{ds}", checks / "irmcl_reference" / ds / "reference-irmcl-tracking-10k"),
+                          (f"irmcl_lf_yaw_{ds}", ours_dir / "localize-likelihood_field-tracking-10k-5cm-irmcl")):
+            if (run / "metrics.json").is_file():
+                out[name] = f"{json.loads((run / 'metrics.json').read_text())['summary']['yaw_rmse_deg_mean']:.2f} deg"
+    nof = checks / "irmcl_reference" / "fr079" / "reference-irmcl-nof" / "metrics.json"
+    if nof.is_file():  # the authors' training script on our split
+        m = json.loads(nof.read_text())
+        out["nof_theirs_mae"] = f"{m['their_eval']['mae_m']:.3f} m"
+        out["nof_theirs_epochs"] = str(len(m.get("their_val_per_epoch") or []))
     return out
 
 

@@ -23,6 +23,12 @@ read it like ours; their own evo summary (what their script prints, after 20 s) 
 
 Their code fixes its own random seeds (numpy at import; the motion model's C++ generator is seeded from
 ``std::random_device``, so runs are not repeatable bit for bit).
+
+The field itself: ``--stage synthesis`` scores our field with their evaluation (their dataset class, renderer
+and metrics, through eval/reference/irmcl_eval_driver.py) on our test split; ``--stage nof-data`` writes our
+split as their training data for ``bash eval/reference/train_irmcl.sh`` (their train.py and recipe), and
+``--stage nof-score`` scores the field it trains by their evaluation and ours. ``--stage keep`` copies what
+docs/fidelity.md reads into results/checks/irmcl_reference/<exp>/.
 """
 
 from __future__ import annotations
