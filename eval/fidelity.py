@@ -327,7 +327,8 @@ initial spread is their pose-tracking file's (variances 0.5 m², 0.5 m², 0.0685
 
 - Commands: `bash eval/reference/build_irmcl.sh <ir-mcl clone>`, then `python -m eval.reference.irmcl +exp=<log>
   train=fast localize.mode=tracking mcl.num_particles=10000 --stage prepare|run|score|keep`.
-- `run` is `bash eval/reference/run_irmcl.sh`. Their script ran on the lent H100: its NOG on the CPU needs
+- `run` is `bash eval/reference/run_irmcl.sh`. Their script ran on the lent H100 (`bash
+  eval/reference/gpu_irmcl_bundle.sh <prepared folders>` packs what it imports): its NOG on the CPU needs
   about 150 s a start.
 - Their estimates are scored by our metric and by `eval.yaw_lag`. Their own evo summary, printed per start, is
   kept in metrics.json (`their_summary`).

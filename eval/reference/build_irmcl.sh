@@ -11,7 +11,8 @@
 #   their particle-filter library (motion model and resampling, C++), built in src/mcl/ with a ctypes binding
 #   of ours (irmcl_pf_shim.cpp, irmcl_pf_binding.py) in place of their pybind11 module
 # Needs g++ and Eigen 3 (Debian: apt-get install libeigen3-dev). WITH_EVAL=1 also installs what their eval.py
-# needs (open3d, about 400 MB) for python -m eval.reference.irmcl --stage synthesis.
+# needs (open3d, about 400 MB) for python -m eval.reference.irmcl --stage synthesis; WITH_TRAIN=1 what their
+# train.py needs (it asks for a GPU: see gpu_irmcl_bundle.sh for the offline GPU machine).
 set -euo pipefail
 PIN=aab8c91  # "Merge pull request #1 from PRBonn/dev", the newest commit of the repository
 SRC=${1:-${IRMCL_SRC:?give the ir-mcl clone as an argument or in IRMCL_SRC}}
@@ -31,7 +32,11 @@ if [ ! -x "$OUT/venv/bin/python" ]; then
   "$OUT/venv/bin/pip" install -q numpy scipy matplotlib pyyaml evo==1.30.6  # their utils.py passes max_diff positionally, which evo 1.38 refuses
 fi
 if [ "${WITH_EVAL:-0}" = 1 ]; then  # their eval.py (Table I's metrics): open3d for the Chamfer distance, tqdm
-  "$OUT/venv/bin/pip" install -q open3d tqdm
+  "$OUT/venv/bin/pip" install -q open3d tqdm  # (open3d also needs libusb-1.0-0 from Debian)
+fi
+if [ "${WITH_TRAIN:-0}" = 1 ]; then  # their train.py: pytorch-lightning 2.5 (1.9 fails under NumPy 2), its logger
+  "$OUT/venv/bin/pip" install -q pytorch-lightning==2.5.5 torchmetrics==1.8.2 lightning-utilities==0.15.2 tensorboardX \
+    "setuptools<70"
 fi
 PY="$OUT/venv/bin/python"
 LIB="$OUT/src/mcl/srrg_utils/pf_library"
