@@ -131,8 +131,13 @@ def _theirs_note(ds: str) -> str:
     if not all((p / "metrics.json").is_file() for p in paths):
         return ""
     theirs, nog, lf = (json.loads((p / "metrics.json").read_text())["summary"]["yaw_rmse_deg_mean"] for p in paths)
-    return (f"; the authors' code, run on this log with our field (pose tracking), errs {theirs:.2f} deg in heading, "
+    text = (f"; the authors' code, run on this log with our field (pose tracking), errs {theirs:.2f} deg in heading, "
             f"our NOG {nog:.2f}, our likelihood field {lf:.2f}")
+    glob = checks / "irmcl_reference" / ds / "reference-irmcl-global-100k" / "metrics.json"
+    if glob.is_file():
+        g = json.loads(glob.read_text())["summary"]
+        text += f"; globally with 100k particles, {g['successes']}/{g['starts']} starts, {g['yaw_rmse_deg_mean']:.2f} deg"
+    return text
 
 
 def _bench(name):

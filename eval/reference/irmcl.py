@@ -212,6 +212,11 @@ def prepare(cfg) -> Path:
                 "gt_file": rel(folder / "gt.tum"), "result_path": rel(folder / "loc_results.npz"),
                 "ckpt_path": rel(out / "nof.ckpt"), "nog_size": nog_size, "start_idx": first,
                 "numParticles": int(m.num_particles), "num_reduced": int(m.num_particles)}
+        if loc.mode == "global":  # their global file: uniform over the map's box (any heading), the heaviest
+            # num_reduced kept 20 s in; the box here is the training path's, 1 m more on every side
+            box = origins.min(0) - 1.0, origins.max(0) + 1.0
+            conf.update(pose_tracking=False, num_reduced=int(m.reduce_to) if m.reduce_to > 0 else int(m.num_particles),
+                        map_size=[float(box[0][0]), float(box[1][0]), float(box[0][1]), float(box[1][1])])
         atomic_write_bytes(folder / "loc.yml", json.dumps(conf, indent=1).encode())  # JSON is YAML
     OmegaConf.save(cfg, out / "config.yaml")
     settings = {**THEIR_TRACKING, "num_particles": int(m.num_particles), "nog_size": nog_size, "far_m": far,
