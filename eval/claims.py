@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -110,30 +111,39 @@ def _real_vs_bench(variant: str) -> str:
     return text
 
 
+# the authors' training script on our fr079 split, scored (eval.reference.irmcl --stage nof-score, kept)
+THEIR_RECIPE = REPO / "results" / "checks" / "irmcl_reference" / "fr079" / "reference-irmcl-nof" / "metrics.json"
+
+
 def _their_recipe_note() -> str:
     """The authors' training script and evaluation on our fr079 split (eval.reference.irmcl), when kept."""
-    p = REPO / "results" / "checks" / "irmcl_reference" / "fr079" / "reference-irmcl-nof" / "metrics.json"
-    if not p.is_file():
+    if not THEIR_RECIPE.is_file():
         return ""
-    m = json.loads(p.read_text())
+    m = json.loads(THEIR_RECIPE.read_text())
     epochs = len(m.get("their_val_per_epoch") or [])
     return (f"; the authors' code on our split: MAE {m['their_eval']['mae_m']:.3f} m after {epochs} of their 32 epochs "
             "(docs/fidelity.md)")
 
 
+def _irmcl_reference_runs(ds: str) -> tuple[Path, Path, Path]:
+    """The kept pose-tracking runs on ``ds`` of the authors' code with our field (eval.reference.irmcl), of our
+    NOG and of our likelihood field, both with their motion model (fr079's are the yaw study's)."""
+    checks = REPO / "results" / "checks"
+    ours = checks / "fr079_yaw" if ds == "fr079" else checks / "irmcl_reference" / ds
+    return (checks / "irmcl_reference" / ds / "reference-irmcl-tracking-10k", ours / "localize-nog_raymarch-tracking-10k-5cm-irmcl",
+            ours / "localize-likelihood_field-tracking-10k-5cm-irmcl")
+
+
 def _theirs_note(ds: str) -> str:
     """What the authors' own code did on this log with our field (eval.reference.irmcl, pose tracking), set
     beside our NOG and likelihood field with their motion model, when those runs are kept."""
-    checks = REPO / "results" / "checks"
-    ours_dir = checks / "fr079_yaw" if ds == "fr079" else checks / "irmcl_reference" / ds
-    paths = [checks / "irmcl_reference" / ds / "reference-irmcl-tracking-10k", ours_dir / "localize-nog_raymarch-tracking-10k-5cm-irmcl",
-             ours_dir / "localize-likelihood_field-tracking-10k-5cm-irmcl"]
+    paths = _irmcl_reference_runs(ds)
     if not all((p / "metrics.json").is_file() for p in paths):
         return ""
     theirs, nog, lf = (json.loads((p / "metrics.json").read_text())["summary"]["yaw_rmse_deg_mean"] for p in paths)
     text = (f"; the authors' code, run on this log with our field (pose tracking), errs {theirs:.2f} deg in heading, "
             f"our NOG {nog:.2f}, our likelihood field {lf:.2f}")
-    glob = checks / "irmcl_reference" / ds / "reference-irmcl-global-100k" / "metrics.json"
+    glob = paths[0].parent / "reference-irmcl-global-100k" / "metrics.json"
     if glob.is_file():
         g = json.loads(glob.read_text())["summary"]
         text += f"; globally with 100k particles, {g['successes']}/{g['starts']} starts, {g['yaw_rmse_deg_mean']:.2f} deg"
@@ -278,16 +288,13 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
     if ours:
         out["intel_code_processed"] = "/".join(str(p) for p in ours)
     count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
-    checks = REPO / "results" / "checks"
     for ds in ("fr079", "intel"):  # the authors' MCL with our field beside our likelihood field (pose tracking)
-        ours_dir = checks / "fr079_yaw" if ds == "fr079" else checks / "irmcl_reference" / ds
-        for name, run in ((f"irmcl_theirs_yaw_{ds}", checks / "irmcl_reference" / ds / "reference-irmcl-tracking-10k"),
-                          (f"irmcl_lf_yaw_{ds}", ours_dir / "localize-likelihood_field-tracking-10k-5cm-irmcl")):
+        theirs, _, lf = _irmcl_reference_runs(ds)
+        for name, run in ((f"irmcl_theirs_yaw_{ds}", theirs), (f"irmcl_lf_yaw_{ds}", lf)):
             if (run / "metrics.json").is_file():
                 out[name] = f"{json.loads((run / 'metrics.json').read_text())['summary']['yaw_rmse_deg_mean']:.2f} deg"
-    nof = checks / "irmcl_reference" / "fr079" / "reference-irmcl-nof" / "metrics.json"
-    if nof.is_file():  # the authors' training script on our split
-        m = json.loads(nof.read_text())
+    if THEIR_RECIPE.is_file():  # the authors' training script on our split
+        m = json.loads(THEIR_RECIPE.read_text())
         out["nof_theirs_mae"] = f"{m['their_eval']['mae_m']:.3f} m"
         out["nof_theirs_epochs"] = str(len(m.get("their_val_per_epoch") or []))
     return out

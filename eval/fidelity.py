@@ -157,25 +157,35 @@ def nof_table() -> str:
     return "\n".join(rows)
 
 
-def nof_curve() -> str:
-    """Validation MAE per epoch: their script on our split beside our `paper` preset (the kept run)."""
+def val_curves() -> tuple[dict, dict] | None:
+    """Validation MAE by epoch (1-based): their script on our split, our `paper` preset (the kept run), on the
+    epochs both have; None until both are kept."""
     theirs = _kept("fr079", "reference-irmcl-nof")
     kept = REPO / "results" / "nof" / "fr079.json"
     ours = json.loads(kept.read_text())["runs"].get("train-paper") if kept.is_file() else None
     if not (theirs and theirs.get("their_val_per_epoch") and ours):
-        return "Not run yet."
+        return None
     t = {r["epoch"]: r["val_mae_m"] for r in theirs["their_val_per_epoch"]}
     o = {r["epoch"]: r["val"]["mae_m"] for r in ours["metrics"]["history"]}
-    epochs = [e for e in sorted(t) if e in o]
-    head = "| epoch | " + " | ".join(str(e) for e in epochs) + " |"
-    return "\n".join([head, "|---|" + "---|" * len(epochs),
-                      "| their script, val MAE (m) | " + " | ".join(f"{t[e]:.3f}" for e in epochs) + " |",
-                      "| our `paper` preset, val MAE (m) | " + " | ".join(f"{o[e]:.3f}" for e in epochs) + " |"])
+    common = sorted(e for e in t if e in o)
+    return {e: t[e] for e in common}, {e: o[e] for e in common}
+
+
+def nof_curve() -> str:
+    """Validation MAE per epoch: their script on our split beside our `paper` preset (the kept run)."""
+    curves = val_curves()
+    if curves is None:
+        return "Not run yet."
+    t, o = curves
+    head = "| epoch | " + " | ".join(str(e) for e in t) + " |"
+    return "\n".join([head, "|---|" + "---|" * len(t),
+                      "| their script, val MAE (m) | " + " | ".join(f"{v:.3f}" for v in t.values()) + " |",
+                      "| our `paper` preset, val MAE (m) | " + " | ".join(f"{v:.3f}" for v in o.values()) + " |"])
 
 
 def nof_findings() -> str:
     """The two statements the field checks support, computed from them (so a new run cannot leave them stale)."""
-    fast, theirs = _kept("fr079", "reference-irmcl-synthesis-fast"), _kept("fr079", "reference-irmcl-nof")
+    fast = _kept("fr079", "reference-irmcl-synthesis-fast")
     out = []
     if fast and fast.get("ours"):
         gap = max(abs(fast["their_eval"][k] - fast["ours"][k]) for k in ("mae_m", "chamfer_m"))
@@ -184,12 +194,10 @@ def nof_findings() -> str:
         out.append(("- **Our evaluation is theirs.** On the same field and split, their code and ours agree within "
                     if same else "- **Our evaluation differs from theirs.** On the same field and split they part by up to ")
                    + f"{gap:.1e} m in MAE and Chamfer and {gap_pct:.1e} points in accuracy and F-score.")
-    kept = REPO / "results" / "nof" / "fr079.json"
-    ours = json.loads(kept.read_text())["runs"].get("train-paper") if kept.is_file() else None
-    if theirs and theirs.get("their_val_per_epoch") and ours:
-        t = {r["epoch"]: r["val_mae_m"] for r in theirs["their_val_per_epoch"]}
-        o = {r["epoch"]: r["val"]["mae_m"] for r in ours["metrics"]["history"]}
-        common = [e for e in t if e in o]
+    curves = val_curves()
+    if curves is not None:
+        t, o = curves
+        common = list(t)
         ahead = sum(o[e] <= t[e] + 5e-4 for e in common)  # theirs printed with 3 decimals
         out.append(f"- **Our port against their code, epoch by epoch.** Our `paper` preset's validation error is at or below "
                    f"theirs in {ahead} of {len(common)} epochs.")

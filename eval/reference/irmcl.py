@@ -47,7 +47,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.config import compose_config
 from irmcl_warp.io import write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
-from irmcl_warp.mcl.stage import start_indices
+from irmcl_warp.mcl.stage import start_indices, start_times
 from irmcl_warp.mcl.folders import particles_tag
 from irmcl_warp.nof.folders import synthesis_folder, train_folder
 from irmcl_warp.services.cli import guard
@@ -65,6 +65,12 @@ THEIR_TRACKING = {"max_beams": 32, "L_pos": 10, "feature_size": 256, "use_skip":
 # their evo summary line after the header "location_rmse location_ptc5 ... yaw_ptc20"
 SUMMARY_KEYS = ("location_rmse_cm", "location_ptc5", "location_ptc10", "location_ptc20", "yaw_rmse_deg",
                 "yaw_ptc5", "yaw_ptc10", "yaw_ptc20")
+
+
+def se2_matrix(x: float, y: float, yaw: float) -> np.ndarray:
+    """The 3x3 homogeneous transform of a 2D pose (their datasets' ``transform_matrix``: [:2, :3] is [R | t])."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
 
 
 def their_checkpoint(nof_pt: Path) -> dict:
@@ -124,8 +130,8 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
     doc = {"num_beams": int(len(angles)), "angle_min": float(angles[0]), "angle_max": float(angles[-1]),
            "angle_res": float(np.median(np.diff(angles))), "max_range": float(far), "scans": scans}
     atomic_write_bytes(folder / "seq.json", json.dumps(doc).encode())
-    x, y, a = log.T_base_laser
-    T = np.array([[np.cos(a), -np.sin(a), 0, x], [np.sin(a), np.cos(a), 0, y], [0, 0, 1, 0], [0, 0, 0, 1]])
+    T = np.eye(4)  # their sensor model composes 4x4 particle poses with it
+    T[np.ix_([0, 1, 3], [0, 1, 3])] = se2_matrix(*log.T_base_laser)
     np.savetxt(folder / "b2l.txt", T)
     known = idx[gt_known]
     write_tum(folder / "gt.tum", log.stamps[known] - t0, log.ground_truth[known])
@@ -141,11 +147,9 @@ def export_split(test, far: float, path: Path) -> None:
     res = float(np.median(np.diff(a)))
     ranges = np.where(test.valid & np.isfinite(test.ranges_m), test.ranges_m, far)
     scans = []
-    for (x, y, yaw), r in zip(test.T_map_laser, ranges):
-        # a 2D homogeneous transform: their loader takes [:2, :3] as [R | t]
-        T = [[float(np.cos(yaw)), float(-np.sin(yaw)), float(x)], [float(np.sin(yaw)), float(np.cos(yaw)), float(y)],
-             [0.0, 0.0, 1.0]]
-        scans.append({"transform_matrix": T, "odom": [0.0, 0.0, 0.0], "range_readings": [round(float(v), 4) for v in r]})
+    for pose, r in zip(test.T_map_laser, ranges):
+        scans.append({"transform_matrix": se2_matrix(*pose).tolist(), "odom": [0.0, 0.0, 0.0],
+                      "range_readings": [round(float(v), 4) for v in r]})
     doc = {"num_beams": int(len(a)), "angle_min": float(a[0]), "angle_max": float(a[0] + res * (len(a) - 0.5)),
            "angle_res": res, "max_range": float(far), "scans": scans}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -174,9 +178,16 @@ def out_folder(cfg) -> Path:
     return stage_dir(cfg, f"reference-irmcl-{cfg.localize.mode}-{particles_tag(cfg.mcl.num_particles)}").resolve()
 
 
-def starts_of(cfg, log) -> np.ndarray:
-    t = log.stamps - log.stamps[0]
-    return np.linspace(0.0, max(t[-1] - cfg.localize.run_s, 0.0), cfg.localize.num_starts)
+def their_field(cfg, out: Path) -> Path:
+    """``train=<preset>``'s nof.pt (which must exist), written as their checkpoint out/nof.ckpt when that is
+    missing or older; returns the nof.pt."""
+    nof_pt = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
+    if not nof_pt.is_file():
+        raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
+        torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
+    return nof_pt
 
 
 def prepare(cfg) -> Path:
@@ -184,13 +195,8 @@ def prepare(cfg) -> Path:
     loc, m = cfg.localize, cfg.mcl
     if loc.kidnap_at_s > 0:
         raise ValueError("localize.kidnap_at_s: their script has no kidnapping; run without it")
-    nof_pt = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
-    if not nof_pt.is_file():
-        raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
     far, out, src = far_bound_m(cfg), out_folder(cfg), BUILD / "src"
-    out.mkdir(parents=True, exist_ok=True)
-    if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
-        torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
+    nof_pt = their_field(cfg, out)
     # their NOG is a box of cells around the training path, the far bound and 2 m more on every side, so that
     # no sample of a ray from a particle near the path falls outside it (their lookup does not clip)
     origins = prepare_beams(cfg)["train"].T_map_laser[:, :2]
@@ -199,8 +205,8 @@ def prepare(cfg) -> Path:
     log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
-    starts = starts_of(cfg, log)
     t = log.stamps - log.stamps[0]
+    starts = start_times(t, loc)
     rel = lambda p: os.path.relpath(p, src)  # noqa: E731  (their script runs in their tree, here or elsewhere)
     for k in range(len(starts)):
         folder = out / f"start{k}"
@@ -229,7 +235,8 @@ def prepare(cfg) -> Path:
 def score(cfg) -> Path:
     """Their estimates (start<k>/IRMCL.txt) scored like our localize runs: start<k>.tum, metrics.json."""
     out, log = out_folder(cfg), load_stream(cfg)
-    starts, t = starts_of(cfg, log), log.stamps - log.stamps[0]
+    t = log.stamps - log.stamps[0]
+    starts = start_times(t, cfg.localize)
     runs, commit = [], (BUILD / "COMMIT").read_text().split()[0] if (BUILD / "COMMIT").is_file() else "?"
     for k, t0 in enumerate(starts):
         folder, text = out / f"start{k}", (out / f"start{k}.log").read_text()
@@ -307,18 +314,11 @@ def their_synthesis(cfg) -> Path:
     """Their evaluation (eval.py's metrics, the paper's Table I) on our test split with our field, on the CPU:
     outputs/<exp>/reference-irmcl-synthesis-<preset>/metrics.json holds their four figures beside our
     eval.synthesis's figures of the same field and split (from its metrics.json, when it was run)."""
-    nof_pt = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
-    if not nof_pt.is_file():
-        raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
     out = stage_dir(cfg, f"reference-irmcl-synthesis-{cfg.train.name}").resolve()
-    far = far_bound_m(cfg)
-    out.mkdir(parents=True, exist_ok=True)
-    if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
-        torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
+    nof_pt = their_field(cfg, out)
     theirs = their_evaluation(cfg, out / "nof.ckpt", out)
     ours, ours_from = our_synthesis(cfg, nof_pt)
-    doc = {"dataset": cfg.data.name, "nof": str(nof_pt), "far_m": far, "their_eval": theirs,
-           "ours": ours,
+    doc = {"dataset": cfg.data.name, "nof": str(nof_pt), "far_m": far_bound_m(cfg), "their_eval": theirs, "ours": ours,
            "ours_from": ours_from}
     write_json(out / "metrics.json", doc)
     print(f"{cfg.data.name}, {cfg.train.name}: their eval.py MAE {theirs['mae_m']:.3f} m, Chamfer {theirs['chamfer_m']:.3f} m, "
@@ -390,25 +390,24 @@ def keep(cfg, also: list[Path]) -> list[Path]:
     results/checks/irmcl_reference/<exp>/<folder>/: metrics.json, config.yaml and yaw_lag.json (run
     ``python -m eval.yaw_lag`` on them first), which is what docs/fidelity.md reads; and the metrics.json of
     the log's field checks (``--stage synthesis``, ``nof-score``) when they were made."""
+    def copy(run: Path, names) -> None:
+        dest = KEPT / cfg.exp / run.name
+        dest.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            atomic_write_bytes(dest / name, (run / name).read_bytes())
+        kept.append(dest)
+        print(f"kept {run} ({', '.join(names)}) -> {dest.relative_to(REPO)}")
+
     kept = []
     for run in [out_folder(cfg), *also]:
         missing = [n for n in KEEP_FILES if not (run / n).is_file()]
         if missing:
             raise FileNotFoundError(f"{run}: no {', '.join(missing)} (score the run, then python -m eval.yaw_lag {run})")
-        dest = KEPT / cfg.exp / run.name
-        dest.mkdir(parents=True, exist_ok=True)
-        for name in KEEP_FILES:
-            atomic_write_bytes(dest / name, (run / name).read_bytes())
-        kept.append(dest)
-        print(f"kept {run} -> {dest.relative_to(REPO)}")
+        copy(run, KEEP_FILES)
     # the field checks of this log, when made: their evaluation of our field, their recipe's field
-    for run in [*stage_dir(cfg, "x").resolve().parent.glob("reference-irmcl-synthesis-*"), nof_folder(cfg)]:
+    for run in [*nof_folder(cfg).parent.glob("reference-irmcl-synthesis-*"), nof_folder(cfg)]:
         if (run / "metrics.json").is_file():
-            dest = KEPT / cfg.exp / run.name
-            dest.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(dest / "metrics.json", (run / "metrics.json").read_bytes())
-            kept.append(dest)
-            print(f"kept {run / 'metrics.json'} -> {dest.relative_to(REPO)}")
+            copy(run, ("metrics.json",))
     return kept
 
 

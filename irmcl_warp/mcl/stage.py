@@ -98,6 +98,12 @@ def nof_inputs(cfg) -> list[Path]:
     return [stage_dir(cfg, train_folder(cfg)) / "nof.pt"]
 
 
+def start_times(t: np.ndarray, loc) -> np.ndarray:
+    """The protocol's ``loc.num_starts`` start times (s since the log's first scan, ``t`` the scans' times),
+    spread evenly so that each run of ``loc.run_s`` fits in the log."""
+    return np.linspace(0.0, max(t[-1] - loc.run_s, 0.0), loc.num_starts)
+
+
 def start_indices(t: np.ndarray, starts: np.ndarray, k: int, loc) -> np.ndarray:
     """The scans of run ``k`` (times ``t`` since the log's start): ``loc.run_s`` from ``starts[k]`` on; when
     kidnapped, the rest of the run continues from the next start time (another place)."""
@@ -127,7 +133,7 @@ def run_localize(cfg) -> Path:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
     view, maps, image = build_maps(cfg, device)
     t = log.stamps - log.stamps[0]
-    starts = np.linspace(0.0, max(t[-1] - loc.run_s, 0.0), loc.num_starts)
+    starts = start_times(t, loc)
     runs, kidnapped, all_steps = [], loc.kidnap_at_s > 0, []
     if kidnapped and not (0 < loc.kidnap_at_s < loc.run_s and loc.num_starts >= 2):
         raise ValueError(f"localize.kidnap_at_s={loc.kidnap_at_s} must lie inside the run (localize.run_s={loc.run_s}) "
