@@ -1,16 +1,23 @@
-"""``python -m eval.bench slam [--exp gmapping_sim] [--particles 30] [--device cpu|cuda:0] [--scans N]``
+"""``python -m eval.bench slam [--exp gmapping_sim] [--particles 30] [--device cpu|cuda:0] [--scans N] [--released]``
 
 Wall time of GMapping's RBPF over a whole log (or its first N scans) and the time per processed scan split
 into motion (all scans since the last processed one), scan matching, weights + resampling and map
 integration, per particle count. Prints a table and writes outputs/bench/slam-<exp>-<device>.json. The
 default log is the simulator (no data needed); real logs need their stream cache or raw files.
+
+``--released``: in each repeat, the released C++ (eval/reference/gmapping.py's build, one core, the ROS
+wrapper's settings, seed 0) runs on the same log right after ours, so that the ratio of the two is
+measured side by side on a machine whose speed drifts from hour to hour.
 """
 
 from __future__ import annotations
 
 import platform
+import subprocess
 import time
 from pathlib import Path
+
+import numpy as np
 
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
@@ -39,11 +46,50 @@ def repeat_runs(runs: list[dict]) -> dict:
             "repeats": len(runs)}
 
 
+def run_released(exp: str, particles: int, scans: int | None) -> float:
+    """Wall time (s) of the released GMapping on the log (its first ``scans`` scans), seed 0, in a scratch
+    folder (eval/reference/gmapping.py's driver and settings)."""
+    import tempfile
+
+    from eval.reference import gmapping as ref
+
+    if not ref.BINARY.is_file():
+        raise FileNotFoundError(f"{ref.BINARY}: --released needs the released code: bash eval/reference/build_gmapping.sh "
+                                "<openslam_gmapping clone>")
+    cfg = compose_config([f"+exp={exp}"])
+    log = load_stream(cfg)
+    if scans is not None:
+        log = log.subset(slice(0, min(int(scans), len(log))))
+    params = {"particles": str(particles), "maxRange": f"{ref.scan_range_max(cfg) - 0.01:.4f}",
+              "angleIncrement": f"{log.info.angle_increment_rad:.9f}"}
+    with tempfile.TemporaryDirectory() as tmp:
+        scans_file = Path(tmp) / "scans.txt"
+        ref.export_scans(log, scans_file)
+        args = [str(ref.BINARY), str(scans_file), f"{tmp}/path.txt", f"{tmp}/neff.txt", "seed=1"]
+        t0 = time.perf_counter()
+        ran = subprocess.run(args + [f"{k}={v}" for k, v in params.items()], capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+    if ran.returncode != 0:
+        raise RuntimeError(f"{ref.BINARY} failed ({ran.returncode}): {ran.stderr[-1000:]}")
+    return wall
+
+
 def run_slam_bench(a) -> list[dict]:
 
     device = pick_device(a.device or "auto")
-    rows = [repeat_runs([run_one(a.exp, p, device, a.scans, a.override) for _ in range(a.repeats)])
-            for p in a.particles]
+    rows = []
+    for p in a.particles:
+        runs, released = [], []
+        for _ in range(a.repeats):
+            runs.append(run_one(a.exp, p, device, a.scans, a.override))
+            if a.released:
+                released.append(run_released(a.exp, p, a.scans))
+        row = repeat_runs(runs)
+        if released:
+            ratios = [r / o["wall_s"] for r, o in zip(released, runs)]
+            row["released_wall_s_all"], row["released_over_ours_all"] = released, ratios
+            row["released_wall_s"], row["released_over_ours"] = float(np.median(released)), float(np.median(ratios))
+        rows.append(row)
     name = platform.processor() or "cpu"
     if device.startswith("cuda"):
         import torch
@@ -57,6 +103,12 @@ def run_slam_bench(a) -> list[dict]:
         t = r["ms_per_processed_scan"]
         print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} [{r['wall_s_min']:.1f}-{r['wall_s_max']:.1f}] | "
               f"{t['matching']:.1f} | {t['motion']:.1f} | {t['weights_resampling']:.1f} | {t['integration']:.1f} |")
+    for r in rows:
+        if "released_wall_s" in r:
+            print(f"released C++ ({r['particles']} particles, one core), each repeat right after ours: "
+                  f"{r['released_wall_s']:.1f} s median [{min(r['released_wall_s_all']):.1f}-"
+                  f"{max(r['released_wall_s_all']):.1f}]; released / ours {r['released_over_ours']:.2f} median "
+                  f"[{min(r['released_over_ours_all']):.2f}-{max(r['released_over_ours_all']):.2f}]")
     out = Path(a.out) / f"slam-{a.exp}-{device.split(':')[0]}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "argv": vars(a), "rows": rows})
@@ -72,4 +124,6 @@ def add_parser(sub) -> None:
     p.add_argument("--scans", type=int, default=None, help="only the first N scans")
     p.add_argument("--override", nargs="*", default=[], help="more Hydra overrides, e.g. sim.duration_s=60")
     p.add_argument("--repeats", type=int, default=5, help="runs per particle count; the table shows the median run")
+    p.add_argument("--released", action="store_true",
+                   help="time the released C++ on the same log after each repeat (eval/reference/build_gmapping.sh)")
     p.add_argument("--out", default="outputs/bench")

@@ -210,6 +210,60 @@ def test_device_hill_climbing_matches_the_host_twin(rng):
     assert np.allclose(score[close], want_score[close], rtol=1e-4)
 
 
+def test_the_climb_in_one_thread_equals_the_launched_rounds(rng):
+    """Scorer.climb (a particle's whole climb in one thread, the CPU's default) against the rounds launched
+    over particles x moves x beams (the GPU's): the same poses and scores bit for bit, from starts off the
+    true pose so that the climbs take different numbers of rounds."""
+    log = _sim(10.0)
+    P = 8
+    rbpf = _matcher(log, P=P)
+    rbpf.start(log.ground_truth[0], log.ranges_m[0])
+    for k in (5, 10):
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (P, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
+        rbpf._set_ranges(log.ranges_m[k])
+        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    rbpf._set_ranges(log.ranges_m[20])
+    start = log.ground_truth[20] + rng.normal(0, [0.12, 0.12, 0.05], (P, 3))
+    launched, launched_score, launched_rounds = rbpf.match(start, rounds_launched=True)
+    fused, fused_score, fused_rounds = rbpf.match(start, rounds_launched=False)
+    assert np.array_equal(fused, launched), f"seed {rng.seed}: {fused - launched}"
+    assert np.array_equal(fused_score, launched_score)
+    assert np.abs(fused[:, :2] - start[:, :2]).max() > 0.05  # the climbs moved
+    per_particle = rbpf._climb["rounds"].numpy()
+    assert fused_rounds == per_particle.max() and len(set(per_particle.tolist())) > 1  # climbs of different lengths
+    assert launched_rounds >= fused_rounds and launched_rounds % 8 == 0  # the host checked every 8 rounds
+
+
+def test_score_of_windows_at_the_map_edge_matches_twin(rng):
+    """End points on the map's border (read cell by cell with a bounds check) and inside it (read without
+    one) against the twin, on a map cut smaller than the world whose first row and column hold the world's
+    walls at x = 0 and y = 0."""
+    log = _sim(5.0)
+    origin, res, shape = (-0.05, -0.05), 0.1, (45, 70)
+    maps, ref = _integrate_both(log, [0, 5, 10], P=1, shape=shape, origin=origin)
+    k = 12
+    cands = log.ground_truth[k] + rng.normal(0, [0.1, 0.1, 0.05], (6, 3))
+    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2),
+                        free_check=True, device=DEVICE)
+    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
+           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
+    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
+                                log.info.angles_rad, 8.0, origin, res, free_delta=0.1 * np.sqrt(2), free_check=True)
+                     for c in cands])
+    lp = twin.laser_pose(log.ground_truth[k], log.T_base_laser)
+    ok = np.isfinite(log.ranges_m[k]) & (log.ranges_m[k] > 0) & (log.ranges_m[k] <= 8.0)
+    a = lp[2] + log.info.angles_rad[ok]
+    ix = np.floor((lp[0] + log.ranges_m[k][ok] * np.cos(a) - origin[0]) / res)
+    iy = np.floor((lp[1] + log.ranges_m[k][ok] * np.sin(a) - origin[1]) / res)
+    edge = (ix < 1) | (iy < 1) | (ix > shape[1] - 2) | (iy > shape[0] - 2)
+    assert 10 < edge.sum() < len(edge) - 10, edge.sum()  # both kinds of window are scored
+    assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
+    assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
+
+
 def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
     P, shape = 7, (5, 6)
     maps = ParticleMaps(P, shape, (0.0, 0.0), 0.1, device=DEVICE)

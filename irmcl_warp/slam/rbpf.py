@@ -179,18 +179,35 @@ class RBPF:
         self._record(k, parents)
         return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
 
-    def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8):
-        """GMapping's hill climbing for every particle at once, on the device: each round builds the 6 moves
-        of the current step sizes (one launch), scores all particles x moves x beams (one launch) and takes
-        the best move if it raises the score, else halves the steps (one launch); a particle stops after
-        ``iterations`` halvings. The host looks at the active flags every ``check_every`` rounds only.
-        Returns (poses [P, 3], scores [P], rounds). Twin: irmcl_warp/reference/slam.py ``hill_climb``."""
+    def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8, rounds_launched: bool | None = None):
+        """GMapping's hill climbing for every particle at once; a particle stops when a round fails after
+        ``iterations`` halvings of the steps. Returns (poses [P, 3], scores [P], rounds).
+        Twin: irmcl_warp/reference/slam.py ``hill_climb``.
+
+        Two ways to run it, the same poses bit for bit (tests/test_slam.py):
+        * on a GPU (``rounds_launched``, the default there), round by round: each round builds the 6 moves
+          of the current steps (one launch), scores all particles x moves x beams (one launch) and takes
+          the best move if it raises the score, else halves the steps (one launch); the host looks at the
+          active flags every ``check_every`` rounds only, and the rounds are one CUDA graph;
+        * on the CPU (the default there), each particle's whole climb in one thread (Scorer.climb): no
+          launch per round, no particle waiting for the slowest one. Rounds = the most any particle took."""
         c, d, P = self.cfg, self.device, self.P
         if not hasattr(self, "_climb"):
             self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
                                steps=wp.zeros(P, dtype=wp.vec3, device=d), halvings=wp.zeros(P, dtype=wp.int32, device=d),
-                               active=wp.zeros(P, dtype=wp.int32, device=d))
+                               active=wp.zeros(P, dtype=wp.int32, device=d), start=wp.zeros(P, dtype=wp.vec3, device=d),
+                               rounds=wp.zeros(P, dtype=wp.int32, device=d))
         st = self._climb
+        if rounds_launched is None:
+            rounds_launched = wp.get_device(d).is_cuda
+        if not rounds_launched:
+            st["start"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
+            self.scorer.climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles,
+                              (c.lstep, c.lstep, c.astep), int(c.iterations), int(max_rounds), st["pose"], st["best"],
+                              st["rounds"])
+            pose = st["pose"].numpy().astype(np.float64)
+            pose[:, 2] = wrap_angle(pose[:, 2])
+            return pose, st["best"].numpy().astype(np.float64), int(st["rounds"].numpy().max())
         st["pose"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
         st["steps"].assign(wp.array(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32), dtype=wp.vec3,
                                     device=d))
