@@ -150,6 +150,7 @@ class MCLConfig:
     weighting: str = "nog_raymarch"  # nog_raymarch | likelihood_field | beam_model
     num_particles: int = 100_000  # IR-MCL global localization
     num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
+    beam_pick: str = "spread"  # spread (the paper: first to last beam) | stride (the authors' code: every (n // num_beams)-th from the first)
     num_samples: int = 256  # IR-MCL: samples per beam on the NOG
     near_m: float = 0.02
     t_min: float = 1e-3  # early termination once the transmittance is below (0 = the authors' formulation)
@@ -332,7 +333,8 @@ CHOICES = {
     "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"),
     "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),
     "mcl.weighting": ("nog_raymarch", "nof_direct", "likelihood_field", "beam_model"),
-    "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.resample": ("low_variance", "multinomial"),
+    "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.beam_pick": ("spread", "stride"),
+    "mcl.resample": ("low_variance", "multinomial"),
     "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
     "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"),
     "globloc.scan2map": ("paper", "likelihood_field"), "globloc.cluster_space": ("pose", "index"),

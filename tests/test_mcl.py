@@ -11,6 +11,7 @@ from scipy.ndimage import binary_dilation
 
 from irmcl_warp.config import register
 from irmcl_warp.mcl import MCLConfig, ParticleFilter
+from irmcl_warp.mcl.filter import pick_beams
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.sim import simulate
@@ -307,3 +308,24 @@ def test_rescore_recomputes_a_runs_metrics_from_its_trajectories(tmp_path, monke
     # from the TUM files (positions to 0.1 mm): the same figures to rounding
     assert again["runs"][0]["location_rmse_cm"] == pytest.approx(original["runs"][0]["location_rmse_cm"], abs=0.01)
     assert again["runs"][0]["ms_per_step_median"] == original["runs"][0]["ms_per_step_median"]
+
+
+def test_beams_are_spread_over_the_scan_or_strided_as_the_authors_code_does():
+    spread = pick_beams(180, 32, "spread")
+    assert len(spread) == 32 and spread[0] == 0 and spread[-1] == 179 and np.all(np.diff(spread) > 0)
+    stride = pick_beams(180, 32, "stride")  # intel: every 5th from the first, -90 to +65 deg of its 1-deg beams
+    assert stride.tolist() == list(range(0, 160, 5))
+    assert pick_beams(360, 32, "stride")[-1] == 341  # fr079: every 11th, its last 18 beams left out
+    assert pick_beams(20, 32, "stride").tolist() == pick_beams(20, 32, "spread").tolist() == list(range(20))
+    with pytest.raises(ValueError, match="beam_pick"):
+        pick_beams(180, 32, "every")
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.mcl.stage import run_tag
+
+    loc = OmegaConf.create({"mode": "tracking", "kidnap_at_s": 0.0})
+    base = OmegaConf.structured(MCLConfig())
+    theirs = OmegaConf.merge(base, {"beam_pick": "stride", "resample_threshold": 1.0})
+    assert run_tag(theirs, loc) == run_tag(base, loc) + "-stride-neff1"
+    old = OmegaConf.create({k: v for k, v in OmegaConf.to_container(base).items() if k != "beam_pick"})
+    assert run_tag(old, loc) == run_tag(base, loc)  # a run kept before the setting existed

@@ -174,8 +174,11 @@ def parse_their_log(text: str) -> dict:
     return out
 
 
-def out_folder(cfg) -> Path:
-    return stage_dir(cfg, f"reference-irmcl-{cfg.localize.mode}-{particles_tag(cfg.mcl.num_particles)}").resolve()
+def out_folder(cfg, repeat: int = 0) -> Path:
+    """outputs/<exp>/reference-irmcl-<mode>-<N>k[-run<repeat>]: their filter seeds itself from the machine
+    (std::random_device), so a repeat is another draw of the same run."""
+    name = f"reference-irmcl-{cfg.localize.mode}-{particles_tag(cfg.mcl.num_particles)}"
+    return stage_dir(cfg, name + (f"-run{repeat}" if repeat else "")).resolve()
 
 
 def their_field(cfg, out: Path) -> Path:
@@ -190,12 +193,12 @@ def their_field(cfg, out: Path) -> Path:
     return nof_pt
 
 
-def prepare(cfg) -> Path:
+def prepare(cfg, repeat: int = 0) -> Path:
     """Their inputs for every start into the run's folder (see the module's doc)."""
     loc, m = cfg.localize, cfg.mcl
     if loc.kidnap_at_s > 0:
         raise ValueError("localize.kidnap_at_s: their script has no kidnapping; run without it")
-    far, out, src = far_bound_m(cfg), out_folder(cfg), BUILD / "src"
+    far, out, src = far_bound_m(cfg), out_folder(cfg, repeat), BUILD / "src"
     nof_pt = their_field(cfg, out)
     # their NOG is a box of cells around the training path, the far bound and 2 m more on every side, so that
     # no sample of a ray from a particle near the path falls outside it (their lookup does not clip)
@@ -232,9 +235,9 @@ def prepare(cfg) -> Path:
     return out
 
 
-def score(cfg) -> Path:
+def score(cfg, repeat: int = 0) -> Path:
     """Their estimates (start<k>/IRMCL.txt) scored like our localize runs: start<k>.tum, metrics.json."""
-    out, log = out_folder(cfg), load_stream(cfg)
+    out, log = out_folder(cfg, repeat), load_stream(cfg)
     t = log.stamps - log.stamps[0]
     starts = start_times(t, cfg.localize)
     runs, commit = [], (BUILD / "COMMIT").read_text().split()[0] if (BUILD / "COMMIT").is_file() else "?"
@@ -385,7 +388,7 @@ KEPT = REPO / "results" / "checks" / "irmcl_reference"
 KEEP_FILES = ("metrics.json", "config.yaml", "yaw_lag.json")
 
 
-def keep(cfg, also: list[Path]) -> list[Path]:
+def keep(cfg, also: list[Path], repeat: int = 0) -> list[Path]:
     """Copy their scored run and the runs of ours it is set beside (``also``: localize folders) into
     results/checks/irmcl_reference/<exp>/<folder>/: metrics.json, config.yaml and yaw_lag.json (run
     ``python -m eval.yaw_lag`` on them first), which is what docs/fidelity.md reads; and the metrics.json of
@@ -399,7 +402,7 @@ def keep(cfg, also: list[Path]) -> list[Path]:
         print(f"kept {run} ({', '.join(names)}) -> {dest.relative_to(REPO)}")
 
     kept = []
-    for run in [out_folder(cfg), *also]:
+    for run in [out_folder(cfg, repeat), *also]:
         missing = [n for n in KEEP_FILES if not (run / n).is_file()]
         if missing:
             raise FileNotFoundError(f"{run}: no {', '.join(missing)} (score the run, then python -m eval.yaw_lag {run})")
@@ -423,18 +426,20 @@ def main(argv=None) -> None:
                          "our split as their training data (for train_irmcl.sh); nof-score: their trained field on our "
                          "test split, by their evaluation and ours")
     ap.add_argument("--also", nargs="*", type=Path, default=[], help="with --stage keep: our localize runs to keep beside theirs")
+    ap.add_argument("--repeat", type=int, default=0,
+                    help="K > 0: another draw of their (self-seeding) filter, in the folder ...-run<K>")
     args = ap.parse_args(argv)
     if not any(o.startswith("+exp=") for o in args.overrides):
         ap.error("give the experiment, e.g. +exp=fr079 train=fast localize.mode=tracking")
     cfg = compose_config(args.overrides)
     if args.stage in ("prepare", "all"):
-        prepare(cfg)
+        prepare(cfg, args.repeat)
     if args.stage in ("run", "all"):
-        subprocess.run(["bash", str(Path(__file__).with_name("run_irmcl.sh")), str(out_folder(cfg))], check=True)
+        subprocess.run(["bash", str(Path(__file__).with_name("run_irmcl.sh")), str(out_folder(cfg, args.repeat))], check=True)
     if args.stage in ("score", "all"):
-        score(cfg)
+        score(cfg, args.repeat)
     if args.stage == "keep":
-        keep(cfg, args.also)
+        keep(cfg, args.also, args.repeat)
     if args.stage == "synthesis":
         their_synthesis(cfg)
     if args.stage == "nof-data":

@@ -59,6 +59,19 @@ class StepInputs:
             wp.copy(self.seeds, self.host_seeds)
 
 
+def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray:
+    """Indices of the scan's beams the filter weighs: ``spread``: ``num_beams`` evenly spread from the first beam
+    to the last (the paper's "32 beams evenly spread over the scan"); ``stride``: the authors' code, every
+    (n_sensor // num_beams)-th beam from the first, the first ``num_beams`` of them, so the last part of the
+    scan is left out (intel's 180 beams: every 5th, -90 to +65 deg)."""
+    n = min(int(num_beams), int(n_sensor))
+    if how == "spread":
+        return np.unique(np.linspace(0, n_sensor - 1, n).round().astype(int))
+    if how == "stride":
+        return np.arange(0, n_sensor, n_sensor // n)[:n]
+    raise ValueError(f"MCL: mcl.beam_pick={how!r}; choose spread or stride")
+
+
 class ParticleFilter:
     def __init__(self, free_space, cfg: MCLConfig, T_base_laser, scan_angles_rad, far_m: float, make_weighting,
                  device: str = "auto"):
@@ -72,7 +85,7 @@ class ParticleFilter:
             raise ValueError("MCL: the sensor has no beams")
         if cfg.estimate not in ESTIMATORS:
             raise ValueError(f"MCL: unknown estimate {cfg.estimate!r}; choose one of {sorted(ESTIMATORS)}")
-        self.beam_index = np.unique(np.linspace(0, n_sensor - 1, min(cfg.num_beams, n_sensor)).round().astype(int))
+        self.beam_index = pick_beams(n_sensor, cfg.num_beams, cfg.beam_pick)
         self.num_sensor_beams, self.free_space, self.T_base_laser = n_sensor, free_space, tuple(map(float, T_base_laser))
         N, B, d = cfg.num_particles, len(self.beam_index), self.device
         if cfg.motion not in ("odometry", "irmcl"):

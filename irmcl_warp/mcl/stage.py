@@ -65,7 +65,8 @@ def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
 
 
 ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",
-                 "resample": "", "estimate": "", "sigma_m": "sigma", "motion": ""}
+                 "resample": "", "estimate": "", "sigma_m": "sigma", "motion": "", "beam_pick": "",
+                 "resample_threshold": "neff"}
 
 
 def cell_tag(m, loc) -> str:
@@ -82,8 +83,9 @@ def run_tag(m, loc) -> str:
     tag += "-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else ""
     defaults = MCLConfig()
     for key, short in ABLATION_TAGS.items():
-        if m[key] != getattr(defaults, key):
-            tag += f"-{short}{m[key]:g}" if short else f"-{m[key]}"
+        value = m.get(key, getattr(defaults, key))  # runs kept before a setting existed ran at its default
+        if value != getattr(defaults, key):
+            tag += f"-{short}{value:g}" if short else f"-{value}"
     return tag
 
 
