@@ -234,6 +234,27 @@ def test_the_climb_in_one_thread_equals_the_launched_rounds(rng):
     assert launched_rounds >= fused_rounds and launched_rounds % 8 == 0  # the host checked every 8 rounds
 
 
+def test_paper_proposal_keeps_the_sample_where_the_match_scores_too_low(rng):
+    """slam.minimum_score: a particle whose match scores at or below it keeps its motion-model sample, weighted
+    by the sample's own likelihood; above it the pose is drawn around the match."""
+    log = _sim(10.0)
+    moved = np.array([0.3, 0.0, 0.05])
+    for minimum, kept in ((1e9, True), (0.0, False)):
+        rbpf = _matcher(log, P=4, proposal="paper", minimum_score=minimum)
+        rbpf.start(log.ground_truth[0], log.ranges_m[0])
+        for k in (5, 10):
+            rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
+            rbpf._set_ranges(log.ranges_m[k])
+            rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+        rbpf._set_ranges(log.ranges_m[20])
+        sampled = log.ground_truth[20] + rng.normal(0, [0.08, 0.08, 0.03], (4, 3))
+        new, gain, _ = rbpf.propose_paper(sampled, moved)
+        if kept:
+            assert np.array_equal(new, sampled) and np.array_equal(gain, rbpf.evaluate(sampled[:, None])[1][:, 0])
+        else:
+            assert not np.allclose(new, sampled, atol=1e-3) and np.all(np.isfinite(gain))
+
+
 def test_score_of_windows_at_the_map_edge_matches_twin(rng):
     """End points on the map's border (read cell by cell with a bounds check) and inside it (read without
     one) against the twin, on a map cut smaller than the world whose first row and column hold the world's

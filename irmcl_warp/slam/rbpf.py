@@ -268,8 +268,9 @@ class RBPF:
         ok = score > self.cfg.minimum_score
         predicted = compose(self.history.poses[-1], np.broadcast_to(moved, (self.P, 3)))
         new, gain = self.gaussian_proposal(matched, predicted, moved)
-        fallback = self.evaluate(sampled[:, None])[1][:, 0]
-        return np.where(ok[:, None], new, sampled), np.where(ok, gain, fallback), rounds
+        if not ok.all():  # particles whose match scored too low keep their sample, weighted by its likelihood
+            gain = np.where(ok, gain, self.evaluate(sampled[:, None])[1][:, 0])
+        return np.where(ok[:, None], new, sampled), gain, rounds
 
     def gaussian_proposal(self, matched: np.ndarray, predicted: np.ndarray, moved: np.ndarray):
         """Paper proposal: tau_j = p(z | m, x_j) p(x_j | x_{t-1}, u) at the grid around the match, the motion
