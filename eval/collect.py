@@ -102,8 +102,10 @@ DERIVED_SETTINGS = ("maxRange", "angleIncrement")  # taken from the log by eval.
 
 
 def reference_variant(m: dict) -> str:
-    """The driver settings of a released-code run that differ from the ROS wrapper's defaults."""
-    return ", ".join(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS)
+    """The driver settings of a released-code run that differ from the ROS wrapper's defaults, then the
+    overrides of the log's data config it ran with (``--data``)."""
+    return ", ".join([*(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS),
+                      *m.get("data_overrides", [])])
 
 
 def slam_errors(runs: dict, ds: str, proposal: str = "paper", resample: str = "selective", particles: int = 30,

@@ -9,6 +9,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 import eval.reference.gmapping as ref
+from eval.collect import released_errors
 from irmcl_warp.config import SimConfig
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.sim import simulate
@@ -57,6 +58,13 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
     # the no-return beams go out as the log's no-return value, every beam of every scan
     first = scans.read_text().splitlines()[0].split()
     assert int(first[4]) == 24 and len(first) == 5 + 24
+    # a run with the log's data config overridden is a variant of its own: its own folder, not in the default rows
+    other = ref.run_seed(cfg, log, scans, 3, {"maxRange": "19.99", "maxUrange": "10"}, tmp_path,
+                         data_overrides=["data.laser_offset=[0,0,0]"])
+    assert other["run"] == "30p-maxUrange10-laser_offset0_0_0-seed3" and other["data_overrides"] == ["data.laser_offset=[0,0,0]"]
+    runs = {("sim", r["run"]): r for r in (m, other)}
+    assert len(released_errors(runs, "sim", variant="maxUrange=10")) == 1
+    assert len(released_errors(runs, "sim", variant="maxUrange=10, data.laser_offset=[0,0,0]")) == 1
 
 
 def test_neff_check_reads_the_released_resamplings_from_its_post_resampling_trace(tmp_path):

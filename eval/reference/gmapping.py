@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -61,15 +62,24 @@ def export_scans(log, path: Path) -> None:
     atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
 
 
-def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path) -> dict:
+def data_tag(overrides) -> str:
+    """A folder-name part for Hydra overrides of the log's data config: data.laser_offset=[0,0,0] ->
+    laser_offset0_0_0."""
+    parts = [o.removeprefix("data.").split("=", 1) for o in overrides]
+    return "-".join(key + re.sub(r"[^A-Za-z0-9.]+", "_", value).strip("_") for key, value in parts)
+
+
+def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path, data_overrides=()) -> dict:
     n = int(params.get("particles", 30))
-    chosen = "-".join(f"{k}{v}" for k, v in sorted(params.items()) if k not in DERIVED_SETTINGS + ("particles",))
+    chosen = "-".join([*(f"{k}{v}" for k, v in sorted(params.items()) if k not in DERIVED_SETTINGS + ("particles",)),
+                       *([data_tag(data_overrides)] if data_overrides else [])])
     out = out_root / f"reference-gmapping-{n}p{'-' + chosen if chosen else ''}-seed{seed}"
     out.mkdir(parents=True, exist_ok=True)
     done = out / "metrics.json"
     if done.is_file():  # a finished run of the same settings: kept, not run again (an interrupted sweep resumes)
         m = json.loads(done.read_text())
-        if m.get("settings") == {k: float(v) for k, v in params.items()} and m.get("drand48_seed") == seed + 1:
+        if (m.get("settings") == {k: float(v) for k, v in params.items()} and m.get("drand48_seed") == seed + 1
+                and m.get("data_overrides", []) == list(data_overrides)):
             return m
     args = [str(BINARY), str(scans_file), str(out / "path.txt"), str(out / "neff.txt"), f"seed={seed + 1}"]
     args += [f"{k}={v}" for k, v in params.items()]
@@ -94,6 +104,7 @@ def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path
                "processed_scans": int(len(processed)), "wall_time_s": wall,
                "resamplings_upper_bound": int(np.sum(neff[:, 1] < 0.5 * n)) if len(neff) else 0,
                "settings": {k: float(v) for k, v in params.items()},
+               "data_overrides": list(data_overrides),
                "relations_frame": {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]},
                "relations": relations_error(stamps, every, rel)}
     metrics["run"] = out.name.removeprefix("reference-gmapping-")
@@ -257,6 +268,8 @@ def main(argv=None):
     ap.add_argument("exp", help="+exp=<name>, e.g. +exp=gmapping_fr079")
     ap.add_argument("--seeds", default="0-9")
     ap.add_argument("--set", action="append", default=[], help="driver parameter key=value (e.g. particles=60)")
+    ap.add_argument("--data", action="append", default=[], help="Hydra override of the log's data config, e.g. "
+                    "data.laser_offset=[0,0,0] (the laser at the base: the CARMEN log's FLASER pose); named in the folder")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--keep", action="store_true", help="merge the runs into results/slam/reference/<exp>.json")
     ap.add_argument("--keep-only", action="store_true", help="run nothing: merge the finished runs in outputs/")
@@ -305,17 +318,19 @@ def main(argv=None):
     if not BINARY.is_file():
         raise FileNotFoundError(f"{BINARY}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
     exp = a.exp.removeprefix("+exp=")
-    cfg = compose_config([f"+exp={exp}"])
+    if any(not o.startswith("data.") for o in a.data):
+        raise ValueError(f"--data {a.data}: only overrides of the data config (data.<key>=<value>)")
+    cfg = compose_config([f"+exp={exp}", *a.data])
     log = load_stream(cfg)
     params = dict(kv.split("=", 1) for kv in a.set)
     params.setdefault("maxRange", f"{scan_range_max(cfg) - 0.01:.4f}")
     params["angleIncrement"] = f"{log.info.angle_increment_rad:.9f}"
     out_root = REPO / "outputs" / exp
     out_root.mkdir(parents=True, exist_ok=True)
-    scans_file = out_root / "reference-gmapping-scans.txt"
+    scans_file = out_root / f"reference-gmapping-scans{'-' + data_tag(a.data) if a.data else ''}.txt"
     export_scans(log, scans_file)
     with ThreadPoolExecutor(a.jobs) as pool:
-        runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root), seeds_of(a.seeds)))
+        runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root, a.data), seeds_of(a.seeds)))
     print(f"released GMapping on {exp} ({len(log)} scans, {params.get('particles', 30)} particles)")
     print("| seed | processed | relations m | deg | wall s |")
     print("|---|---|---|---|---|")
