@@ -54,6 +54,24 @@ def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), 
     return maps, ref
 
 
+def _score_against_twin(maps, log, k, cands, origin, free_check, rng, res=0.1):
+    """Scan k scored at ``cands`` on map 0 by the kernel and by the twin; asserts they agree and returns the
+    kernel's scores."""
+    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=res * np.sqrt(2),
+                        free_check=free_check, device=DEVICE)
+    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
+    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
+           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
+    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
+                                log.info.angles_rad, 8.0, origin, res, free_delta=res * np.sqrt(2),
+                                free_check=free_check) for c in cands])
+    assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
+    assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
+    return score.numpy()[0]
+
+
 @pytest.mark.parametrize("line", ["bresenham", "dda"])
 def test_integrate_matches_twin(rng, line):
     log = _sim(5.0)
@@ -81,19 +99,7 @@ def test_score_matches_twin_and_peaks_at_the_true_pose(rng, free_check):
     true = log.ground_truth[k]
     far = np.array([[0.25, 0.0, 0.0], [0.0, -0.25, 0.0], [0.0, 0.0, 0.2]])
     cands = true + np.concatenate([np.zeros((1, 3)), far, rng.normal(0, [0.1, 0.1, 0.05], (5, 3))])
-    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2),
-                        free_check=free_check, device=DEVICE)
-    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
-    score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
-    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
-    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
-           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
-    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                                log.info.angles_rad, 8.0, (-1.0, -1.0), 0.1, free_delta=0.1 * np.sqrt(2),
-                                free_check=free_check) for c in cands])
-    assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
-    assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
-    got = score.numpy()[0]
+    got = _score_against_twin(maps, log, k, cands, (-1.0, -1.0), free_check, rng)
     assert got[0] > got[1:4].max() and got[0] > 0.8 * got.max()  # the true pose beats poses 0.25 m / 0.2 rad off
 
 
@@ -118,14 +124,20 @@ def _matcher(log, P=4, proposal="gmapping_code", **kw):
     return rbpf
 
 
+def _map_from_true_poses(rbpf, log):
+    """Every particle's map from scans 0, 5 and 10 at their true poses (the matcher tests' map)."""
+    rbpf.start(log.ground_truth[0], log.ranges_m[0])
+    for k in (5, 10):
+        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (rbpf.P, 1)).astype(np.float32), dtype=wp.vec3,
+                                   device=DEVICE))
+        rbpf._set_ranges(log.ranges_m[k])
+        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+
+
 def test_scan_matcher_recovers_a_known_offset():
     log = _sim(10.0)
     rbpf = _matcher(log)
-    rbpf.start(log.ground_truth[0], log.ranges_m[0])
-    for k in (5, 10):  # the map from three true poses
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
-        rbpf._set_ranges(log.ranges_m[k])
-        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    _map_from_true_poses(rbpf, log)
     k = 20
     offsets = np.array([[0.15, -0.10, 0.05], [-0.12, 0.08, -0.04], [0.0, 0.18, 0.0], [0.1, 0.1, -0.06]])
     rbpf._set_ranges(log.ranges_m[k])
@@ -196,11 +208,7 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
 def test_device_hill_climbing_matches_the_host_twin(rng):
     log = _sim(10.0)
     rbpf = _matcher(log, P=6)
-    rbpf.start(log.ground_truth[0], log.ranges_m[0])
-    for k in (5, 10):
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (6, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
-        rbpf._set_ranges(log.ranges_m[k])
-        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    _map_from_true_poses(rbpf, log)
     rbpf._set_ranges(log.ranges_m[20])
     start = (log.ground_truth[20] + rng.normal(0, [0.1, 0.1, 0.04], (6, 3))).astype(np.float32).astype(np.float64)
     ours, score, _ = rbpf.match(start)
@@ -217,11 +225,7 @@ def test_the_climb_in_one_thread_equals_the_launched_rounds(rng):
     log = _sim(10.0)
     P = 8
     rbpf = _matcher(log, P=P)
-    rbpf.start(log.ground_truth[0], log.ranges_m[0])
-    for k in (5, 10):
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (P, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
-        rbpf._set_ranges(log.ranges_m[k])
-        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    _map_from_true_poses(rbpf, log)
     rbpf._set_ranges(log.ranges_m[20])
     start = log.ground_truth[20] + rng.normal(0, [0.12, 0.12, 0.05], (P, 3))
     launched, launched_score, launched_rounds = rbpf.match(start, rounds_launched=True)
@@ -241,11 +245,7 @@ def test_paper_proposal_keeps_the_sample_where_the_match_scores_too_low(rng):
     moved = np.array([0.3, 0.0, 0.05])
     for minimum, kept in ((1e9, True), (0.0, False)):
         rbpf = _matcher(log, P=4, proposal="paper", minimum_score=minimum)
-        rbpf.start(log.ground_truth[0], log.ranges_m[0])
-        for k in (5, 10):
-            rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (4, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE))
-            rbpf._set_ranges(log.ranges_m[k])
-            rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+        _map_from_true_poses(rbpf, log)
         rbpf._set_ranges(log.ranges_m[20])
         sampled = log.ground_truth[20] + rng.normal(0, [0.08, 0.08, 0.03], (4, 3))
         new, gain, _ = rbpf.propose_paper(sampled, moved)
@@ -264,16 +264,6 @@ def test_score_of_windows_at_the_map_edge_matches_twin(rng):
     maps, ref = _integrate_both(log, [0, 5, 10], P=1, shape=shape, origin=origin)
     k = 12
     cands = log.ground_truth[k] + rng.normal(0, [0.1, 0.1, 0.05], (6, 3))
-    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=0.1 * np.sqrt(2),
-                        free_check=True, device=DEVICE)
-    cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
-    score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
-    loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
-    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
-           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
-    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                                log.info.angles_rad, 8.0, origin, res, free_delta=0.1 * np.sqrt(2), free_check=True)
-                     for c in cands])
     lp = twin.laser_pose(log.ground_truth[k], log.T_base_laser)
     ok = np.isfinite(log.ranges_m[k]) & (log.ranges_m[k] > 0) & (log.ranges_m[k] <= 8.0)
     a = lp[2] + log.info.angles_rad[ok]
@@ -281,8 +271,7 @@ def test_score_of_windows_at_the_map_edge_matches_twin(rng):
     iy = np.floor((lp[1] + log.ranges_m[k][ok] * np.sin(a) - origin[1]) / res)
     edge = (ix < 1) | (iy < 1) | (ix > shape[1] - 2) | (iy > shape[0] - 2)
     assert 10 < edge.sum() < len(edge) - 10, edge.sum()  # both kinds of window are scored
-    assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
-    assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
+    _score_against_twin(maps, log, k, cands, origin, True, rng)
 
 
 def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
