@@ -13,7 +13,6 @@ measured side by side on a machine whose speed drifts from hour to hour.
 from __future__ import annotations
 
 import platform
-import subprocess
 import time
 from pathlib import Path
 
@@ -60,18 +59,11 @@ def run_released(exp: str, particles: int, scans: int | None) -> float:
     log = load_stream(cfg)
     if scans is not None:
         log = log.subset(slice(0, min(int(scans), len(log))))
-    params = {"particles": str(particles), "maxRange": f"{ref.scan_range_max(cfg) - 0.01:.4f}",
-              "angleIncrement": f"{log.info.angle_increment_rad:.9f}"}
+    params = ref.wrapper_params(cfg, log, [f"particles={particles}"])
     with tempfile.TemporaryDirectory() as tmp:
         scans_file = Path(tmp) / "scans.txt"
         ref.export_scans(log, scans_file)
-        args = [str(ref.BINARY), str(scans_file), f"{tmp}/path.txt", f"{tmp}/neff.txt", "seed=1"]
-        t0 = time.perf_counter()
-        ran = subprocess.run(args + [f"{k}={v}" for k, v in params.items()], capture_output=True, text=True)
-        wall = time.perf_counter() - t0
-    if ran.returncode != 0:
-        raise RuntimeError(f"{ref.BINARY} failed ({ran.returncode}): {ran.stderr[-1000:]}")
-    return wall
+        return ref.run_binary(scans_file, Path(tmp), 0, params)
 
 
 def run_slam_bench(a) -> list[dict]:

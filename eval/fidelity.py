@@ -340,7 +340,7 @@ def slam_table() -> str:
     return "\n".join(rows)
 
 
-RELEASED_VARIANTS = [  # (log, particles, released-code variant, ours: (proposal, variant) or None, what it is)
+RELEASED_VARIANTS = [  # (log, particles, released-code variant (collect.reference_variant), what it is)
     ("fr079", 30, "", "the wrapper's way (the laser 4 cm ahead of the base, as the bag's extrinsic has it)"),
     ("fr079", 30, "data.laser_offset=[0,0,0]", "the laser at the base, as the derived CARMEN log's FLASER pose has it"),
     ("mit_killian", 60, "particles=60", "60 particles, the wrapper's 5 cm cells"),
@@ -390,8 +390,9 @@ def released_variants_findings() -> str:
         "way. The rest (the CARMEN reader's beam layout, its 50 m range) was not run.",
         f"- **On MIT Killian the released code converges where ours does not:** {k10[0]}/{k10[1]} seeds at 10 cm with "
         f"60 particles (and {k5[0]}/{k5[1]} at its own 5 cm; two seeds each, 19 min a run on one core), ours "
-        f"{ours[0]}/{ours[1]} at 10 cm. Our 10 cm grid is not the cause, and neither is our usable range (the data config's far_m = 40 m, against the scan's 80 m "
-        "range_max the wrapper uses) nor the proposal: at 80 m, with the paper's proposal or the released one, "
+        f"{ours[0]}/{ours[1]} at 10 cm. Our 10 cm grid is not the cause, and neither is our usable range (the data "
+        "config's far_m = 40 m, against the scan's 80 m range_max the wrapper uses) nor the proposal: at 80 m, with "
+        "the paper's proposal or the released one, "
         "ours still fails (table). Where the difference lies is open.",
         f"- **Ours is not as sensitive to the mounting on fr079:** `gmapping_code` with the laser at the base converges "
         f"in {ours_base[0]}/{ours_base[1]} seeds, with the extrinsic in {ours_ext[0]}/{ours_ext[1]}; the released code "

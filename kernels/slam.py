@@ -174,6 +174,12 @@ def make_integrate_kernel(line: str):
 
 
 @wp.func
+def window_inside(c: wp.vec2i, k: int, x_hi: int, y_hi: int) -> bool:
+    """Whether the (2k+1)^2 window around cell c lies in the map (x_hi, y_hi: the largest centre that fits)."""
+    return c[0] >= k and c[1] >= k and c[0] <= x_hi and c[1] <= y_hi
+
+
+@wp.func
 def cell_inside(cells: wp.array3d(dtype=wp.vec4), p: int, ix: int, iy: int) -> wp.vec4:
     """The cell, read without a bounds check (the caller has checked the whole window)."""
     return cells[p, iy, ix]
@@ -262,9 +268,9 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
                 ey = lp[1] + r * sa
                 hit_cell = cell_of(ex, ey, origin, res)
                 free_cell = cell_of(ex - wp.static(free_delta) * ca, ey - wp.static(free_delta) * sa, origin, res)
-                inside = hit_cell[0] >= wp.static(k) and hit_cell[1] >= wp.static(k) and hit_cell[0] <= x_hi and hit_cell[1] <= y_hi
+                inside = window_inside(hit_cell, wp.static(k), x_hi, y_hi)
                 if wp.static(free_check):
-                    inside = inside and free_cell[0] >= wp.static(k) and free_cell[1] >= wp.static(k) and free_cell[0] <= x_hi and free_cell[1] <= y_hi
+                    inside = inside and window_inside(free_cell, wp.static(k), x_hi, y_hi)
                 best = float(1.0e30)
                 if inside:
                     best = search_inside(cells, p, hit_cell, free_cell, ex, ey)
@@ -499,9 +505,9 @@ class Scorer:
         self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
         self._pool = None
         self._partials, self._beam_cs = {}, None
-        self.kernel, self.climb_kernel = make_score_kernel(int(kernel_size), float(fullness), float(sigma), float(lsigma),
-                                        float(null_likelihood), float(free_delta_m), int(lskip) + 1, self.per_thread,
-                                        bool(free_check))
+        self.kernel, self.climb_kernel = make_score_kernel(
+            int(kernel_size), float(fullness), float(sigma), float(lsigma), float(null_likelihood), float(free_delta_m),
+            int(lskip) + 1, self.per_thread, bool(free_check))
 
     def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
                  score: wp.array, loglik: wp.array, active: wp.array | None = None) -> None:
@@ -516,16 +522,12 @@ class Scorer:
         part_s, part_l = self.reserve(P, C, B)
         beam_cs = self._beam_directions(angles)
 
-        def run(p0: int, p1: int, c0: int, c1: int) -> None:
-            wp.launch(self.kernel, (p1 - p0, c1 - c0, part_s.shape[2]),
-                      [candidates[p0:p1, c0:c1], T, ranges, beam_cs, self.usable, maps.origin, maps.res,
-                       maps.cells[p0:p1], part_s[p0:p1, c0:c1], part_l[p0:p1, c0:c1], active[p0:p1]],
-                      device=self.device)
+        def run(p0: int, p1: int) -> None:
+            wp.launch(self.kernel, (p1 - p0, C, part_s.shape[2]),
+                      [candidates[p0:p1], T, ranges, beam_cs, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
+                       part_s[p0:p1], part_l[p0:p1], active[p0:p1]], device=self.device)
 
-        if self.threads == 1:
-            run(0, P, 0, C)
-        else:
-            self._run_blocks(run, P, C)
+        self._run_blocks(run, P)
         wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)
 
     def climb(self, maps: ParticleMaps, start: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
@@ -537,16 +539,13 @@ class Scorer:
         T, beam_cs = wp.vec3(*map(float, T_base_laser)), self._beam_directions(angles)
         steps = wp.vec3(*map(float, first_steps))
 
-        def run(p0: int, p1: int, c0: int = 0, c1: int = 1) -> None:
+        def run(p0: int, p1: int) -> None:
             wp.launch(self.climb_kernel, p1 - p0,
                       [start[p0:p1], T, ranges, beam_cs, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
                        steps, int(iterations), int(max_rounds), pose[p0:p1], best[p0:p1], rounds[p0:p1]],
                       device=self.device)
 
-        if self.threads == 1:
-            run(0, start.shape[0])
-        else:
-            self._run_blocks(run, start.shape[0], 1)
+        self._run_blocks(run, start.shape[0])
 
     def reserve(self, P: int, C: int, B: int):
         """The partial-sum buffers for P x C candidates of B beams (allocate before a CUDA graph capture)."""
@@ -564,15 +563,19 @@ class Scorer:
             self._beam_cs = (angles, wp.array(cs, dtype=wp.vec2, device=self.device))
         return self._beam_cs[1]
 
-    def _run_blocks(self, run, P: int, C: int) -> None:
-        """Runs the launch as blocks of particles from ``threads`` host threads (blocks of candidates, each
-        holding every particle, measured 1.6x slower on 2 cores: each core then reads all maps)."""
+    def _run_blocks(self, run, P: int) -> None:
+        """``run(p0, p1)`` launches particles p0..p1-1: once for all of them with one host thread (and on a GPU),
+        else as blocks of particles from ``threads`` host threads (blocks of candidates, each holding every
+        particle, measured 1.6x slower on 2 cores: each core then reads all maps)."""
+        if self.threads == 1:
+            run(0, P)
+            return
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="slam-score")
         cuts = np.linspace(0, P, min(self.threads, P) + 1).astype(int)
-        for f in [self._pool.submit(run, int(a), int(b), 0, C) for a, b in zip(cuts[:-1], cuts[1:])]:
+        for f in [self._pool.submit(run, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
             f.result()
 
 

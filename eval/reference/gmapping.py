@@ -62,6 +62,27 @@ def export_scans(log, path: Path) -> None:
     atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
 
 
+def wrapper_params(cfg, log, chosen=()) -> dict:
+    """The driver's parameters: ``chosen`` ("key=value" strings, the wrapper's defaults elsewhere), maxRange
+    from the bag's range_max as the wrapper takes it (unless chosen) and the log's beam increment."""
+    params = dict(kv.split("=", 1) for kv in chosen)
+    params.setdefault("maxRange", f"{scan_range_max(cfg) - 0.01:.4f}")
+    params["angleIncrement"] = f"{log.info.angle_increment_rad:.9f}"
+    return params
+
+
+def run_binary(scans_file: Path, out: Path, seed: int, params: dict) -> float:
+    """Runs the driver on ``scans_file`` (path.txt and neff.txt into ``out``), drand48 seeded with seed + 1
+    (0 would leave it unseeded); returns its wall time (s)."""
+    args = [str(BINARY), str(scans_file), str(out / "path.txt"), str(out / "neff.txt"), f"seed={seed + 1}"]
+    t0 = time.perf_counter()
+    ran = subprocess.run(args + [f"{k}={v}" for k, v in params.items()], capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if ran.returncode != 0:
+        raise RuntimeError(f"gmapping_replay seed {seed} failed ({ran.returncode}): {ran.stderr[-1000:]}")
+    return wall
+
+
 def data_tag(overrides) -> str:
     """A folder-name part for Hydra overrides of the log's data config: data.laser_offset=[0,0,0] ->
     laser_offset0_0_0."""
@@ -81,13 +102,7 @@ def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path
         if (m.get("settings") == {k: float(v) for k, v in params.items()} and m.get("drand48_seed") == seed + 1
                 and m.get("data_overrides", []) == list(data_overrides)):
             return m
-    args = [str(BINARY), str(scans_file), str(out / "path.txt"), str(out / "neff.txt"), f"seed={seed + 1}"]
-    args += [f"{k}={v}" for k, v in params.items()]
-    t0 = time.perf_counter()
-    ran = subprocess.run(args, capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    if ran.returncode != 0:
-        raise RuntimeError(f"gmapping_replay seed {seed} failed ({ran.returncode}): {ran.stderr[-1000:]}")
+    wall = run_binary(scans_file, out, seed, params)
     path = np.loadtxt(out / "path.txt", ndmin=2)
     processed = match_stamps(log.stamps, path[:, 0], 1e-5)
     if (processed < 0).any():
@@ -322,9 +337,7 @@ def main(argv=None):
         raise ValueError(f"--data {a.data}: only overrides of the data config (data.<key>=<value>)")
     cfg = compose_config([f"+exp={exp}", *a.data])
     log = load_stream(cfg)
-    params = dict(kv.split("=", 1) for kv in a.set)
-    params.setdefault("maxRange", f"{scan_range_max(cfg) - 0.01:.4f}")
-    params["angleIncrement"] = f"{log.info.angle_increment_rad:.9f}"
+    params = wrapper_params(cfg, log, a.set)
     out_root = REPO / "outputs" / exp
     out_root.mkdir(parents=True, exist_ok=True)
     scans_file = out_root / f"reference-gmapping-scans{'-' + data_tag(a.data) if a.data else ''}.txt"

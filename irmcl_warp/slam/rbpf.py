@@ -191,7 +191,7 @@ class RBPF:
           active flags every ``check_every`` rounds only, and the rounds are one CUDA graph;
         * on the CPU (the default there), each particle's whole climb in one thread (Scorer.climb): no
           launch per round, no particle waiting for the slowest one. Rounds = the most any particle took."""
-        c, d, P = self.cfg, self.device, self.P
+        d, P = self.device, self.P
         if not hasattr(self, "_climb"):
             self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
                                steps=wp.zeros(P, dtype=wp.vec3, device=d), halvings=wp.zeros(P, dtype=wp.int32, device=d),
@@ -200,14 +200,26 @@ class RBPF:
         st = self._climb
         if rounds_launched is None:
             rounds_launched = wp.get_device(d).is_cuda
-        if not rounds_launched:
-            st["start"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
-            self.scorer.climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles,
-                              (c.lstep, c.lstep, c.astep), int(c.iterations), int(max_rounds), st["pose"], st["best"],
-                              st["rounds"])
-            pose = st["pose"].numpy().astype(np.float64)
-            pose[:, 2] = wrap_angle(pose[:, 2])
-            return pose, st["best"].numpy().astype(np.float64), int(st["rounds"].numpy().max())
+        climb = self._climb_launching_rounds if rounds_launched else self._climb_in_threads
+        rounds = climb(start, max_rounds, check_every)
+        pose = st["pose"].numpy().astype(np.float64)
+        pose[:, 2] = wrap_angle(pose[:, 2])
+        return pose, st["best"].numpy().astype(np.float64), rounds
+
+    def _climb_in_threads(self, start: np.ndarray, max_rounds: int, check_every: int) -> int:
+        """match's CPU way: Scorer.climb, each particle's whole climb in one thread; returns the most rounds any
+        particle took (``check_every`` is the GPU way's)."""
+        c, st = self.cfg, self._climb
+        st["start"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=self.device))
+        self.scorer.climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles,
+                          (c.lstep, c.lstep, c.astep), int(c.iterations), int(max_rounds), st["pose"], st["best"],
+                          st["rounds"])
+        return int(st["rounds"].numpy().max())
+
+    def _climb_launching_rounds(self, start: np.ndarray, max_rounds: int, check_every: int) -> int:
+        """match's GPU way: rounds launched over particles x moves x beams, ``check_every`` of them per CUDA
+        graph between looks at the active flags; returns the rounds launched."""
+        c, d, P, st = self.cfg, self.device, self.P, self._climb
         st["pose"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
         st["steps"].assign(wp.array(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32), dtype=wp.vec3,
                                     device=d))
@@ -245,9 +257,7 @@ class RBPF:
             rounds += check_every
             if not st["active"].numpy().any():
                 break
-        pose = st["pose"].numpy().astype(np.float64)
-        pose[:, 2] = wrap_angle(pose[:, 2])
-        return pose, st["best"].numpy().astype(np.float64), rounds
+        return rounds
 
     # --- proposals: (poses sampled from the motion model, odometry step) -> (new poses, log-weight gain, rounds)
     def propose_odometry(self, sampled, moved):
