@@ -207,7 +207,8 @@ class SlamConfig:
     linear_update: float = 1.0  # process a scan after this much travel (m) ...
     angular_update: float = 0.5  # ... or rotation (rad)
     resolution_m: float = 0.05
-    map_margin_m: float = 10.0  # map = odometry's bounding box + this margin
+    map_margin_m: float = 10.0  # the first map's half-size around the first pose, and the least slack the maps
+    # get beyond a scan when they grow to hold it
     proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses around the match, spaced as below
     proposal_lstep: Optional[float] = None  # their spacing in x and y (m); None: lstep
     proposal_astep: Optional[float] = None  # and in theta (rad); None: astep

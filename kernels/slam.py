@@ -3,7 +3,9 @@ per-particle maps held as one [P, H, W] set of arrays, updated and read by one l
 
 Cells are GMapping's point accumulators, one vec4 per cell (visits, hits, sx, sy): the times a beam passed
 or ended in the cell, the times a beam ended in it, and the sum of those end points, so that a cell knows
-where in it the walls were seen. Occupancy = hits / visits, -1 where never visited. One vec4 rather than
+where in it the walls were seen. The sums are of the end points' offsets from the cell's corner, not of
+their world coordinates: in float32, a sum of a thousand hits 600 m from the origin (MIT Killian) keeps
+only about 3 cm, and the matcher compares means to its 5 cm sigma (the released code sums in double). Occupancy = hits / visits, -1 where never visited. One vec4 rather than
 four arrays: a lookup reads one 16-byte value (on the CPU, the matcher's cost is these cache misses).
 
 * ``SLAM["integrate"]``: one thread per (particle, beam) walks the cells from the laser to the end point
@@ -168,7 +170,10 @@ def make_integrate_kernel(line: str):
                 seg = beam_segment(poses[p], T_base_laser, r, angles[b])
                 c1 = cell_of(seg[2], seg[3], origin, res)
                 if c1[0] >= 0 and c1[1] >= 0 and c1[0] < cells.shape[2] and c1[1] < cells.shape[1]:
-                    cells[p, c1[1], c1[0]] = cells[p, c1[1], c1[0]] + wp.vec4(1.0, 1.0, seg[2], seg[3])
+                    # the end point's offset from its cell's corner (see the module's docstring)
+                    ox = (seg[2] - origin[0]) - float(c1[0]) * res
+                    oy = (seg[3] - origin[1]) - float(c1[1]) * res
+                    cells[p, c1[1], c1[0]] = cells[p, c1[1], c1[0]] + wp.vec4(1.0, 1.0, ox, oy)
 
     return free, hits
 
@@ -204,11 +209,12 @@ def move(m: int) -> wp.vec3:
 def make_window_search(kernel_size: int, fullness: float, free_check: bool, read):
     """A wp.func: the smallest |end point - mean hit point|^2 over the matching cells of the (2k+1)^2 window
     around the end point's cell (1e30 where none matches), reading cells with ``read`` (``cell_at``, which
-    answers an unvisited cell outside the map, or ``cell_inside``, which reads without checking)."""
+    answers an unvisited cell outside the map, or ``cell_inside``, which reads without checking). ``ex``,
+    ``ey``: the end point's offset from the corner of its cell (the cells hold their hits' offsets alike)."""
 
     @wp.func
     def search(cells: wp.array3d(dtype=wp.vec4), p: int, hit_cell: wp.vec2i, free_cell: wp.vec2i, ex: float,
-               ey: float) -> float:
+               ey: float, res: float) -> float:
         best = float(1.0e30)
         for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):  # row by row in memory
             for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
@@ -222,8 +228,8 @@ def make_window_search(kernel_size: int, fullness: float, free_check: bool, read
                             free = 0
                     if free == 1:
                         inv = 1.0 / h[1]
-                        mx = ex - h[2] * inv
-                        my = ey - h[3] * inv
+                        mx = ex - float(ox) * res - h[2] * inv
+                        my = ey - float(oy) * res - h[3] * inv
                         d2 = mx * mx + my * my
                         if d2 < best:
                             best = d2
@@ -271,11 +277,13 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
                 inside = window_inside(hit_cell, wp.static(k), x_hi, y_hi)
                 if wp.static(free_check):
                     inside = inside and window_inside(free_cell, wp.static(k), x_hi, y_hi)
+                lx = (ex - origin[0]) - float(hit_cell[0]) * res  # the end point's offset from its cell's corner
+                ly = (ey - origin[1]) - float(hit_cell[1]) * res
                 best = float(1.0e30)
                 if inside:
-                    best = search_inside(cells, p, hit_cell, free_cell, ex, ey)
+                    best = search_inside(cells, p, hit_cell, free_cell, lx, ly, res)
                 else:
-                    best = search_checked(cells, p, hit_cell, free_cell, ex, ey)
+                    best = search_checked(cells, p, hit_cell, free_cell, lx, ly, res)
                 if best < 1.0e30:
                     s += wp.exp(-best / wp.static(sigma))
                     ll += -best / wp.static(lsigma)
@@ -425,9 +433,20 @@ def keep_slots(parents: np.ndarray) -> np.ndarray:
     return order
 
 
+@wp.kernel
+def shift_cells_kernel(src: wp.array3d(dtype=wp.vec4), dst: wp.array3d(dtype=wp.vec4), dx: int, dy: int):
+    """dst[p, y + dy, x + dx] = src[p, y, x]: the maps copied into a larger frame (ParticleMaps.cover)."""
+    p, y, x = wp.tid()
+    dst[p, y + dy, x + dx] = src[p, y, x]
+
+
 class ParticleMaps:
     """P maps of H x W point accumulators on one device, with their frame (origin = corner of cell (0, 0));
-    ``cells`` [P, H, W] vec4 = (visits, hits, sx, sy)."""
+    ``cells`` [P, H, W] vec4 = (visits, hits, sx, sy). The frame grows by whole cells (``cover``) when a scan
+    reaches beyond it, as the released code's maps do: no end point is dropped at the map's border, however
+    far the corrected path strays from where the odometry went (MIT Killian: hundreds of metres)."""
+
+    MAX_CELLS = 200_000_000  # per map: 3.2 GB each; a frame that would grow beyond it is an error
 
     FIELDS = ("visits", "hits", "sx", "sy")
 
@@ -436,8 +455,37 @@ class ParticleMaps:
         if num_particles < 1 or H < 1 or W < 1 or not resolution_m > 0:
             raise ValueError(f"ParticleMaps: {num_particles} particles of {H} x {W} cells at {resolution_m} m")
         self.device = pick_device(device)
-        self.origin, self.res = wp.vec2(float(origin_xy[0]), float(origin_xy[1])), float(resolution_m)
+        self.origin_xy = (float(origin_xy[0]), float(origin_xy[1]))  # in double: growing adds whole cells to it
+        self.origin, self.res = wp.vec2(*self.origin_xy), float(resolution_m)
         self.cells = wp.zeros((num_particles, H, W), dtype=wp.vec4, device=self.device)
+        self.grown = 0  # times cover() enlarged the frame
+
+    def cover(self, lo_xy, hi_xy, slack_m: float) -> bool:
+        """Grow the frame, by whole cells so that every cell keeps its place, until it holds the box
+        lo_xy..hi_xy; a side that grows gets ``slack_m`` or a quarter of the frame's extent beyond the box,
+        whichever is more (geometric growth: the copies cost a few times the final maps, not one per scan).
+        Returns whether it grew. Twin: the numpy slice assignment in tests/test_slam.py."""
+        P, H, W = self.shape
+        (ox, oy), res = self.origin_xy, self.res
+        x1, y1 = ox + W * res, oy + H * res
+        def need(gap: float, extent: float) -> int:  # cells to add on a side the box passes by ``gap`` (>= 0: out)
+            return int(np.ceil((max(gap, 0.0) + max(slack_m, 0.25 * extent)) / res)) if gap >= 0 else 0
+
+        left, right = need(ox - lo_xy[0] - 1e-9, W * res), need(hi_xy[0] - x1, W * res)
+        down, up = need(oy - lo_xy[1] - 1e-9, H * res), need(hi_xy[1] - y1, H * res)
+        if not (left or right or down or up):
+            return False
+        H2, W2 = H + down + up, W + left + right
+        if H2 * W2 > self.MAX_CELLS:
+            raise ValueError(f"slam: the maps would grow to {W2} x {H2} cells at {res} m to hold the scans from "
+                             f"{lo_xy} to {hi_xy}; raise slam.resolution_m")
+        cells = wp.zeros((P, H2, W2), dtype=wp.vec4, device=self.device)
+        wp.launch(shift_cells_kernel, (P, H, W), [self.cells, cells, left, down], device=self.device)
+        self.cells = cells
+        self.origin_xy = (ox - left * res, oy - down * res)
+        self.origin = wp.vec2(*self.origin_xy)
+        self.grown += 1
+        return True
 
     @property
     def shape(self):

@@ -287,6 +287,59 @@ def test_map_resampling_keeps_survivors_in_place_and_copies_the_rest(rng):
     assert maps.fields(3)["sx"].tolist() == before[order[3], ..., 2].tolist()
 
 
+def test_growing_the_maps_keeps_every_cell_where_it_was(rng):
+    """ParticleMaps.cover against its twin, a numpy slice: the old cells land at the same world position in
+    the larger frame, the new ones are empty, and a box already inside changes nothing."""
+    P, (H, W), res = 3, (5, 6), 0.1
+    maps = ParticleMaps(P, (H, W), (1.0, -2.0), res, device=DEVICE)
+    before = rng.uniform(0, 1, (P, H, W, 4)).astype(np.float32)
+    maps.cells.assign(before)
+    assert not maps.cover((1.05, -1.95), (1.55, -1.55), slack_m=0.2)  # inside: no growth
+    assert maps.cover((0.93, -2.01), (1.61, -1.45), slack_m=0.2)  # out on the left, below and right
+    left, down = round((1.0 - maps.origin_xy[0]) / res), round((-2.0 - maps.origin_xy[1]) / res)
+    assert left >= 1 and down >= 1 and maps.grown == 1
+    expect = np.zeros(maps.cells.shape + (4,), np.float32)
+    expect[:, down:down + H, left:left + W] = before  # the twin
+    assert np.array_equal(maps.cells.numpy(), expect)
+    x1 = maps.origin_xy[0] + maps.shape[2] * res
+    assert x1 >= 1.61 + 0.2 and maps.origin_xy[0] <= 0.93 - 0.2  # the slack beyond the box on both sides
+
+
+def test_hits_far_from_the_origin_keep_their_mean_to_a_millimetre():
+    """A wall 600 m from the origin (MIT Killian's scale), hit 3000 times: the cell's mean hit point, which
+    the matcher compares to its 5 cm sigma, stays within a millimetre (float32 sums of world coordinates
+    drift by centimetres there)."""
+    res, P = 0.1, 1
+    maps = ParticleMaps(P, (40, 40), (598.0, -402.0), res, device=DEVICE)
+    integ = SLAM.build("integrate", usable_range_m=8.0, free_space=False, device=DEVICE)
+    angles = wp.array(np.zeros(1), dtype=wp.float32, device=DEVICE)
+    ranges = wp.array(np.array([1.2345], np.float32), dtype=wp.float32, device=DEVICE)
+    pose = np.array([[599.0126, -400.0128, 0.0]], np.float32)
+    for _ in range(3000):
+        integ(maps, wp.array(pose, dtype=wp.vec3, device=DEVICE), (0.0, 0.0, 0.0), ranges, angles)
+    c = maps.fields(0)
+    iy, ix = np.argwhere(c["hits"] > 0)[0]
+    assert c["hits"][iy, ix] == 3000
+    mean_x = 598.0 + ix * res + c["sx"][iy, ix] / 3000
+    mean_y = -402.0 + iy * res + c["sy"][iy, ix] / 3000
+    assert abs(mean_x - (float(pose[0, 0]) + 1.2345)) < 1e-3 and abs(mean_y - float(pose[0, 1])) < 1e-3
+
+
+def test_the_filter_grows_its_maps_and_drops_no_end_point():
+    """A filter whose first map is smaller than the scans: every end point within the usable range is
+    added (the released code's maps grow alike), none is lost at a border drawn in advance."""
+    log = _sim(6.0)
+    cfg = SlamConfig(num_particles=2, resolution_m=0.1, map_margin_m=1.0)
+    pose = log.odom[0]
+    rbpf = RBPF(cfg, (20, 20), (pose[0] - 1.0, pose[1] - 1.0), log.T_base_laser, log.info.angles_rad, 8.0, DEVICE)
+    rbpf.start(pose, log.ranges_m[0])
+    r = log.ranges_m[0]
+    valid = int(np.sum(np.isfinite(r) & (r > 0) & (r <= 8.0)))
+    assert rbpf.maps.grown >= 1 and rbpf.maps.shape[1] * rbpf.maps.shape[2] > 400
+    for p in range(2):
+        assert rbpf.maps.fields(p)["hits"].sum() == valid
+
+
 def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     """Documented handling: the jump is reported in metrics.json and the filter takes it as motion."""
     import irmcl_warp.slam.stage as stage

@@ -278,6 +278,115 @@ def seeds_of(text: str) -> list[int]:
     return [int(s) for s in text.split(",")]
 
 
+TRACE_NOISE_FREE = ("particles=1", "srr=0", "srt=0", "str=0", "stt=0")
+
+
+def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, scans: int | None = None,
+                data_overrides=(), tol_m: float = 0.01, tol_deg: float = 0.5) -> dict:
+    """The whole filter, differentially: one particle, no motion noise, so that both sides are deterministic
+    (scan matching from the odometry's prediction, then the scan added to the map), on the same log and the
+    same inputs (the wrapper's beam layout, usable range = maxRange, our cells aligned on the released map's:
+    boundaries at (k + 1/2) delta). The poses at the processed scans agree until one side's map or matcher
+    differs; the first scan where they part by more than ``tol_m`` / ``tol_deg`` is where to look.
+    Ours runs on the CPU, its first map ``margin_m`` around the first pose (both sides' maps grow to fit)."""
+    from irmcl_warp.geometry import wrap_angle
+    from irmcl_warp.slam.rbpf import RBPF
+
+    cfg = compose_config([f"+exp={exp}", *data_overrides, "slam.num_particles=1", "slam.srr=0", "slam.srt=0",
+                          "slam.str=0", "slam.stt=0", "slam.proposal=gmapping_code",
+                          *([f"slam.resolution_m={delta}"] if delta else [])])
+    log = load_stream(cfg)
+    if scans:
+        log = log.subset(np.arange(min(scans, len(log))))
+    delta = float(cfg.slam.resolution_m)
+    params = wrapper_params(cfg, log, [*TRACE_NOISE_FREE, f"delta={delta}"])
+    out = REPO / "outputs" / exp / f"trace-gmapping-{delta:g}m{'-' + data_tag(data_overrides) if data_overrides else ''}"
+    out.mkdir(parents=True, exist_ok=True)
+    export_scans(log, out / "scans.txt")
+    wall_released = run_binary(out / "scans.txt", out, 0, params)
+    released = np.loadtxt(out / "path.txt", ndmin=2)
+    n, inc = log.info.num_beams, float(params["angleIncrement"])
+    angles = (-0.5 * n + np.arange(n)) * inc  # the RangeSensor the wrapper builds: from -n inc / 2
+    # our first map around the first pose, its cells on the released lattice; it grows by whole cells
+    origin = (np.floor((log.odom[0, :2] - margin_m) / delta - 0.5) + 0.5) * delta
+    n = int(np.ceil(2 * margin_m / delta))
+    rbpf = RBPF(cfg.slam, (n, n), tuple(origin), log.T_base_laser, angles, float(params["maxRange"]), "cpu")
+    t0 = time.perf_counter()
+    rbpf.start(log.odom[0], log.ranges_m[0])
+    for k in range(1, len(log)):
+        rbpf.step(k, log.odom[k], log.ranges_m[k])
+    wall_ours = time.perf_counter() - t0
+    ours_idx, ours = rbpf.trajectory(0)
+    ours = compose(ours, log.T_base_laser)  # the released code's poses are the laser's
+    rel_idx = match_stamps(log.stamps, released[:, 0], 1e-5)
+    one_step = one_step_check(rbpf, log, rel_idx, released[:, 1:4], tol_m, tol_deg)
+    common = np.intersect1d(ours_idx, rel_idx)
+    a = ours[np.searchsorted(ours_idx, common)]
+    b = released[np.searchsorted(rel_idx, common), 1:4]
+    d_xy = np.hypot(*(a[:, :2] - b[:, :2]).T)
+    d_deg = np.degrees(np.abs(wrap_angle(a[:, 2] - b[:, 2])))
+    parted = np.flatnonzero((d_xy > tol_m) | (d_deg > tol_deg))
+    first = int(parted[0]) if len(parted) else None
+    report = {"log": str(log.source), "exp": exp, "delta_m": delta, "scans": len(log), "settings": params,
+              "data_overrides": list(data_overrides), "margin_m": margin_m, "origin": origin.tolist(),
+              "processed_ours": int(len(ours_idx)), "processed_released": int(len(rel_idx)),
+              "processed_both": int(len(common)),
+              "processed_only_ours": np.setdiff1d(ours_idx, rel_idx)[:20].tolist(),
+              "processed_only_released": np.setdiff1d(rel_idx, ours_idx)[:20].tolist(),
+              "tolerance": {"m": tol_m, "deg": tol_deg},
+              "first_parted": None if first is None else {"processed": first, "scan": int(common[first]),
+                                                           "ours": a[first].tolist(), "released": b[first].tolist()},
+              "pose_diff_m": {"median": float(np.median(d_xy)), "max": float(d_xy.max()), "last": float(d_xy[-1])},
+              "yaw_diff_deg": {"median": float(np.median(d_deg)), "max": float(d_deg.max()), "last": float(d_deg[-1])},
+              "wall_s": {"ours_cpu": wall_ours, "released": wall_released}, "one_step": one_step,
+              "per_processed": {"scan": common.tolist(), "d_m": np.round(d_xy, 6).tolist(),
+                                "d_deg": np.round(d_deg, 5).tolist()}}
+    write_json(out / "trace.json", report)
+    return report
+
+
+def one_step_check(rbpf, log, idx: np.ndarray, released: np.ndarray, tol_m: float, tol_deg: float) -> dict:
+    """Our matcher led by the released run (one particle, no noise): at each processed scan, our map holds
+    the scans added at the released poses so far, and we climb from the released previous pose moved by the
+    odometry, as the released code did. Our pose against its pose, scan by scan: what a free-running
+    comparison cannot show once the two paths have parted by a rounding."""
+    from irmcl_warp.geometry import inverse, relative, wrap_angle
+
+    T = np.asarray(log.T_base_laser, float)
+    base = compose(released, inverse(T)[None])
+    rbpf.maps.cells.zero_()
+    rbpf._cover_scan(base[:1])
+    rbpf.poses.assign(wp_vec3(base[:1]))
+    rbpf._set_ranges(log.ranges_m[idx[0]])
+    rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    d_m, d_deg, start_m = [], [], []
+    for j in range(1, len(idx)):
+        predicted = compose(base[j - 1][None], relative(log.odom[idx[j - 1]][None], log.odom[idx[j]][None]))
+        rbpf._set_ranges(log.ranges_m[idx[j]])
+        matched, _, _ = rbpf.match(predicted)
+        ours = compose(matched, T[None])[0]
+        d_m.append(float(np.hypot(*(ours[:2] - released[j, :2]))))
+        d_deg.append(float(np.degrees(abs(wrap_angle(ours[2] - released[j, 2])))))
+        start_m.append(float(np.hypot(*(predicted[0, :2] - base[j, :2]))))
+        rbpf.poses.assign(wp_vec3(base[j][None]))
+        rbpf._cover_scan(base[j][None])
+        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    d_m, d_deg = np.array(d_m), np.array(d_deg)
+    off = (d_m > tol_m) | (d_deg > tol_deg)
+    return {"steps": int(len(d_m)), "parted": int(off.sum()), "parted_scans": idx[1:][off][:50].tolist(),
+            "d_m_quantiles": np.quantile(d_m, [0.5, 0.9, 0.99, 1.0]).tolist(),
+            "d_deg_quantiles": np.quantile(d_deg, [0.5, 0.9, 0.99, 1.0]).tolist(),
+            "exact": int(((d_m < 1e-4) & (d_deg < 1e-3)).sum()),
+            "correction_m_median": float(np.median(start_m)),
+            "per_step": {"scan": idx[1:].tolist(), "d_m": np.round(d_m, 6).tolist(), "d_deg": np.round(d_deg, 5).tolist()}}
+
+
+def wp_vec3(a: np.ndarray):
+    import warp as wp
+
+    return wp.array(np.asarray(a, np.float32), dtype=wp.vec3, device="cpu")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m eval.reference.gmapping")
     ap.add_argument("exp", help="+exp=<name>, e.g. +exp=gmapping_fr079")
@@ -295,7 +404,26 @@ def main(argv=None):
     ap.add_argument("--neff", metavar="GLOB", nargs="?", const="slam-gmapping_code-selective-30p-seed*",
                     help="run nothing else: resamplings and N_eff of our runs outputs/<exp>/GLOB against the released "
                     "code's (results/checks/gmapping_neff_<exp>.json)")
+    ap.add_argument("--trace", action="store_true", help="run nothing else: one particle without motion noise on "
+                    "both sides, the poses at every processed scan compared (results/checks/gmapping_trace_<exp>.json)")
+    ap.add_argument("--scans", type=int, help="--trace: only the first SCANS scans of the log")
+    ap.add_argument("--delta", type=float, help="--trace: the cell size (default: the experiment's slam.resolution_m)")
     a = ap.parse_args(argv)
+    if a.trace:
+        exp = a.exp.removeprefix("+exp=")
+        r = trace_check(exp, a.delta, scans=a.scans, data_overrides=a.data)
+        f = r["first_parted"]
+        print(f"{exp}: {r['processed_both']} scans processed by both (ours {r['processed_ours']}, released "
+              f"{r['processed_released']}); pose difference median {r['pose_diff_m']['median']:.4f} m, max "
+              f"{r['pose_diff_m']['max']:.3f} m, yaw max {r['yaw_diff_deg']['max']:.2f} deg; "
+              + (f"first parted at processed scan {f['processed']} (log scan {f['scan']})" if f else "never parted"))
+        o = r["one_step"]
+        print(f"led by the released poses: {o['parted']} of {o['steps']} steps part (> {r['tolerance']['m']} m or "
+              f"{r['tolerance']['deg']} deg), {o['exact']} agree to 0.1 mm; pose difference quantiles (50/90/99/100 %) "
+              f"{np.round(o['d_m_quantiles'], 4).tolist()} m, {np.round(o['d_deg_quantiles'], 3).tolist()} deg")
+        name = f"gmapping_trace_{exp}{'-' + data_tag(a.data) if a.data else ''}{f'-{a.scans}scans' if a.scans else ''}.json"
+        write_json(REPO / "results" / "checks" / name, {k: v for k, v in r.items()})
+        return 0
     if a.neff:
         exp = a.exp.removeprefix("+exp=")
         r = neff_check(exp, a.neff)

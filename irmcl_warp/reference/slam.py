@@ -54,7 +54,7 @@ def bresenham_cells(x0, y0, x1, y1, origin, res):
 
 
 def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, line="bresenham", free_space=True):
-    """maps: dict of [H, W] arrays (visits, hits, sx, sy) of one particle, updated in place; ``line``:
+    """maps: dict of [H, W] arrays (visits, hits, sx, sy: the sums of the end points' offsets from their cell's corner) of one particle, updated in place; ``line``:
     bresenham (the released code) or dda (every crossed cell); ``free_space=False``: only the end cells
     (the released code with generateMap off, as its ROS wrapper runs it)."""
     walk = bresenham_cells if line == "bresenham" else traversed_cells
@@ -75,8 +75,8 @@ def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, lin
                 maps["visits"][iy, ix] += 1
                 if k == len(cells) - 1 and hit:
                     maps["hits"][iy, ix] += 1
-                    maps["sx"][iy, ix] += ex
-                    maps["sy"][iy, ix] += ey
+                    maps["sx"][iy, ix] += ex - (origin[0] + ix * res)  # offsets from the cell's corner, as the kernel
+                    maps["sy"][iy, ix] += ey - (origin[1] + iy * res)
 
 
 def occupancy(maps, ix, iy):
@@ -105,7 +105,9 @@ def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_
                 if occupancy(maps, hx + ox, hy + oy) > fullness and (
                         not free_check or occupancy(maps, fx + ox, fy + oy) < fullness):
                     n = maps["hits"][hy + oy, hx + ox]
-                    d2 = (ex - maps["sx"][hy + oy, hx + ox] / n) ** 2 + (ey - maps["sy"][hy + oy, hx + ox] / n) ** 2
+                    mx = origin[0] + (hx + ox) * res + maps["sx"][hy + oy, hx + ox] / n  # the cell's mean hit point
+                    my = origin[1] + (hy + oy) * res + maps["sy"][hy + oy, hx + ox] / n
+                    d2 = (ex - mx) ** 2 + (ey - my) ** 2
                     best = d2 if best is None else min(best, d2)
         if best is not None:
             s += np.exp(-best / sigma)

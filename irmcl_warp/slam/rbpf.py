@@ -18,7 +18,8 @@ to ``angular_update`` (the released code's accumulated distances), the scan is p
 3. weights smoothed as exp((log w - max) / (ogain * N)) (the released code); N_eff = 1 / sum w^2;
    low-variance resampling (maps copied on the device) when N_eff < threshold * N (``selective``) or
    every time (``always``);
-4. each particle integrates the scan into its map (kernels/slam.py ``integrate``).
+4. each particle integrates the scan into its map (kernels/slam.py ``integrate``), the maps first grown to
+   hold the scan's end points (``ParticleMaps.cover``), as the released code's maps grow.
 
 The host keeps only P-sized arrays (weights, hill-climbing state) and each processed scan's poses and
 resampling parents, from which the best particle's trajectory is traced back at the end.
@@ -85,6 +86,7 @@ class RBPF:
         self.motion = SLAM.build("motion", srr=cfg.srr, srt=cfg.srt, str_=cfg.str, stt=cfg.stt, device=d)
         self.angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=d)
         self.ranges = wp.zeros(len(angles_rad), dtype=wp.float32, device=d)
+        self._angles_np, self._ranges_np = np.asarray(angles_rad, np.float64), np.zeros(len(angles_rad))
         self.poses = wp.zeros(P, dtype=wp.vec3, device=d)
         g = int(cfg.proposal_grid)
         offs = np.stack(np.meshgrid(*[np.arange(-g, g + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
@@ -119,6 +121,22 @@ class RBPF:
             raise ValueError(f"slam: a scan of {r.size} beams, the filter was built for {self.ranges.shape[0]} "
                              f"(set data.beam_policy to reject or resample such scans when reading the log)")
         self.ranges.assign(r)
+        self._ranges_np = r.astype(np.float64)
+
+    def _cover_scan(self, poses: np.ndarray) -> None:
+        """Grow the maps (ParticleMaps.cover) to hold the current scan's end points and the laser at
+        ``poses`` [P, 3] before the scan is added: the released code's maps grow alike, so no end point is
+        dropped at a border drawn in advance."""
+        r, usable = self._ranges_np, self.integrator.usable
+        keep = np.isfinite(r) & (r > 0)
+        if not self.integrator.free_space:
+            keep &= r <= usable
+        lp = compose(poses, np.asarray(self.T_base_laser)[None])
+        rr, a = np.minimum(r[keep], usable), lp[:, 2:3] + self._angles_np[keep][None]
+        xs = np.concatenate([lp[:, 0], (lp[:, :1] + rr * np.cos(a)).ravel()])
+        ys = np.concatenate([lp[:, 1], (lp[:, 1:2] + rr * np.sin(a)).ravel()])
+        if self.maps.cover((xs.min(), ys.min()), (xs.max(), ys.max()), self.cfg.map_margin_m):
+            self._graph = None  # the captured rounds read the old cells
 
     def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
@@ -133,6 +151,7 @@ class RBPF:
         pose = np.asarray(odom_pose, np.float64)
         self.poses.assign(wp.array(np.tile(pose, (self.P, 1)).astype(np.float32), dtype=wp.vec3, device=self.device))
         self._set_ranges(ranges_m)
+        self._cover_scan(np.tile(pose, (self.P, 1)))
         self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
         self.last_odom = self.prev_odom = pose
         self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
@@ -173,6 +192,7 @@ class RBPF:
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
         t = self._tick("weights_resampling", t)
+        self._cover_scan(new[parents])
         self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
         self._tick("integration", t)
         self.last_odom = odom_pose

@@ -69,22 +69,20 @@ def variant_suffix(s, data=None) -> str:
     return tag
 
 
-def map_frame(odom: np.ndarray, margin_m: float, res: float, max_cells: int = 60_000_000):
-    """(shape [H, W], origin) of a map covering the odometry's bounding box plus a margin."""
-    lo = odom[:, :2].min(0) - margin_m
-    hi = odom[:, :2].max(0) + margin_m
-    W, H = (np.ceil((hi - lo) / res).astype(int) + 1).tolist()
-    if H * W > max_cells:
-        raise ValueError(f"slam map of {W} x {H} cells at {res} m is too large: lower slam.map_margin_m or raise "
-                         f"slam.resolution_m")
-    return (H, W), (float(lo[0]), float(lo[1]))
+def initial_frame(pose, margin_m: float, res: float):
+    """(shape [H, W], origin) of the first map: a square of side 2 margin around the first pose. The maps then
+    grow to hold every scan (ParticleMaps.cover), wherever the corrected path goes: a frame drawn around the
+    odometry misses it where the odometry drifts (MIT Killian's lies hundreds of metres from its corrected
+    path, whose scans fell outside such a frame)."""
+    n = max(int(np.ceil(2 * margin_m / res)), 1)
+    return (n, n), (float(pose[0]) - margin_m, float(pose[1]) - margin_m)
 
 
 def start_filter(cfg, log, device: str) -> RBPF:
-    """The RBPF of ``cfg.slam`` for ``log`` (map framed on its odometry), started on its first scan."""
+    """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need)."""
     s = cfg.slam
     usable = far_bound_m(cfg, log.info.range_max_m)
-    shape, origin = map_frame(log.odom, s.map_margin_m, s.resolution_m)
+    shape, origin = initial_frame(log.odom[0], s.map_margin_m, s.resolution_m)
     rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
     rbpf.start(log.odom[0], log.ranges_m[0])
     return rbpf
@@ -169,6 +167,7 @@ def run_slam(cfg) -> Path:
                "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
                "odometry_jumps": int(jumps),
                "resamplings": int(sum(r for _, _, r, _ in neff_rows)), "wall_time_s": wall,
+               "map_cells": list(rbpf.maps.shape[1:]), "map_grown": rbpf.maps.grown,
                "time_s": dict(rbpf.timing),
                "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
                "settings": OmegaConf.to_container(s)}
