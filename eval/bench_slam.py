@@ -21,7 +21,7 @@ import numpy as np
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.data import load_stream
-from irmcl_warp.slam.stage import start_filter
+from irmcl_warp.slam.stage import filter_frame, start_filter
 from kernels import pick_device
 
 
@@ -30,8 +30,9 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
     rbpf = start_filter(cfg, log, device)
+    odom, _ = filter_frame(cfg, log)
     t0 = time.perf_counter()
-    processed = sum(rbpf.step(k, log.odom[k], log.ranges_m[k]).processed for k in range(1, n))
+    processed = sum(rbpf.step(k, odom[k], log.ranges_m[k]).processed for k in range(1, n))
     wall = time.perf_counter() - t0
     return {"exp": exp, "particles": particles, "device": rbpf.device, "scans": n, "processed_scans": processed,
             "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}

@@ -212,6 +212,9 @@ class SlamConfig:
     proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses around the match, spaced as below
     proposal_lstep: Optional[float] = None  # their spacing in x and y (m); None: lstep
     proposal_astep: Optional[float] = None  # and in theta (rad); None: astep
+    frame: builtins.str = "base"  # the poses the particles carry: base (the odometry's frame) | laser (the released code
+    # as its ROS wrapper feeds it: laser poses as odometry, so its motion noise, hill climbing and update distances
+    # act on the laser; the same where the laser sits at the base)
     seed: int = 0
 
 

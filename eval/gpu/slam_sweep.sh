@@ -7,7 +7,10 @@
 #   bash eval/gpu/slam_sweep.sh particles # intel: particles 5..60 x (paper+selective, paper+always, odometry+selective)
 #   bash eval/gpu/slam_sweep.sh killian   # mit_killian (10 cm grid): paper+selective, 30 and 60 particles
 #   bash eval/gpu/slam_sweep.sh replay    # intel and fr079 seed 0, each run twice: are the trajectories identical?
-# Env: JOBS (parallel processes, default 8; killian 2), SEEDS (default 0..9), EXTRA (more overrides for every
+#   LIST=jobs.txt bash eval/gpu/slam_sweep.sh list  # one line of overrides per run from a file: e.g. every kept
+#                                         # run again after the code changed (python -m eval.rerun > jobs.txt)
+# Env: JOBS (parallel processes, default 8; killian 2; list 12), SWEEP_TIMEOUT (s: stop starting runs then and
+# pack the finished ones; a later call with the same list runs only what is not finished), SEEDS (default 0..9), EXTRA (more overrides for every
 # run of the sweep, e.g. "slam.free_check=false"; the run folders name them), main only: LOGS, PROPOSALS; TAG
 # (appended to the archive's name). Data: the stream caches and the
 # relations (+ the killian g2o) staged beside the code, IRMCL_DATA pointing at them. Results: $OUT/slam-<what>.tgz.
@@ -38,16 +41,24 @@ case "$what" in
   killian)
     for s in $SEEDS; do for n in ${PARTICLES:-30 60}; do echo "+exp=gmapping_mit_killian slam.num_particles=$n slam.seed=$s ${EXTRA:-}"; done; done \
       > "$jobs"; P=${JOBS:-2} ;;
+  list)
+    cp "${LIST:?LIST: a file with one line of overrides per run}" "$jobs"; P=${JOBS:-12} ;;
   *) echo "unknown sweep $what"; exit 2 ;;
 esac
 echo "$(wc -l < "$jobs") runs, $P at a time"
+touch "$OUT/.sweep-start"
 # one run first: Warp compiles the kernels into its cache once, not in every process at the same time
 head -1 "$jobs" | xargs python -m irmcl_warp.slam device=cuda:0 2>&1 | grep -E "scans processed|Error" | tail -2
 start=$(date +%s)
-tail -n +2 "$jobs" | xargs -P "$P" -I{} sh -c 'python -m irmcl_warp.slam device=cuda:0 {} 2>&1 | grep -E "scans processed|Error" | tail -1'
+# a run already finished here (same settings) returns at once: the slam stage skips up-to-date folders
+tail -n +2 "$jobs" | timeout "${SWEEP_TIMEOUT:-0}" xargs -P "$P" -I{} sh -c \
+  'python -m irmcl_warp.slam device=cuda:0 {} 2>&1 | grep -E "scans processed|Error" | tail -1'
+pkill -f "python -m irmcl_warp.slam" 2>/dev/null  # runs the timeout stopped: unfinished, not packed
 echo "sweep $what: $(( $(date +%s) - start )) s for $(( $(wc -l < "$jobs") - 1 )) runs with $P processes"
-find outputs -path "*/slam-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name neff.csv \
-  -o -name map.png \) > "$OUT/files-$what.txt"
+# the runs finished by this call (a stopped run leaves no metrics.json, and its folder is not packed)
+find outputs -path "*/slam-*" -name metrics.json -newer "$OUT/.sweep-start" | xargs -r -n1 dirname | while read -r d; do
+  for f in metrics.json config.yaml manifest.json neff.csv map.png; do [ -f "$d/$f" ] && echo "$d/$f"; done
+done > "$OUT/files-$what.txt"
 [ -n "${TRAJECTORIES:-}" ] && find outputs -path "*/slam-*" -name trajectory.tum >> "$OUT/files-$what.txt"  # large: only when asked
 tar czf "$OUT/slam-$what${TAG:-}.tgz" -T "$OUT/files-$what.txt"
 ls -la "$OUT"

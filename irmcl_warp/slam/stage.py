@@ -23,7 +23,7 @@ import warp as wp
 from omegaconf import OmegaConf
 
 from irmcl_warp.config import SlamConfig
-from irmcl_warp.geometry import compose
+from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io import GEOMETRY_FIELDS, read_relations, resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
@@ -40,7 +40,8 @@ from kernels.slam import ParticleMaps
 
 # settings that name a run when they differ from their default: key -> short name in the folder name
 ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "srr": "srr", "srt": "srt",
-                 "str": "str", "stt": "stt", "proposal_grid": "grid", "proposal_lstep": "plstep", "proposal_astep": "pastep"}
+                 "str": "str", "stt": "stt", "proposal_grid": "grid", "proposal_lstep": "plstep", "proposal_astep": "pastep",
+                 "frame": ""}
 
 
 def run_tag(s, data=None) -> str:
@@ -59,6 +60,8 @@ def variant_suffix(s, data=None) -> str:
         if v != getattr(defaults, key):
             if isinstance(v, bool):
                 tag += f"-{short}" if v else f"-no{short}"
+            elif key == "frame":
+                tag += f"-{v}frame"
             else:
                 tag += f"-{short}{v:g}" if isinstance(v, float) else f"-{short}{v}"
     short = {"fov_rad": "fov", "angle_min_rad": "amin", "laser_offset": "offset"}
@@ -78,13 +81,25 @@ def initial_frame(pose, margin_m: float, res: float):
     return (n, n), (float(pose[0]) - margin_m, float(pose[1]) - margin_m)
 
 
+def filter_frame(cfg, log) -> tuple[np.ndarray, np.ndarray]:
+    """(odometry the particles follow, base -> particle-frame transform) for ``slam.frame``: the base's
+    odometry and the extrinsic (base), or the laser's odometry and identity (laser, the released code's way)."""
+    frame = cfg.slam.get("frame", "base")
+    if frame == "base":
+        return log.odom, np.asarray(log.T_base_laser, float)
+    if frame == "laser":
+        return compose(log.odom, log.T_base_laser), np.zeros(3)
+    raise ValueError(f"slam.frame={frame!r}: choose base or laser")
+
+
 def start_filter(cfg, log, device: str) -> RBPF:
     """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need)."""
     s = cfg.slam
     usable = far_bound_m(cfg, log.info.range_max_m)
-    shape, origin = initial_frame(log.odom[0], s.map_margin_m, s.resolution_m)
-    rbpf = RBPF(s, shape, origin, log.T_base_laser, log.info.angles_rad, usable, device)
-    rbpf.start(log.odom[0], log.ranges_m[0])
+    odom, T = filter_frame(cfg, log)
+    shape, origin = initial_frame(odom[0], s.map_margin_m, s.resolution_m)
+    rbpf = RBPF(s, shape, origin, T, log.info.angles_rad, usable, device)
+    rbpf.start(odom[0], log.ranges_m[0])
     return rbpf
 
 
@@ -142,6 +157,7 @@ def run_slam(cfg) -> Path:
               f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
               f"map there; the derived logs of ../shared/data repair known jumps")
     rbpf = start_filter(cfg, log, device)
+    odom, T_filter = filter_frame(cfg, log)
     neff_rows, t0 = [], time.perf_counter()
     try:
         from tqdm import tqdm
@@ -150,7 +166,7 @@ def run_slam(cfg) -> Path:
     except ImportError:  # pragma: no cover
         bar = range(1, len(log))
     for k in bar:
-        st = rbpf.step(k, log.odom[k], log.ranges_m[k])
+        st = rbpf.step(k, odom[k], log.ranges_m[k])
         if st.processed:
             neff_rows.append((k, st.neff, int(st.resampled), st.match_rounds))
             if hasattr(bar, "set_postfix"):
@@ -158,7 +174,9 @@ def run_slam(cfg) -> Path:
     wall = time.perf_counter() - t0
     best = rbpf.best_particle()
     scans, poses = rbpf.trajectory(best)
-    every = per_scan_poses(np.arange(len(log)), np.asarray(scans), poses, log.odom)
+    every = per_scan_poses(np.arange(len(log)), np.asarray(scans), poses, odom)
+    if not np.array_equal(T_filter, log.T_base_laser):  # laser poses carried: the base's, as in every run's files
+        every = compose(every, inverse(np.asarray(log.T_base_laser, float)))
     write_tum(out / "trajectory.tum", log.stamps, every)
     atomic_write_bytes(out / "neff.csv", ("scan,neff,resampled,match_rounds\n" + "".join(
         f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode())
