@@ -280,6 +280,14 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
         count(f"{ds}_released", rel)
         error(f"{ds}_released_error", rel)
     count("fr079_code_60p", slam_errors(slam, "fr079", "gmapping_code", particles=60))
+    count("fr079_code_laserframe", slam_errors(slam, "fr079", "gmapping_code", variant="laserframe"))
+    count("fr079_paper_laserframe", slam_errors(slam, "fr079", "paper", variant="laserframe"))
+    for proposal, short in (("gmapping_code", "code"), ("paper", "paper")):  # MIT Killian, the paper's 60 particles
+        count(f"killian_{short}_60p", slam_errors(slam, "mit_killian", proposal, particles=60))
+        error(f"killian_{short}_60p_error", slam_errors(slam, "mit_killian", proposal, particles=60))
+    count("killian_paper_30p", slam_errors(slam, "mit_killian", "paper", particles=30))
+    count("killian_released_60p", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
+    error("killian_released_60p_error", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
     processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
     if processed:
         out["intel_released_processed"] = "/".join(str(p) for p in processed)

@@ -89,7 +89,7 @@ def kidnapped_run(exp: str, name: str, metrics: dict, out: Path) -> Path | None:
 
 def best_maps(runs: dict, out: Path) -> list[Path]:
     """docs/maps/<exp>.png: the map of each log's best default paper-proposal run (lowest relations error;
-    30 particles, or the most there are), copied from its run folder in outputs/ or its kept map
+    a converged run first, then 30 particles, or the most there are), copied from its run folder in outputs/ or its kept map
     (results/slam/maps/<exp>/<run>.png; outputs/ wins)."""
     import shutil
 
@@ -98,7 +98,8 @@ def best_maps(runs: dict, out: Path) -> list[Path]:
         if m.get("proposal") != "paper" or m.get("resample") != "selective" or slam_variant(m) \
                 or not isinstance(m.get("relations"), dict):
             continue
-        key = (m["particles"] == 30, m["particles"], -m["relations"]["trans_abs_mean_m"])
+        err = m["relations"]["trans_abs_mean_m"]
+        key = (err < CONVERGED_M, m["particles"] == 30, m["particles"], -err)  # a converged run, 30 particles if any
         if exp not in best or key > best[exp][0]:
             best[exp] = (key, tag)
     made = []

@@ -444,3 +444,44 @@ def test_run_folders_name_their_ablations_and_tables_read_them_back():
     assert variant(rot) == "srt0.4, stt0.4" and run_tag(rot.slam, rot.data).endswith("-srt0.4-stt0.4")
     assert variant(odd) == "freecheck, dda, offset0_0_0"
     assert OmegaConf.to_container(odd.data)["laser_offset"] == [0, 0, 0]
+
+
+def test_the_trace_check_led_by_our_own_path_agrees_at_every_step():
+    """eval.reference.gmapping's one-step check, fed our own noise-free one-particle run as the "released" poses:
+    every step's match must come out the same (the check rebuilds the map and the odometry prediction as the
+    filter did; a wrong prediction, frame or map order would part)."""
+    from eval.reference.gmapping import one_step_check
+
+    log = _sim(40.0, **{"sim.laser_x_m": 0.2})
+    cfg = SlamConfig(num_particles=1, proposal="gmapping_code", srr=0.0, srt=0.0, str=0.0, stt=0.0, resolution_m=0.05,
+                     map_margin_m=2.0)
+    p0 = log.odom[0]
+    rbpf = RBPF(cfg, (80, 80), (p0[0] - 2.0, p0[1] - 2.0), log.T_base_laser, log.info.angles_rad, 8.0, DEVICE)
+    rbpf.start(log.odom[0], log.ranges_m[0])
+    for k in range(1, len(log)):
+        rbpf.step(k, log.odom[k], log.ranges_m[k])
+    idx, poses = rbpf.trajectory(0)
+    from irmcl_warp.geometry import compose as compose_poses
+
+    laser = compose_poses(poses, log.T_base_laser)  # the check takes the released code's (laser) poses
+    r = one_step_check(rbpf, log, log.odom, np.asarray(log.T_base_laser), np.asarray(idx), laser, 0.01, 0.5)
+    assert r["steps"] == len(idx) - 1 > 10
+    assert r["parted"] == 0 and r["d_m_quantiles"][-1] < 1e-4, r["d_m_quantiles"]
+
+
+def test_kept_runs_are_made_again_under_their_own_folder_names():
+    """eval.rerun: the overrides rebuilt from a kept run's config compose to the same settings and folder."""
+    from omegaconf import OmegaConf
+
+    from eval.rerun import overrides
+    from irmcl_warp.config import compose_config
+    from irmcl_warp.slam.stage import run_tag
+
+    line = ["+exp=gmapping_fr079", "slam.proposal=gmapping_code", "slam.seed=3", "slam.frame=laser",
+            "slam.srt=0.4", "data.laser_offset=[0.0,0.0,0.0]"]
+    cfg = compose_config(line)
+    kept = {"slam": OmegaConf.to_container(cfg.slam), "data": OmegaConf.to_container(cfg.data)}
+    again = compose_config(overrides("gmapping_fr079", kept))
+    assert OmegaConf.to_container(again.slam) == kept["slam"] and OmegaConf.to_container(again.data) == kept["data"]
+    assert run_tag(again.slam, again.data) == run_tag(cfg.slam, cfg.data) == \
+        "slam-gmapping_code-selective-30p-seed3-srt0.4-laserframe-offset0_0_0"

@@ -37,7 +37,7 @@ from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.slam.rbpf import per_scan_poses
-from irmcl_warp.slam.stage import relation_stamps
+from irmcl_warp.slam.stage import filter_frame, relation_stamps
 from irmcl_warp.types import match_stamps
 
 REPO = Path(__file__).resolve().parents[2]
@@ -282,7 +282,7 @@ TRACE_NOISE_FREE = ("particles=1", "srr=0", "srt=0", "str=0", "stt=0")
 
 
 def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, scans: int | None = None,
-                data_overrides=(), tol_m: float = 0.01, tol_deg: float = 0.5) -> dict:
+                data_overrides=(), tol_m: float = 0.01, tol_deg: float = 0.5, frame: str = "base") -> dict:
     """The whole filter, differentially: one particle, no motion noise, so that both sides are deterministic
     (scan matching from the odometry's prediction, then the scan added to the map), on the same log and the
     same inputs (the wrapper's beam layout, usable range = maxRange, our cells aligned on the released map's:
@@ -293,7 +293,7 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
     from irmcl_warp.slam.rbpf import RBPF
 
     cfg = compose_config([f"+exp={exp}", *data_overrides, "slam.num_particles=1", "slam.srr=0", "slam.srt=0",
-                          "slam.str=0", "slam.stt=0", "slam.proposal=gmapping_code",
+                          "slam.str=0", "slam.stt=0", "slam.proposal=gmapping_code", f"slam.frame={frame}",
                           *([f"slam.resolution_m={delta}"] if delta else [])])
     log = load_stream(cfg)
     if scans:
@@ -308,18 +308,19 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
     n, inc = log.info.num_beams, float(params["angleIncrement"])
     angles = (-0.5 * n + np.arange(n)) * inc  # the RangeSensor the wrapper builds: from -n inc / 2
     # our first map around the first pose, its cells on the released lattice; it grows by whole cells
-    origin = (np.floor((log.odom[0, :2] - margin_m) / delta - 0.5) + 0.5) * delta
+    odom, T = filter_frame(cfg, log)  # slam.frame: the base's poses (ours by default) or the laser's
+    origin = (np.floor((odom[0, :2] - margin_m) / delta - 0.5) + 0.5) * delta
     n = int(np.ceil(2 * margin_m / delta))
-    rbpf = RBPF(cfg.slam, (n, n), tuple(origin), log.T_base_laser, angles, float(params["maxRange"]), "cpu")
+    rbpf = RBPF(cfg.slam, (n, n), tuple(origin), T, angles, float(params["maxRange"]), "cpu")
     t0 = time.perf_counter()
-    rbpf.start(log.odom[0], log.ranges_m[0])
+    rbpf.start(odom[0], log.ranges_m[0])
     for k in range(1, len(log)):
-        rbpf.step(k, log.odom[k], log.ranges_m[k])
+        rbpf.step(k, odom[k], log.ranges_m[k])
     wall_ours = time.perf_counter() - t0
     ours_idx, ours = rbpf.trajectory(0)
-    ours = compose(ours, log.T_base_laser)  # the released code's poses are the laser's
+    ours = compose(ours, T)  # the released code's poses are the laser's
     rel_idx = match_stamps(log.stamps, released[:, 0], 1e-5)
-    one_step = one_step_check(rbpf, log, rel_idx, released[:, 1:4], tol_m, tol_deg)
+    one_step = one_step_check(rbpf, log, odom, T, rel_idx, released[:, 1:4], tol_m, tol_deg)
     common = np.intersect1d(ours_idx, rel_idx)
     a = ours[np.searchsorted(ours_idx, common)]
     b = released[np.searchsorted(rel_idx, common), 1:4]
@@ -327,7 +328,7 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
     d_deg = np.degrees(np.abs(wrap_angle(a[:, 2] - b[:, 2])))
     parted = np.flatnonzero((d_xy > tol_m) | (d_deg > tol_deg))
     first = int(parted[0]) if len(parted) else None
-    report = {"log": str(log.source), "exp": exp, "delta_m": delta, "scans": len(log), "settings": params,
+    report = {"log": str(log.source), "exp": exp, "frame": frame, "delta_m": delta, "scans": len(log), "settings": params,
               "data_overrides": list(data_overrides), "margin_m": margin_m, "origin": origin.tolist(),
               "processed_ours": int(len(ours_idx)), "processed_released": int(len(rel_idx)),
               "processed_both": int(len(common)),
@@ -345,14 +346,15 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
     return report
 
 
-def one_step_check(rbpf, log, idx: np.ndarray, released: np.ndarray, tol_m: float, tol_deg: float) -> dict:
+def one_step_check(rbpf, log, odom: np.ndarray, T: np.ndarray, idx: np.ndarray, released: np.ndarray, tol_m: float,
+                   tol_deg: float) -> dict:
     """Our matcher led by the released run (one particle, no noise): at each processed scan, our map holds
     the scans added at the released poses so far, and we climb from the released previous pose moved by the
     odometry, as the released code did. Our pose against its pose, scan by scan: what a free-running
     comparison cannot show once the two paths have parted by a rounding."""
     from irmcl_warp.geometry import inverse, relative, wrap_angle
 
-    T = np.asarray(log.T_base_laser, float)
+    T = np.asarray(T, float)
     base = compose(released, inverse(T)[None])
     rbpf.maps.cells.zero_()
     rbpf._cover_scan(base[:1])
@@ -361,7 +363,7 @@ def one_step_check(rbpf, log, idx: np.ndarray, released: np.ndarray, tol_m: floa
     rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
     d_m, d_deg, start_m = [], [], []
     for j in range(1, len(idx)):
-        predicted = compose(base[j - 1][None], relative(log.odom[idx[j - 1]][None], log.odom[idx[j]][None]))
+        predicted = compose(base[j - 1][None], relative(odom[idx[j - 1]][None], odom[idx[j]][None]))
         rbpf._set_ranges(log.ranges_m[idx[j]])
         matched, _, _ = rbpf.match(predicted)
         ours = compose(matched, T[None])[0]
@@ -408,10 +410,11 @@ def main(argv=None):
                     "both sides, the poses at every processed scan compared (results/checks/gmapping_trace_<exp>.json)")
     ap.add_argument("--scans", type=int, help="--trace: only the first SCANS scans of the log")
     ap.add_argument("--delta", type=float, help="--trace: the cell size (default: the experiment's slam.resolution_m)")
+    ap.add_argument("--frame", default="base", help="--trace: our slam.frame (base, or laser as the released code)")
     a = ap.parse_args(argv)
     if a.trace:
         exp = a.exp.removeprefix("+exp=")
-        r = trace_check(exp, a.delta, scans=a.scans, data_overrides=a.data)
+        r = trace_check(exp, a.delta, scans=a.scans, data_overrides=a.data, frame=a.frame)
         f = r["first_parted"]
         print(f"{exp}: {r['processed_both']} scans processed by both (ours {r['processed_ours']}, released "
               f"{r['processed_released']}); pose difference median {r['pose_diff_m']['median']:.4f} m, max "
@@ -421,7 +424,8 @@ def main(argv=None):
         print(f"led by the released poses: {o['parted']} of {o['steps']} steps part (> {r['tolerance']['m']} m or "
               f"{r['tolerance']['deg']} deg), {o['exact']} agree to 0.1 mm; pose difference quantiles (50/90/99/100 %) "
               f"{np.round(o['d_m_quantiles'], 4).tolist()} m, {np.round(o['d_deg_quantiles'], 3).tolist()} deg")
-        name = f"gmapping_trace_{exp}{'-' + data_tag(a.data) if a.data else ''}{f'-{a.scans}scans' if a.scans else ''}.json"
+        name = (f"gmapping_trace_{exp}{'-' + data_tag(a.data) if a.data else ''}{'-laserframe' if a.frame == 'laser' else ''}"
+                f"{f'-{a.scans}scans' if a.scans else ''}.json")
         write_json(REPO / "results" / "checks" / name, {k: v for k, v in r.items()})
         return 0
     if a.neff:
