@@ -213,6 +213,16 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
                  "15 particles (Grisetti et al. 2007)", "; ".join(f"{n}: {v}" for n, v in few.items() if v) or "not run",
                  _slam_verdict(slam_errors(slam, "intel", particles=15), what="seeds converge with 15 particles"),
                  "bash eval/gpu/slam_sweep.sh particles"))
+    killian = {pr: _slam(slam, "mit_killian", pr, particles=60) for pr in ("paper", "gmapping_code")}
+    ref = released_errors(released or {}, "mit_killian", particles=60, variant="delta=0.1, particles=60")
+    rows.append(("GMapping", "MIT Killian Court (1.9 km, large loops) is mapped with 60 particles",
+                 "60-80 particles (Grisetti et al. 2007)",
+                 "; ".join(f"`{pr}`: {v}" for pr, v in killian.items() if v) + (
+                     f"; the released code at 10 cm: {converged(ref)[0]}/{len(ref)} seeds converge" if ref else "")
+                 if any(killian.values()) else "not run",
+                 _slam_verdict(slam_errors(slam, "mit_killian", "paper", particles=60)),
+                 "python -m irmcl_warp.slam -m +exp=gmapping_mit_killian slam.num_particles=60 "
+                 "slam.proposal=paper,gmapping_code slam.seed=0,1,2,3,4,5,6,7,8,9"))
     rows.append(("GMapping", "the odometry proposal fails where the scan-based one succeeds",
                  "fails on intel (Grisetti et al. 2007)", _slam(slam, "intel", "odometry", particles=60) or "not run",
                  _fails_verdict(slam_errors(slam, "intel", "odometry", particles=60)),

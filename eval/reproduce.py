@@ -101,8 +101,10 @@ SWEEPS = (
              gpu=True)
        for extra, n in (([], [5, 10, 15, 60]), (["slam.resample=always"], [5, 10, 15, 30, 60]),
                         (["slam.proposal=odometry"], [5, 10, 15, 30, 60]))]
-    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian"], {"slam.num_particles": [30, 60],
-                                                                       "slam.seed": SEEDS[:5]}, gpu=True)]
+    + [Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian", "slam.num_particles=30"], {"slam.seed": SEEDS[:5]},
+             gpu=True),
+       Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_mit_killian", "slam.num_particles=60"],
+             {"slam.proposal": ["paper", "gmapping_code"], "slam.seed": SEEDS}, gpu=True)]
     # lidar + camera global localization: the four corridor scenarios, and the paper's one-frame trigger
     + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}"]) for e in GLOBLOC]
     + [Sweep("globloc", "irmcl_warp.globloc", [f"+exp={e}", "globloc.trigger_confirm_frames=1", "globloc.methods=[paper]",
