@@ -21,7 +21,7 @@ import numpy as np
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.data import load_stream
-from irmcl_warp.slam.stage import filter_frame, start_filter
+from irmcl_warp.slam.stage import start_filter
 from kernels import pick_device
 
 
@@ -29,8 +29,7 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
     cfg = compose_config([f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}", *overrides])
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
-    rbpf = start_filter(cfg, log, device)
-    odom, _ = filter_frame(cfg, log)
+    rbpf, odom = start_filter(cfg, log, device)
     t0 = time.perf_counter()
     processed = sum(rbpf.step(k, odom[k], log.ranges_m[k]).processed for k in range(1, n))
     wall = time.perf_counter() - t0

@@ -423,14 +423,14 @@ def released_variants_findings() -> str:
 
 
 def trace_findings() -> str:
-    have = {f.stem.removeprefix("gmapping_trace_gmapping_"): json.loads(f.read_text())["one_step"]
-            for f in TRACES.glob("gmapping_trace_*.json")}
+    traces = {f.stem.removeprefix("gmapping_trace_gmapping_"): json.loads(f.read_text())
+              for f in TRACES.glob("gmapping_trace_*.json")}
+    have = {k: t["one_step"] for k, t in traces.items()}
     need = ("intel", "fr079", "fr079-laser_offset0_0_0", "fr079-laserframe", "mit_killian")
     if any(k not in have for k in need):
         return "- Not every trace is kept: no finding."
     t = {k: have[k] for k in need}
-    firsts = [json.loads(f.read_text())["first_parted"]["processed"] for f in TRACES.glob("gmapping_trace_*.json")
-              if json.loads(f.read_text())["first_parted"]]
+    firsts = [tr["first_parted"]["processed"] for tr in traces.values() if tr["first_parted"]]
     return "\n".join(textwrap.fill(line, 116, subsequent_indent="  ") for line in [
         f"- **Intel and fr079 with the laser at the base: the same filter step for step.** {t['intel']['exact']} of "
         f"{t['intel']['steps']} and {t['fr079-laser_offset0_0_0']['exact']} of {t['fr079-laser_offset0_0_0']['steps']} "

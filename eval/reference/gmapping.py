@@ -357,10 +357,7 @@ def one_step_check(rbpf, log, odom: np.ndarray, T: np.ndarray, idx: np.ndarray, 
     T = np.asarray(T, float)
     base = compose(released, inverse(T)[None])
     rbpf.maps.cells.zero_()
-    rbpf._cover_scan(base[:1])
-    rbpf.poses.assign(wp_vec3(base[:1]))
-    rbpf._set_ranges(log.ranges_m[idx[0]])
-    rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+    rbpf.start(base[0], log.ranges_m[idx[0]])
     d_m, d_deg, start_m = [], [], []
     for j in range(1, len(idx)):
         predicted = compose(base[j - 1][None], relative(odom[idx[j - 1]][None], odom[idx[j]][None]))
@@ -371,8 +368,7 @@ def one_step_check(rbpf, log, odom: np.ndarray, T: np.ndarray, idx: np.ndarray, 
         d_deg.append(float(np.degrees(abs(wrap_angle(ours[2] - released[j, 2])))))
         start_m.append(float(np.hypot(*(predicted[0, :2] - base[j, :2]))))
         rbpf.poses.assign(wp_vec3(base[j][None]))
-        rbpf._cover_scan(base[j][None])
-        rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
+        rbpf._add_scan(base[j][None])
     d_m, d_deg = np.array(d_m), np.array(d_deg)
     off = (d_m > tol_m) | (d_deg > tol_deg)
     return {"steps": int(len(d_m)), "parted": int(off.sum()), "parted_scans": idx[1:][off][:50].tolist(),

@@ -138,6 +138,12 @@ class RBPF:
         if self.maps.cover((xs.min(), ys.min()), (xs.max(), ys.max()), self.cfg.map_margin_m):
             self._graph = None  # the captured rounds read the old cells
 
+    def _add_scan(self, poses: np.ndarray) -> None:
+        """Add the current scan to every map at ``poses`` [P, 3] (the same poses already on the device), the
+        maps first grown to hold it."""
+        self._cover_scan(poses)
+        self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+
     def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
         cand, score, loglik = self._buf(candidates.shape[1])
@@ -151,8 +157,7 @@ class RBPF:
         pose = np.asarray(odom_pose, np.float64)
         self.poses.assign(wp.array(np.tile(pose, (self.P, 1)).astype(np.float32), dtype=wp.vec3, device=self.device))
         self._set_ranges(ranges_m)
-        self._cover_scan(np.tile(pose, (self.P, 1)))
-        self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+        self._add_scan(np.tile(pose, (self.P, 1)))
         self.last_odom = self.prev_odom = pose
         self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
         self._record(0, parents=np.arange(self.P))
@@ -192,8 +197,7 @@ class RBPF:
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
         t = self._tick("weights_resampling", t)
-        self._cover_scan(new[parents])
-        self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
+        self._add_scan(new[parents])
         self._tick("integration", t)
         self.last_odom = odom_pose
         self._record(k, parents)

@@ -92,15 +92,16 @@ def filter_frame(cfg, log) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"slam.frame={frame!r}: choose base or laser")
 
 
-def start_filter(cfg, log, device: str) -> RBPF:
-    """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need)."""
+def start_filter(cfg, log, device: str) -> tuple[RBPF, np.ndarray]:
+    """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need), and
+    the odometry its steps take (``filter_frame``)."""
     s = cfg.slam
     usable = far_bound_m(cfg, log.info.range_max_m)
     odom, T = filter_frame(cfg, log)
     shape, origin = initial_frame(odom[0], s.map_margin_m, s.resolution_m)
     rbpf = RBPF(s, shape, origin, T, log.info.angles_rad, usable, device)
     rbpf.start(odom[0], log.ranges_m[0])
-    return rbpf
+    return rbpf, odom
 
 
 def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, margin_cells: int = 20) -> OccupancyGrid:
@@ -156,8 +157,7 @@ def run_slam(cfg) -> Path:
         print(f"{cfg.data.name}: {jumps} odometry steps jump (over {cfg.data.max_step_m} m or {cfg.data.max_speed_mps} "
               f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
               f"map there; the derived logs of ../shared/data repair known jumps")
-    rbpf = start_filter(cfg, log, device)
-    odom, T_filter = filter_frame(cfg, log)
+    rbpf, odom = start_filter(cfg, log, device)
     neff_rows, t0 = [], time.perf_counter()
     try:
         from tqdm import tqdm
@@ -175,7 +175,7 @@ def run_slam(cfg) -> Path:
     best = rbpf.best_particle()
     scans, poses = rbpf.trajectory(best)
     every = per_scan_poses(np.arange(len(log)), np.asarray(scans), poses, odom)
-    if not np.array_equal(T_filter, log.T_base_laser):  # laser poses carried: the base's, as in every run's files
+    if s.frame == "laser":  # the laser's poses carried: written as the base's, as in every run's files
         every = compose(every, inverse(np.asarray(log.T_base_laser, float)))
     write_tum(out / "trajectory.tum", log.stamps, every)
     atomic_write_bytes(out / "neff.csv", ("scan,neff,resampled,match_rounds\n" + "".join(
