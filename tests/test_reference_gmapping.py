@@ -6,6 +6,7 @@ import stat
 import sys
 
 import numpy as np
+import pytest
 from omegaconf import OmegaConf
 
 import eval.reference.gmapping as ref
@@ -17,6 +18,7 @@ from irmcl_warp.sim import simulate
 FAKE = """#!{python}
 import sys
 import numpy as np
+import pytest
 rows = [l.split() for l in open(sys.argv[1])]
 t = np.array([float(r[0]) for r in rows]); p = np.array([[float(v) for v in r[1:4]] for r in rows])
 n = np.array([int(r[4]) for r in rows]); assert (n == n[0]).all() and all(len(r) == 5 + n[0] for r in rows)
@@ -84,3 +86,22 @@ def test_neff_check_reads_the_released_resamplings_from_its_post_resampling_trac
     assert sorted(r["resamplings_released"]) == [1, 3] and r["resamplings_ours"] == [2, 2]
     assert r["scans_released"] == 6 and r["scans_ours"] == 6  # 2 + 4 not resampled; 3 + 3 of ours
     assert r["neff_quartiles_ours"][1] == 24.0 and 0 <= r["neff_ks_p"] <= 1
+
+
+def test_gfs_path_is_read_from_gfs2logs_odom_lines(tmp_path):
+    """gfs2log's CARMEN log: one ODOM line per reading (the start, stamped 0, dropped; a stamp given twice
+    keeps its last pose); a broken line is an error naming the file and the line; its runs form their own
+    variant, apart from the wrapper replay's runs."""
+    from eval.collect import reference_variant
+
+    f = tmp_path / "best.log"
+    f.write_text("ODOM 0 0 0 0 0 0 0.000000 pippo 0\nNEFF 29.5 0 pippo 0\n"
+                 "ODOM 1.0 2.0 0.5 0 0 0 10.250000 pippo 10.25\nROBOTLASER1 0 0\n"
+                 "ODOM 1.5 2.0 0.6 0 0 0 10.500000 pippo 10.5\nODOM 1.6 2.1 0.7 0 0 0 10.500000 pippo 10.5\n")
+    stamps, poses = ref.read_gfs_path(f)
+    assert stamps.tolist() == [10.25, 10.5] and poses.tolist() == [[1.0, 2.0, 0.5], [1.6, 2.1, 0.7]]
+    f.write_text("ODOM 1.0 2.0 0.5 0 0 0 10.25 pippo 10.25\nODOM 1.0 x 0.5\n")
+    with pytest.raises(ValueError, match="best.log, line 2"):
+        ref.read_gfs_path(f)
+    assert reference_variant({"tool": "gfs_nogui", "settings": {}, "gfs_flags": []}) == "gfs"
+    assert reference_variant({"settings": {}}) == ""

@@ -7,8 +7,8 @@
 # SRC: a clone of https://github.com/ros-perception/openslam_gmapping (a work tree or a bare repository);
 # default $OPENSLAM_GMAPPING_SRC. The commit used for the figures is pinned below; the build goes to
 # outputs/reference/gmapping/ (git-ignored): its sources, then the binaries gmapping_replay (a log through
-# GridSlamProcessor), gmapping_motion (samples of its motion model) and gmapping_matcher (its scan matcher's
-# score, likelihood and hill climbing on given scans and maps).
+# GridSlamProcessor), gmapping_motion (samples of its motion model), gmapping_matcher (its scan matcher's
+# score, likelihood and hill climbing on given scans and maps), and the released gfs_nogui and gfs2log.
 set -euo pipefail
 PIN=5105476  # "Merge pull request #44" (2022), the newest commit of the ROS package
 SRC=${1:-${OPENSLAM_GMAPPING_SRC:?give the openslam_gmapping clone as an argument or in OPENSLAM_GMAPPING_SRC}}
@@ -35,4 +35,15 @@ g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude $SOURCES "$HERE/gmapping_replay.cpp" -o
 g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude utils/stat.cpp utils/movement.cpp gridfastslam/motionmodel.cpp \
   "$HERE/gmapping_motion.cpp" -o "$OUT/gmapping_motion"
 g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude $SOURCES "$HERE/gmapping_matcher.cpp" -o "$OUT/gmapping_matcher"
-echo "built $OUT/gmapping_replay, gmapping_motion and gmapping_matcher from openslam_gmapping $(cat "$OUT/COMMIT")"
+# the released code's own tool for CARMEN logs (gui/gfs_nogui.cpp, no Qt) and its converter of the output to
+# a CARMEN log of the best particle's path (gridfastslam/gfs2log.cpp). gsp_thread.cpp streams `cout` into a
+# stream, which compiles only as C++98 (an ostream's conversion to void*); libstdc++ linked statically, so the
+# binaries also run on the lent GPU machine (eval/gpu/).
+LOGSRC="log/carmenconfiguration.cpp log/configuration.cpp log/sensorlog.cpp log/sensorstream.cpp configfile/configfile.cpp"
+g++ -O3 -DNDEBUG -std=gnu++98 -w -Iinclude -c gui/gsp_thread.cpp -o "$OUT/gsp_thread.o"
+g++ -O3 -DNDEBUG -std=c++14 -w -Iinclude $SOURCES $LOGSRC "$OUT/gsp_thread.o" gui/gfs_nogui.cpp -lpthread \
+  -static-libstdc++ -static-libgcc -o "$OUT/gfs_nogui"
+g++ -O3 -DNDEBUG -std=gnu++98 -w -Iinclude gridfastslam/gfs2log.cpp gridfastslam/gfsreader.cpp utils/stat.cpp \
+  utils/movement.cpp -static-libstdc++ -static-libgcc -o "$OUT/gfs2log"
+rm -f "$OUT/gsp_thread.o"
+echo "built $OUT/gmapping_replay, gmapping_motion, gmapping_matcher, gfs_nogui and gfs2log from openslam_gmapping $(cat "$OUT/COMMIT")"

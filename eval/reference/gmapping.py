@@ -127,6 +127,89 @@ def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path
     return metrics
 
 
+GFS = BINARY.parent / "gfs_nogui"
+GFS2LOG = BINARY.parent / "gfs2log"
+
+
+def read_gfs_path(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps [K], poses [K, 3]) of the best particle from gfs2log's CARMEN log: its ODOM lines, one per
+    reading, ``ODOM x y theta tv rv accel stamp host logger_stamp`` (the corrected pose at each reading's
+    stamp; the line stamped 0 is the start it prints before the first reading, dropped). A stamp given twice
+    keeps its last pose; a line that is not that is an error naming the file and the line."""
+    poses = {}
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.startswith("ODOM"):
+            continue
+        f = line.split()
+        try:
+            x, y, a, stamp = float(f[1]), float(f[2]), float(f[3]), float(f[7])
+        except (IndexError, ValueError):
+            raise ValueError(f"{path}, line {n}: expected 'ODOM x y theta tv rv accel stamp host logger_stamp'") from None
+        if stamp > 0:
+            poses[round(stamp, 6)] = (x, y, a)
+    if not poses:
+        raise ValueError(f"{path}: no ODOM line with a stamp: did gfs_nogui process the log?")
+    stamps = np.array(sorted(poses))
+    return stamps, np.array([poses[t] for t in stamps])
+
+
+def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
+    """The released code's own CARMEN-log tool, gfs_nogui, on the data config's CARMEN log with its defaults
+    (``extra``: more of its -flags), seeded with seed + 1; the best particle's path through gfs2log, scored
+    like our runs. Its defaults differ from the ROS wrapper's (rotational noise srt = stt = 0.1 instead of
+    0.2, a scan also processed 5 s after the last one, maxrange 80 m), and its reader gives FLASER beams
+    its own angles (irmcl_warp.io.carmen.gfs_flaser_angles) and puts the laser at the FLASER pose."""
+    if cfg.data.format != "carmen":
+        raise ValueError(f"data={cfg.data.name}: gfs_nogui reads CARMEN logs; this one is {cfg.data.format}")
+    for exe in (GFS, GFS2LOG):
+        if not exe.is_file():
+            raise FileNotFoundError(f"{exe}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
+    flags = list(extra)
+    out = out_root / f"reference-gmapping-gfs-30p{'-' + data_tag([f.lstrip('-') for f in flags]) if flags else ''}-seed{seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    done = out / "metrics.json"
+    if done.is_file():
+        m = json.loads(done.read_text())
+        if m.get("gfs_flags") == flags and m.get("randseed") == seed + 1:
+            return m
+    clf = out / "log.clf"  # gfs_nogui reads plain text; it writes rawpath.dat and w-*.dat into its folder
+    import gzip
+
+    src = resolve(cfg.data.path)
+    clf.write_bytes(gzip.open(src).read() if str(src).endswith(".gz") else src.read_bytes())
+    t0 = time.perf_counter()
+    ran = subprocess.run([str(GFS), "-filename", "log.clf", "-outfilename", "run.gfs", "-randseed", str(seed + 1),
+                          *flags], cwd=out, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if ran.returncode != 0 or "DONE!" not in ran.stdout:
+        raise RuntimeError(f"gfs_nogui seed {seed} failed ({ran.returncode}): {ran.stderr[-1000:]}")
+    subprocess.run([str(GFS2LOG), "run.gfs", "best.log"], cwd=out, capture_output=True, check=True)
+    stamps, poses = read_gfs_path(out / "best.log")
+    idx = match_stamps(log.stamps, stamps, 1e-5)
+    if (idx < 0).any():
+        raise RuntimeError(f"{out / 'best.log'}: {int((idx < 0).sum())} stamps match no scan of {src}")
+    if len(np.unique(idx)) != len(log):
+        raise RuntimeError(f"{out / 'best.log'}: poses at {len(np.unique(idx))} of the log's {len(log)} scans")
+    every = np.empty((len(log), 3))
+    every[idx] = poses  # the laser's path (the FLASER pose, laser at the robot's centre as gfs reads it)
+    write_tum(out / "trajectory.tum", log.stamps, every)
+    neff = [float(line.split()[1]) for line in (out / "best.log").read_text().splitlines() if line.startswith("NEFF")]
+    rel = read_relations(resolve(cfg.data.relations_path))
+    metrics = {"dataset": cfg.data.name, "implementation": "released GMapping (openslam_gmapping "
+               f"{(BINARY.parent / 'COMMIT').read_text().split()[0]}), its gfs_nogui on the CARMEN log",
+               "tool": "gfs_nogui", "particles": 30, "seed": seed, "randseed": seed + 1, "gfs_flags": flags,
+               "scans": len(log), "processed_scans": len(neff), "wall_time_s": wall,
+               "resamplings_upper_bound": int(sum(v < 15 for v in neff)),
+               "settings": {}, "data_overrides": [],
+               "relations_frame": {"frame": "laser", "T_base_laser": [0.0, 0.0, 0.0]},
+               "relations": relations_error(relation_stamps(cfg, log), every, rel)}
+    metrics["run"] = out.name.removeprefix("reference-gmapping-")
+    for junk in [clf, out / "run.gfs", out / "rawpath.dat", *out.glob("w-*.dat")]:
+        junk.unlink(missing_ok=True)  # 10-20 MB a run; best.log keeps the path
+    write_json(done, metrics)
+    return metrics
+
+
 MOTION = BINARY.parent / "gmapping_motion"
 # odometry steps (old pose, new pose) of the kinds a log holds: straight, turning, sideways slip, turning on
 # the spot; the particle starts elsewhere with another heading
@@ -313,9 +396,9 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
     n = int(np.ceil(2 * margin_m / delta))
     rbpf = RBPF(cfg.slam, (n, n), tuple(origin), T, angles, float(params["maxRange"]), "cpu")
     t0 = time.perf_counter()
-    rbpf.start(odom[0], log.ranges_m[0])
+    rbpf.start(odom[0], log.ranges_m[0], float(log.stamps[0]))
     for k in range(1, len(log)):
-        rbpf.step(k, odom[k], log.ranges_m[k])
+        rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
     wall_ours = time.perf_counter() - t0
     ours_idx, ours = rbpf.trajectory(0)
     ours = compose(ours, T)  # the released code's poses are the laser's
@@ -406,6 +489,8 @@ def main(argv=None):
                     "both sides, the poses at every processed scan compared (results/checks/gmapping_trace_<exp>.json)")
     ap.add_argument("--scans", type=int, help="--trace: only the first SCANS scans of the log")
     ap.add_argument("--delta", type=float, help="--trace: the cell size (default: the experiment's slam.resolution_m)")
+    ap.add_argument("--gfs", action="store_true", help="run the released code's own CARMEN-log tool (gfs_nogui, its "
+                    "defaults) on the data config's CARMEN log instead of our replay of the ROS wrapper")
     ap.add_argument("--frame", default="base", help="--trace: our slam.frame (base, or laser as the released code)")
     a = ap.parse_args(argv)
     if a.trace:
@@ -465,14 +550,22 @@ def main(argv=None):
         raise ValueError(f"--data {a.data}: only overrides of the data config (data.<key>=<value>)")
     cfg = compose_config([f"+exp={exp}", *a.data])
     log = load_stream(cfg)
-    params = wrapper_params(cfg, log, a.set)
     out_root = REPO / "outputs" / exp
     out_root.mkdir(parents=True, exist_ok=True)
-    scans_file = out_root / f"reference-gmapping-scans{'-' + data_tag(a.data) if a.data else ''}.txt"
-    export_scans(log, scans_file)
-    with ThreadPoolExecutor(a.jobs) as pool:
-        runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root, a.data), seeds_of(a.seeds)))
-    print(f"released GMapping on {exp} ({len(log)} scans, {params.get('particles', 30)} particles)")
+    if a.gfs:
+        if a.data or a.set:
+            raise ValueError("--gfs runs the released tool at its own defaults on the log as it is: no --data or --set")
+        with ThreadPoolExecutor(a.jobs) as pool:
+            runs = list(pool.map(lambda s: run_gfs_seed(cfg, log, s, out_root), seeds_of(a.seeds)))
+        print(f"released GMapping's gfs_nogui on {exp} ({len(log)} scans, 30 particles, its defaults)")
+    else:
+        params = wrapper_params(cfg, log, a.set)
+        scans_file = out_root / f"reference-gmapping-scans{'-' + data_tag(a.data) if a.data else ''}.txt"
+        export_scans(log, scans_file)
+        with ThreadPoolExecutor(a.jobs) as pool:
+            runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root, a.data),
+                                 seeds_of(a.seeds)))
+        print(f"released GMapping on {exp} ({len(log)} scans, {params.get('particles', 30)} particles)")
     print("| seed | processed | relations m | deg | wall s |")
     print("|---|---|---|---|---|")
     for m in runs:
