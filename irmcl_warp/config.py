@@ -205,7 +205,9 @@ class SlamConfig:
     str: float = 0.1  # translation from rotation
     stt: float = 0.2  # rotation from rotation
     linear_update: float = 1.0  # process a scan after this much travel (m) ...
-    angular_update: float = 0.5  # ... or rotation (rad)
+    angular_update: float = 0.5  # ... or rotation (rad) ...
+    temporal_update: float = -1.0  # ... or more than this many seconds after the last processed one; < 0: never
+    # (the ROS wrapper's temporalUpdate; the released code's own default, which its gfs_nogui keeps, is 5 s)
     resolution_m: float = 0.05
     map_margin_m: float = 10.0  # the first map's half-size around the first pose, and the least slack the maps
     # get beyond a scan when they grow to hold it
@@ -215,6 +217,8 @@ class SlamConfig:
     frame: builtins.str = "base"  # the poses the particles carry: base (the odometry's frame) | laser (the released code
     # as its ROS wrapper feeds it: laser poses as odometry, so its motion noise, hill climbing and update distances
     # act on the laser; the same where the laser sits at the base)
+    beam_angles: builtins.str = "log"  # log (the angles the log declares) | gfs (those the released code's own CARMEN
+    # reader gives FLASER beams: irmcl_warp.io.carmen.gfs_flaser_angles; for a side-by-side run with its gfs_nogui)
     seed: int = 0
 
 
@@ -340,7 +344,8 @@ CHOICES = {
     "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.beam_pick": ("spread", "stride"),
     "mcl.resample": ("low_variance", "multinomial"),
     "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
-    "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"),
+    "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"), "slam.frame": ("base", "laser"),
+    "slam.beam_angles": ("log", "gfs"),
     "globloc.scan2map": ("paper", "likelihood_field"), "globloc.cluster_space": ("pose", "index"),
 }
 # numeric settings: (lowest, highest), None for no bound; a lowest written "> x" is exclusive
@@ -370,7 +375,8 @@ RANGES = {
     "slam.kernel_size": (0, None), "slam.lstep": ("> 0", None), "slam.astep": ("> 0", None), "slam.iterations": (0, None),
     "slam.lsigma": ("> 0", None), "slam.ogain": ("> 0", None), "slam.lskip": (0, None), "slam.fullness": (0, 1),
     "slam.srr": (0, None), "slam.srt": (0, None), "slam.str": (0, None), "slam.stt": (0, None),
-    "slam.linear_update": (0, None), "slam.angular_update": (0, None), "slam.resolution_m": ("> 0", None),
+    "slam.linear_update": (0, None), "slam.angular_update": (0, None), "slam.temporal_update": (None, None),
+    "slam.resolution_m": ("> 0", None),
     "slam.map_margin_m": (0, None), "slam.proposal_grid": (0, None), "slam.proposal_lstep": ("> 0", None),
     "slam.proposal_astep": ("> 0", None),
     "globloc.num_particles": (1, None), "globloc.beams": (1, None), "globloc.runs": (1, None),

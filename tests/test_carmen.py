@@ -144,3 +144,17 @@ def test_fuzzed_logs_read_or_fail_clearly(tmp_path, data):
             return
     assert len(log) >= 1 and log.ranges_m.shape[1] == log.info.num_beams
     assert not np.any(log.ranges_m[np.isfinite(log.ranges_m)] < 0)
+
+
+def test_gfs_beam_angles_follow_the_released_reader():
+    """The released GMapping's CARMEN reader: 360 beams 0.5 deg apart with no beam at 0, 181 beams 1 deg apart
+    with one at 0; a count it has no resolution for is an error naming the count."""
+    from irmcl_warp.io.carmen import gfs_flaser_angles
+
+    a = np.rad2deg(gfs_flaser_angles(360))
+    assert len(a) == 360 and np.allclose(np.diff(a)[np.arange(359) != 179], 0.5) and np.isclose(a[180] - a[179], 1.0)
+    assert np.isclose(a[0], -90) and np.isclose(a[-1], 90) and np.allclose(a, -a[::-1]) and not np.any(np.isclose(a, 0))
+    b = np.rad2deg(gfs_flaser_angles(181))
+    assert np.allclose(np.diff(b), 1.0) and b[90] == 0 and np.isclose(b[0], -90)
+    with pytest.raises(ValueError, match="361|200 beams"):
+        gfs_flaser_angles(200)

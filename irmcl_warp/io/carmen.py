@@ -212,3 +212,23 @@ def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:
     warn_defects(path, _parse_report(c))
     return check_pose_stamps(path, np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans]),
                              [s.line for s in c.scans])
+
+
+GFS_RESOLUTION_DEG = {180: 1.0, 181: 1.0, 360: 0.5, 361: 0.5, 540: 0.5, 541: 0.5, 682: 360 / 1024, 683: 360 / 1024,
+                      769: 360 / 1024}  # the released GMapping's CARMEN reader (log/carmenconfiguration.cpp)
+
+
+def gfs_flaser_angles(num_beams: int) -> np.ndarray:
+    """The beam angles (rad) that the released GMapping's own CARMEN reader (gfs_nogui's) gives an n-beam FLASER
+    laser without PARAM lines: a resolution chosen by the beam count (1 deg for 180/181 beams, 0.5 deg for
+    360/361 and 540/541), the beams symmetric about the heading; an odd count has a beam at 0, an even one
+    none (360 beams: -90, ..., -0.5, +0.5, ..., +90 deg, where the log's uniform 180-deg span puts them
+    0.501 deg apart). Used by ``slam.beam_angles=gfs`` to feed our filter the released tool's input."""
+    if num_beams not in GFS_RESOLUTION_DEG:
+        raise ValueError(f"slam.beam_angles=gfs: the released CARMEN reader sets no resolution for {num_beams} beams "
+                         f"(it knows {sorted(GFS_RESOLUTION_DEG)}; others need a PARAM line)")
+    step, j = np.deg2rad(GFS_RESOLUTION_DEG[num_beams]), np.arange(num_beams)
+    if num_beams % 2:
+        return (j - num_beams // 2) * step
+    half = num_beams // 2
+    return np.where(j < half, j - half, j - half + 1) * step

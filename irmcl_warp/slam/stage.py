@@ -25,6 +25,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io import GEOMETRY_FIELDS, read_relations, resolve, write_tum
+from irmcl_warp.io.carmen import gfs_flaser_angles
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
@@ -41,7 +42,7 @@ from kernels.slam import ParticleMaps
 # settings that name a run when they differ from their default: key -> short name in the folder name
 ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "srr": "srr", "srt": "srt",
                  "str": "str", "stt": "stt", "proposal_grid": "grid", "proposal_lstep": "plstep", "proposal_astep": "pastep",
-                 "frame": ""}
+                 "frame": "", "temporal_update": "temporal", "beam_angles": "beams"}
 
 
 def run_tag(s, data=None) -> str:
@@ -99,8 +100,9 @@ def start_filter(cfg, log, device: str) -> tuple[RBPF, np.ndarray]:
     usable = far_bound_m(cfg, log.info.range_max_m)
     odom, T = filter_frame(cfg, log)
     shape, origin = initial_frame(odom[0], s.map_margin_m, s.resolution_m)
-    rbpf = RBPF(s, shape, origin, T, log.info.angles_rad, usable, device)
-    rbpf.start(odom[0], log.ranges_m[0])
+    angles = gfs_flaser_angles(log.ranges_m.shape[1]) if s.get("beam_angles", "log") == "gfs" else log.info.angles_rad
+    rbpf = RBPF(s, shape, origin, T, angles, usable, device)
+    rbpf.start(odom[0], log.ranges_m[0], float(log.stamps[0]))
     return rbpf, odom
 
 
@@ -166,7 +168,7 @@ def run_slam(cfg) -> Path:
     except ImportError:  # pragma: no cover
         bar = range(1, len(log))
     for k in bar:
-        st = rbpf.step(k, odom[k], log.ranges_m[k])
+        st = rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
         if st.processed:
             neff_rows.append((k, st.neff, int(st.resampled), st.match_rounds))
             if hasattr(bar, "set_postfix"):
