@@ -31,7 +31,7 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
     n = len(log) if scans is None else min(int(scans), len(log))
     rbpf, odom = start_filter(cfg, log, device)
     t0 = time.perf_counter()
-    processed = sum(rbpf.step(k, odom[k], log.ranges_m[k]).processed for k in range(1, n))
+    processed = sum(rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k])).processed for k in range(1, n))
     wall = time.perf_counter() - t0
     return {"exp": exp, "particles": particles, "device": rbpf.device, "scans": n, "processed_scans": processed,
             "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}

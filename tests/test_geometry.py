@@ -34,3 +34,19 @@ def test_rigid_alignment_recovers_a_random_motion(rng):
     assert np.allclose(got[:2], T[:2], atol=1e-9) and abs(wrap_angle(got[2] - T[2])) < 1e-9, f"seed {rng.seed}"
     with pytest.raises(ValueError, match="two poses"):
         align_rigid(est[:1], ref[:1])
+
+
+def test_relative_of_one_pair_is_relatives_bits(rng):
+    """RBPF.step queues each scan's odometry step through relative_one; its bits must be relative()'s, or the
+    particles' draws move. Far from the origin (a log hundreds of metres out) and across +-pi."""
+    from irmcl_warp.geometry import relative_one, wrap_angle_one
+
+    n = 2000
+    a = np.c_[rng.uniform(-700, 700, (n, 2)), rng.uniform(-np.pi, np.pi, n)]
+    b = a + np.c_[rng.normal(0, 0.05, (n, 2)), rng.normal(0, 0.3, n)]
+    b[: n // 4, 2] = wrap_angle(b[: n // 4, 2] + np.pi)  # some steps cross the wrap
+    want = relative(a, b)
+    got = np.array([relative_one(tuple(map(float, p)), tuple(map(float, q))) for p, q in zip(a, b)])
+    assert np.array_equal(got, want)
+    d = b[:, 2] - a[:, 2]
+    assert np.array_equal([wrap_angle_one(float(v)) for v in d], wrap_angle(d))

@@ -363,6 +363,45 @@ def test_the_filter_grows_its_maps_and_drops_no_end_point():
         assert rbpf.maps.fields(p)["hits"].sum() == valid
 
 
+
+def test_scans_are_processed_by_distance_turn_or_time_and_steps_queued_exactly():
+    """The update rule, on the simulator's odometry against a direct count: a scan is processed once the path
+    since the last processed one reaches linear_update, its turns angular_update, or (temporal_update) more
+    than that many seconds have passed. The queued steps of the scans between are geometry.relative's, bit for
+    bit. Without stamps a temporal update is an error, not a silent 'never'."""
+    from irmcl_warp.geometry import relative, wrap_angle
+
+    log = _sim(30.0)
+    for temporal in (-1.0, 2.0):
+        cfg = SlamConfig(num_particles=2, resolution_m=0.1, map_margin_m=2.0, linear_update=1.5,
+                         angular_update=0.7, temporal_update=temporal)
+        rbpf = RBPF(cfg, (40, 40), (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0), log.T_base_laser,
+                    log.info.angles_rad, 8.0, DEVICE)
+        rbpf.start(log.odom[0], log.ranges_m[0], float(log.stamps[0]))
+        want, got, timed, path, turn, last = [], [], set(), 0.0, 0.0, 0
+        for k in range(1, len(log)):
+            path += float(np.hypot(*(log.odom[k, :2] - log.odom[k - 1, :2])))
+            turn += abs(float(wrap_angle(log.odom[k, 2] - log.odom[k - 1, 2])))
+            due = path >= 1.5 or turn >= 0.7 or (temporal >= 0 and log.stamps[k] - log.stamps[last] > temporal)
+            if not due and k - last == 3:  # the steps queued so far, before this one is added
+                steps = relative(log.odom[last:k - 1], log.odom[last + 1:k])
+                assert np.array_equal(np.array(rbpf.pending), steps[np.any(steps != 0, axis=1)])
+            if due:
+                want.append(k)
+                if path < 1.5 and turn < 0.7:
+                    timed.add(k)
+                path, turn, last = 0.0, 0.0, k
+            if rbpf.step(k, log.odom[k], log.ranges_m[k], float(log.stamps[k])).processed:
+                got.append(k)
+        assert got == want and len(got) >= 5
+        by_time = sum(1 for k in got if k in timed)
+        assert (by_time > 0) == (temporal > 0), (temporal, by_time)
+    rbpf = RBPF(cfg, (40, 40), (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0), log.T_base_laser, log.info.angles_rad,
+                8.0, DEVICE)
+    rbpf.start(log.odom[0], log.ranges_m[0])
+    with pytest.raises(ValueError, match="temporal_update needs each scan's stamp"):
+        rbpf.step(1, log.odom[1], log.ranges_m[1])
+
 def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     """Documented handling: the jump is reported in metrics.json and the filter takes it as motion."""
     import irmcl_warp.slam.stage as stage

@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
+from omegaconf import OmegaConf
 
-from irmcl_warp.geometry import compose, relative, wrap_angle
+from irmcl_warp.config import SlamConfig
+from irmcl_warp.geometry import compose, relative, relative_one, wrap_angle, wrap_angle_one
 from kernels import SLAM, pick_device
 from kernels.slam import ParticleMaps, climb_candidates_kernel, climb_update_kernel
 
@@ -73,6 +75,8 @@ class RBPF:
         self.propose = getattr(self, self.PROPOSALS[cfg.proposal])  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
         if cfg.resample not in ("selective", "always"):
             raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
+        if not isinstance(cfg, SlamConfig):  # a DictConfig: plain attributes instead (microseconds a read there)
+            cfg = SlamConfig(**OmegaConf.to_container(cfg, resolve=True))
         self.cfg, self.device = cfg, pick_device(device)
         P, d = int(cfg.num_particles), self.device
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
@@ -104,6 +108,9 @@ class RBPF:
         self.prev_odom = None  # odometry at the previous scan
         self.pending = []  # odometry steps not yet applied to the particles
         self.path_m = self.turn_rad = 0.0  # travelled and turned since the last processed scan
+        self.last_stamp = None  # stamp of the last processed scan (temporal_update)
+        # the update thresholds, read every scan
+        self._update = (float(cfg.linear_update), float(cfg.angular_update), float(cfg.temporal_update))
         self._graph = None  # CUDA graph of check_every hill-climbing rounds
 
     # --- device helpers -----------------------------------------------------------------------------
@@ -147,33 +154,47 @@ class RBPF:
     def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
         cand, score, loglik = self._buf(candidates.shape[1])
-        cand.assign(wp.array(candidates.astype(np.float32), dtype=wp.vec3, device=self.device))
+        cand.assign(candidates.astype(np.float32))
         self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
         return score.numpy().astype(np.float64), loglik.numpy().astype(np.float64)
 
+    def loglik_at(self, candidates: np.ndarray) -> np.ndarray:
+        """evaluate's log-likelihood [P, C] alone: one read back from the device instead of two."""
+        cand, score, loglik = self._buf(candidates.shape[1])
+        cand.assign(candidates.astype(np.float32))
+        self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
+        return loglik.numpy().astype(np.float64)
+
     # --- the filter ---------------------------------------------------------------------------------
-    def start(self, odom_pose, ranges_m) -> None:
+    def start(self, odom_pose, ranges_m, stamp: float | None = None) -> None:
         """All particles at the first odometry pose; the first scan is integrated as it is."""
         pose = np.asarray(odom_pose, np.float64)
-        self.poses.assign(wp.array(np.tile(pose, (self.P, 1)).astype(np.float32), dtype=wp.vec3, device=self.device))
+        self.poses.assign(np.tile(pose, (self.P, 1)).astype(np.float32))
         self._set_ranges(ranges_m)
         self._add_scan(np.tile(pose, (self.P, 1)))
-        self.last_odom = self.prev_odom = pose
+        self.last_odom, self.prev_odom = pose, tuple(pose)
         self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
-        self._record(0, parents=np.arange(self.P))
+        self.last_stamp = stamp
+        self._record(0, np.arange(self.P), np.tile(pose, (self.P, 1)))
 
-    def step(self, k: int, odom_pose, ranges_m) -> StepStats:
-        """Scan k with its odometry pose; returns what happened."""
-        odom_pose = np.asarray(odom_pose, np.float64)
+    def step(self, k: int, odom_pose, ranges_m, stamp: float | None = None) -> StepStats:
+        """Scan k with its odometry pose (and its stamp, which ``temporal_update`` needs); returns what
+        happened. A scan that is not processed costs a few scalar operations on the host: its odometry step
+        is queued for the next processed scan."""
+        x, y, a = odom_pose
+        pose = (float(x), float(y), float(a))
+        prev, self.prev_odom = self.prev_odom, pose
         self.steps += 1
-        delta = relative(self.prev_odom[None], odom_pose[None])[0]
-        self.path_m += float(np.hypot(*(odom_pose[:2] - self.prev_odom[:2])))
-        self.turn_rad += float(abs(wrap_angle(odom_pose[2] - self.prev_odom[2])))
-        self.prev_odom = odom_pose
-        if np.any(delta != 0):
+        delta = relative_one(prev, pose)
+        self.path_m += float(np.hypot(x - prev[0], y - prev[1]))
+        self.turn_rad += abs(wrap_angle_one(pose[2] - prev[2]))
+        if delta != (0.0, 0.0, 0.0):
             self.pending.append(delta)
-        if self.path_m < self.cfg.linear_update and self.turn_rad < self.cfg.angular_update:
+        linear, angular, _ = self._update
+        if self.path_m < linear and self.turn_rad < angular and not self._time_is_up(stamp):
             return StepStats(processed=False)
+        odom_pose = np.array(pose)
+        self.last_stamp = stamp
         t = self._tick()
         if self.pending:
             self.motion(self.poses, np.array(self.pending), seed=self.cfg.seed * 1_000_003 + self.steps)
@@ -186,22 +207,32 @@ class RBPF:
         t = self._tick("matching", t)
         self.log_w += gain
         self.log_w_total += gain
-        self.poses.assign(wp.array(new.astype(np.float32), dtype=wp.vec3, device=self.device))
+        self.poses.assign(new.astype(np.float32))
         w = self.smoothed_weights()
         neff = 1.0 / np.sum(w ** 2)
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
             parents = self.maps.resample(low_variance_parents(w, self.rng.uniform()))
-            self.poses.assign(wp.array(new[parents].astype(np.float32), dtype=wp.vec3, device=self.device))
+            self.poses.assign(new[parents].astype(np.float32))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
         t = self._tick("weights_resampling", t)
         self._add_scan(new[parents])
         self._tick("integration", t)
         self.last_odom = odom_pose
-        self._record(k, parents)
+        self._record(k, parents, new[parents])
         return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
+
+    def _time_is_up(self, stamp: float | None) -> bool:
+        """temporal_update: more than that many seconds since the last processed scan (the released code's
+        ``period_``; never when it is negative)."""
+        period = self._update[2]
+        if period < 0:
+            return False
+        if stamp is None or self.last_stamp is None:
+            raise ValueError("slam.temporal_update needs each scan's stamp: pass it to RBPF.start and RBPF.step")
+        return stamp - self.last_stamp > period
 
     def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8, rounds_launched: bool | None = None):
         """GMapping's hill climbing for every particle at once; a particle stops when a round fails after
@@ -234,7 +265,7 @@ class RBPF:
         """match's CPU way: Scorer.climb, each particle's whole climb in one thread; returns the most rounds any
         particle took (``check_every`` is the GPU way's)."""
         c, st = self.cfg, self._climb
-        st["start"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=self.device))
+        st["start"].assign(start.astype(np.float32))
         self.scorer.climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles,
                           (c.lstep, c.lstep, c.astep), int(c.iterations), int(max_rounds), st["pose"], st["best"],
                           st["rounds"])
@@ -244,9 +275,8 @@ class RBPF:
         """match's GPU way: rounds launched over particles x moves x beams, ``check_every`` of them per CUDA
         graph between looks at the active flags; returns the rounds launched."""
         c, d, P, st = self.cfg, self.device, self.P, self._climb
-        st["pose"].assign(wp.array(start.astype(np.float32), dtype=wp.vec3, device=d))
-        st["steps"].assign(wp.array(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32), dtype=wp.vec3,
-                                    device=d))
+        st["pose"].assign(start.astype(np.float32))
+        st["steps"].assign(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32))
         st["halvings"].zero_()
         st["active"].fill_(1)
         cand1, score1, loglik1 = self._buf(1)
@@ -286,13 +316,13 @@ class RBPF:
     # --- proposals: (poses sampled from the motion model, odometry step) -> (new poses, log-weight gain, rounds)
     def propose_odometry(self, sampled, moved):
         """The motion model alone (the paper's baseline)."""
-        return sampled, self.evaluate(sampled[:, None])[1][:, 0], 0
+        return sampled, self.loglik_at(sampled[:, None])[:, 0], 0
 
     def propose_match(self, sampled, moved):
         """The released code's: the scan matcher's pose where its score beats ``minimum_score``."""
         matched, score, rounds = self.match(sampled)
         new = np.where((score > self.cfg.minimum_score)[:, None], matched, sampled)
-        return new, self.evaluate(new[:, None])[1][:, 0], rounds
+        return new, self.loglik_at(new[:, None])[:, 0], rounds
 
     def propose_paper(self, sampled, moved):
         """The paper's: a Gaussian fitted around the match (eq. 9-12), the motion prior centred on each
@@ -303,7 +333,7 @@ class RBPF:
         predicted = compose(self.history.poses[-1], np.broadcast_to(moved, (self.P, 3)))
         new, gain = self.gaussian_proposal(matched, predicted, moved)
         if not ok.all():  # particles whose match scored too low keep their sample, weighted by its likelihood
-            gain = np.where(ok, gain, self.evaluate(sampled[:, None])[1][:, 0])
+            gain = np.where(ok, gain, self.loglik_at(sampled[:, None])[:, 0])
         return np.where(ok[:, None], new, sampled), gain, rounds
 
     def gaussian_proposal(self, matched: np.ndarray, predicted: np.ndarray, moved: np.ndarray):
@@ -311,7 +341,7 @@ class RBPF:
         prior a Gaussian around ``predicted`` with GMapping's noise for the step ``moved``; new pose ~ N(mu,
         Sigma) of the normalised tau; log-weight gain = log sum tau_j."""
         cand = matched[:, None, :] + self.grid_offsets[None]  # [P, K, 3]
-        loglik = self.evaluate(cand)[1]
+        loglik = self.loglik_at(cand)
         std = np.maximum(motion_std(moved, self.cfg), [0.01, 0.01, 0.005])
         d = cand - predicted[:, None, :]
         d[..., 2] = wrap_angle(d[..., 2])
@@ -337,9 +367,11 @@ class RBPF:
             self.timing[part] += now - since
         return now
 
-    def _record(self, k: int, parents: np.ndarray) -> None:
+    def _record(self, k: int, parents: np.ndarray, poses: np.ndarray) -> None:
+        """History of scan k: ``poses`` [P, 3] are those just put on the device, recorded as the device holds
+        them (float32) without reading them back."""
         self.history.scans.append(k)
-        self.history.poses.append(self.poses.numpy().astype(np.float64))
+        self.history.poses.append(np.asarray(poses).astype(np.float32).astype(np.float64))
         self.history.parents.append(np.asarray(parents))
 
     # --- results ------------------------------------------------------------------------------------
