@@ -543,8 +543,9 @@ def main(argv=None):
               f"hill climbing: poses within {r['climb_pose_diff_m_max']:.4f} m, scores {r['climb_score_rel_diff_max']:.2e}")
         write_json(REPO / "results" / "checks" / f"gmapping_matcher_{exp}.json", r)
         return 0
-    if not BINARY.is_file():
-        raise FileNotFoundError(f"{BINARY}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
+    if not (GFS if a.gfs else BINARY).is_file():
+        raise FileNotFoundError(f"{GFS if a.gfs else BINARY}: build it first: bash eval/reference/build_gmapping.sh "
+                                "<openslam_gmapping clone>")
     exp = a.exp.removeprefix("+exp=")
     if any(not o.startswith("data.") for o in a.data):
         raise ValueError(f"--data {a.data}: only overrides of the data config (data.<key>=<value>)")

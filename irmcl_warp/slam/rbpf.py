@@ -98,6 +98,7 @@ class RBPF:
         as_ = cfg.astep if cfg.proposal_astep is None else cfg.proposal_astep
         self.grid_offsets = offs * np.array([ls, ls, as_])
         self._buffers = {}
+        self._cuda, self._mirrors = wp.get_device(d).is_cuda, {}  # pinned host mirrors of device arrays (_read)
         self.log_w = np.zeros(P)  # since the last resampling
         self.log_w_total = np.zeros(P)  # over the whole run (inherited on resampling): picks the best particle
         self.history = History()
@@ -114,6 +115,21 @@ class RBPF:
         self._graph = None  # CUDA graph of check_every hill-climbing rounds
 
     # --- device helpers -----------------------------------------------------------------------------
+    def _read(self, a: wp.array) -> np.ndarray:
+        """``a.numpy()`` without its cost on a GPU: a.numpy() allocates a host array and copies through
+        pageable memory (about 170 us a call, thousands of calls a run); here each device array has one
+        pinned host mirror, copied into and waited for. The returned view is overwritten by the next read of
+        the same array. On the CPU, a.numpy() itself (a view, no copy)."""
+        if not self._cuda:
+            return a.numpy()
+        key = (a.ptr, a.shape)
+        mirror = self._mirrors.get(key)
+        if mirror is None:
+            mirror = self._mirrors[key] = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+        wp.copy(mirror, a)
+        wp.synchronize_stream(wp.get_stream(self.device))
+        return mirror.numpy()
+
     def _buf(self, C: int):
         if C not in self._buffers:
             d = self.device
@@ -156,14 +172,14 @@ class RBPF:
         cand, score, loglik = self._buf(candidates.shape[1])
         cand.assign(candidates.astype(np.float32))
         self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
-        return score.numpy().astype(np.float64), loglik.numpy().astype(np.float64)
+        return self._read(score).astype(np.float64), self._read(loglik).astype(np.float64)
 
     def loglik_at(self, candidates: np.ndarray) -> np.ndarray:
         """evaluate's log-likelihood [P, C] alone: one read back from the device instead of two."""
         cand, score, loglik = self._buf(candidates.shape[1])
         cand.assign(candidates.astype(np.float32))
         self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
-        return loglik.numpy().astype(np.float64)
+        return self._read(loglik).astype(np.float64)
 
     # --- the filter ---------------------------------------------------------------------------------
     def start(self, odom_pose, ranges_m, stamp: float | None = None) -> None:
@@ -202,7 +218,7 @@ class RBPF:
         moved = relative(self.last_odom[None], odom_pose[None])[0]
         t = self._tick("motion", t)
         self._set_ranges(ranges_m)
-        sampled = self.poses.numpy().astype(np.float64)
+        sampled = self._read(self.poses).astype(np.float64)
         new, gain, rounds = self.propose(sampled, moved)
         t = self._tick("matching", t)
         self.log_w += gain
@@ -257,9 +273,9 @@ class RBPF:
             rounds_launched = wp.get_device(d).is_cuda
         climb = self._climb_launching_rounds if rounds_launched else self._climb_in_threads
         rounds = climb(start, max_rounds, check_every)
-        pose = st["pose"].numpy().astype(np.float64)
+        pose = self._read(st["pose"]).astype(np.float64)
         pose[:, 2] = wrap_angle(pose[:, 2])
-        return pose, st["best"].numpy().astype(np.float64), rounds
+        return pose, self._read(st["best"]).astype(np.float64), rounds
 
     def _climb_in_threads(self, start: np.ndarray, max_rounds: int, check_every: int) -> int:
         """match's CPU way: Scorer.climb, each particle's whole climb in one thread; returns the most rounds any
@@ -309,7 +325,7 @@ class RBPF:
             else:
                 rounds_block()
             rounds += check_every
-            if not st["active"].numpy().any():
+            if not self._read(st["active"]).any():
                 break
         return rounds
 
