@@ -306,6 +306,12 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
     if ours:
         out["intel_code_processed"] = "/".join(str(p) for p in ours)
     count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
+    # the released code's own CARMEN tool (gfs_nogui) at its defaults, and ours on the same inputs
+    count("fr079_released_gfs", released_errors(released, "fr079", variant="gfs"))
+    error("fr079_released_gfs_error", released_errors(released, "fr079", variant="gfs"))
+    for p in ("gmapping_code", "paper"):
+        count(f"fr079_{'code' if p == 'gmapping_code' else p}_gfs_inputs",
+              slam_errors(slam, "fr079", p, variant="srt0.1, stt0.1, temporal5, beamsgfs, offset0_0_0"))
     for ds in ("fr079", "intel"):  # the authors' MCL with our field beside our likelihood field (pose tracking)
         theirs, _, lf = _irmcl_reference_runs(ds)
         for name, run in ((f"irmcl_theirs_yaw_{ds}", theirs), (f"irmcl_lf_yaw_{ds}", lf)):

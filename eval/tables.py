@@ -214,7 +214,8 @@ def slam_table(runs: dict, reference: dict | None = None) -> str:
                 released.setdefault((m["particles"], reference_variant(m)), []).append(m)
         for (particles, variant), rows in sorted(released.items()):
             label = "*released C++ (python -m eval.reference.gmapping" + (f"; {variant}" if variant else "") + ")*"
-            lines.append(slam_rows(ds, label, particles, rows, "2-core CPU"))
+            hosts = sorted({r.get("host", "2-core CPU") for r in rows})  # runs before the field: the 2-core CPU
+            lines.append(slam_rows(ds, label, particles, rows, ", ".join(hosts)))
         for name, conv, err, wall in SLAM_REFERENCES.get(ds, []):
             lines.append(f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
                          if conv else f"| {ds} | *{name}* | | | | | {err} | | |")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import time
@@ -199,6 +200,7 @@ def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
                f"{(BINARY.parent / 'COMMIT').read_text().split()[0]}), its gfs_nogui on the CARMEN log",
                "tool": "gfs_nogui", "particles": 30, "seed": seed, "randseed": seed + 1, "gfs_flags": flags,
                "scans": len(log), "processed_scans": len(neff), "wall_time_s": wall,
+               "host": f"{os.cpu_count()}-core CPU",
                "resamplings_upper_bound": int(sum(v < 15 for v in neff)),
                "settings": {}, "data_overrides": [],
                "relations_frame": {"frame": "laser", "T_base_laser": [0.0, 0.0, 0.0]},
