@@ -67,6 +67,7 @@ class History:
 
 class RBPF:
     PROPOSALS = {"paper": "propose_paper", "gmapping_code": "propose_match", "odometry": "propose_odometry"}
+    FIRST_LOOK = 24  # hill-climbing rounds launched before the host first reads the active flags (GPU way)
 
     def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float,
                  device: str = "auto"):
@@ -325,7 +326,9 @@ class RBPF:
             else:
                 rounds_block()
             rounds += check_every
-            if not self._read(st["active"]).any():
+            # the first look after FIRST_LOOK rounds: most climbs take 24-40 (intel, fr079), so earlier looks only
+            # find particles still climbing; a round after a particle stopped leaves it as it is
+            if rounds >= min(self.FIRST_LOOK, max_rounds) and not self._read(st["active"]).any():
                 break
         return rounds
 
