@@ -18,6 +18,7 @@ Settings left at the wrapper's defaults unless given with ``--set key=value`` (t
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import os
 import re
@@ -174,8 +175,6 @@ def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
         if m.get("gfs_flags") == flags and m.get("randseed") == seed + 1:
             return m
     clf = out / "log.clf"  # gfs_nogui reads plain text; it writes rawpath.dat and w-*.dat into its folder
-    import gzip
-
     src = resolve(cfg.data.path)
     clf.write_bytes(gzip.open(src).read() if str(src).endswith(".gz") else src.read_bytes())
     t0 = time.perf_counter()

@@ -168,19 +168,21 @@ class RBPF:
         self._cover_scan(poses)
         self.integrator(self.maps, self.poses, self.T_base_laser, self.ranges, self.angles)
 
-    def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
+    def _score(self, candidates: np.ndarray) -> tuple[wp.array, wp.array]:
+        """The device's (score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
         cand, score, loglik = self._buf(candidates.shape[1])
         cand.assign(candidates.astype(np.float32))
         self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
+        return score, loglik
+
+    def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
+        score, loglik = self._score(candidates)
         return self._read(score).astype(np.float64), self._read(loglik).astype(np.float64)
 
     def loglik_at(self, candidates: np.ndarray) -> np.ndarray:
         """evaluate's log-likelihood [P, C] alone: one read back from the device instead of two."""
-        cand, score, loglik = self._buf(candidates.shape[1])
-        cand.assign(candidates.astype(np.float32))
-        self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
-        return self._read(loglik).astype(np.float64)
+        return self._read(self._score(candidates)[1]).astype(np.float64)
 
     # --- the filter ---------------------------------------------------------------------------------
     def start(self, odom_pose, ranges_m, stamp: float | None = None) -> None:
