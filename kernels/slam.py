@@ -467,12 +467,12 @@ class ParticleMaps:
         Returns whether it grew. Twin: the numpy slice assignment in tests/test_slam.py."""
         P, H, W = self.shape
         (ox, oy), res = self.origin_xy, self.res
-        x1, y1 = ox + W * res, oy + H * res
         def need(gap: float, extent: float) -> int:  # cells to add on a side the box passes by ``gap`` (>= 0: out)
             return int(np.ceil((max(gap, 0.0) + max(slack_m, 0.25 * extent)) / res)) if gap >= 0 else 0
 
-        left, right = need(ox - lo_xy[0] - 1e-9, W * res), need(hi_xy[0] - x1, W * res)
-        down, up = need(oy - lo_xy[1] - 1e-9, H * res), need(hi_xy[1] - y1, H * res)
+        g_left, g_right, g_down, g_up = self._gaps(lo_xy, hi_xy)
+        left, right = need(g_left, W * res), need(g_right, W * res)
+        down, up = need(g_down, H * res), need(g_up, H * res)
         if not (left or right or down or up):
             return False
         H2, W2 = H + down + up, W + left + right
@@ -486,6 +486,16 @@ class ParticleMaps:
         self.origin = wp.vec2(*self.origin_xy)
         self.grown += 1
         return True
+
+    def _gaps(self, lo_xy, hi_xy) -> tuple[float, float, float, float]:
+        """How far the box lo_xy..hi_xy passes the frame's left, right, lower and upper sides (>= 0: out)."""
+        _, H, W = self.shape
+        (ox, oy), res = self.origin_xy, self.res
+        return ox - lo_xy[0] - 1e-9, hi_xy[0] - (ox + W * res), oy - lo_xy[1] - 1e-9, hi_xy[1] - (oy + H * res)
+
+    def holds(self, lo_xy, hi_xy) -> bool:
+        """Whether the frame holds the box lo_xy..hi_xy (cover would not grow for it, nor for any box inside)."""
+        return all(g < 0 for g in self._gaps(lo_xy, hi_xy))
 
     @property
     def shape(self):
@@ -571,9 +581,12 @@ class Scorer:
         beam_cs = self._beam_directions(angles)
 
         def run(p0: int, p1: int) -> None:
+            def part(a: wp.array) -> wp.array:  # one block of all particles: the arrays themselves, no views made
+                return a if (p0, p1) == (0, P) else a[p0:p1]
+
             wp.launch(self.kernel, (p1 - p0, C, part_s.shape[2]),
-                      [candidates[p0:p1], T, ranges, beam_cs, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
-                       part_s[p0:p1], part_l[p0:p1], active[p0:p1]], device=self.device)
+                      [part(candidates), T, ranges, beam_cs, self.usable, maps.origin, maps.res, part(maps.cells),
+                       part(part_s), part(part_l), part(active)], device=self.device)
 
         self._run_blocks(run, P)
         wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)

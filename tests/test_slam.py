@@ -348,6 +348,22 @@ def test_hits_far_from_the_origin_keep_their_mean_to_a_millimetre():
     assert abs(mean_x - (float(pose[0, 0]) + 1.2345)) < 1e-3 and abs(mean_y - float(pose[0, 1])) < 1e-3
 
 
+
+def test_a_frame_holds_exactly_the_boxes_it_would_not_grow_for(rng):
+    """ParticleMaps.holds, which lets RBPF skip computing a scan's end points, says yes exactly where cover()
+    would not grow, on fresh random boxes in, across and beyond a frame (and at its edges)."""
+    for _ in range(200):
+        maps = ParticleMaps(1, (8, 12), tuple(rng.uniform(-5, 5, 2)), 0.25, device="cpu")
+        (ox, oy), (x1, y1) = maps.origin_xy, (maps.origin_xy[0] + 3.0, maps.origin_xy[1] + 2.0)
+        edge = rng.integers(0, 3)
+        if edge == 0:  # exactly on the frame's sides
+            lo, hi = (ox, oy), (x1, y1)
+        else:
+            lo = (rng.uniform(ox - 1, x1), rng.uniform(oy - 1, y1))
+            hi = (lo[0] + rng.uniform(0, 2), lo[1] + rng.uniform(0, 2))
+        held = maps.holds(lo, hi)
+        assert held == (not maps.cover(lo, hi, 0.5)), (lo, hi, maps.origin_xy)
+
 def test_the_filter_grows_its_maps_and_drops_no_end_point():
     """A filter whose first map is smaller than the scans: every end point within the usable range is
     added (the released code's maps grow alike), none is lost at a border drawn in advance."""

@@ -156,7 +156,14 @@ class RBPF:
         if not self.integrator.free_space:
             keep &= r <= usable
         lp = compose(poses, np.asarray(self.T_base_laser)[None])
-        rr, a = np.minimum(r[keep], usable), lp[:, 2:3] + self._angles_np[keep][None]
+        rr = np.minimum(r[keep], usable)
+        reach = float(rr.max()) if rr.size else 0.0
+        # most scans lie well inside: a box around every laser position, the scan's longest beam wide, holds all
+        # end points (in floating point too), so where the frame holds it the end points need not be computed
+        if self.maps.holds(((lp[:, 0] - reach).min(), (lp[:, 1] - reach).min()),
+                           ((lp[:, 0] + reach).max(), (lp[:, 1] + reach).max())):
+            return
+        a = lp[:, 2:3] + self._angles_np[keep][None]
         xs = np.concatenate([lp[:, 0], (lp[:, :1] + rr * np.cos(a)).ravel()])
         ys = np.concatenate([lp[:, 1], (lp[:, 1:2] + rr * np.sin(a)).ravel()])
         if self.maps.cover((xs.min(), ys.min()), (xs.max(), ys.max()), self.cfg.map_margin_m):
