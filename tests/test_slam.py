@@ -353,7 +353,7 @@ def test_a_frame_holds_exactly_the_boxes_it_would_not_grow_for(rng):
     """ParticleMaps.holds, which lets RBPF skip computing a scan's end points, says yes exactly where cover()
     would not grow, on fresh random boxes in, across and beyond a frame (and at its edges)."""
     for _ in range(200):
-        maps = ParticleMaps(1, (8, 12), tuple(rng.uniform(-5, 5, 2)), 0.25, device="cpu")
+        maps = ParticleMaps(1, (8, 12), tuple(rng.uniform(-5, 5, 2)), 0.25, device=DEVICE)
         (ox, oy), (x1, y1) = maps.origin_xy, (maps.origin_xy[0] + 3.0, maps.origin_xy[1] + 2.0)
         edge = rng.integers(0, 3)
         if edge == 0:  # exactly on the frame's sides
