@@ -312,8 +312,8 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
               pose_out: wp.array(dtype=wp.vec3), best_out: wp.array(dtype=wp.float32),
               rounds_out: wp.array(dtype=wp.int32)):
         """The whole hill climb of one particle in one thread (the CPU's way: no launch per round, no
-        particle waiting for the slowest). Each round is the one ``climb_moves`` + ``climb_take_kernel``
-        make, with the same sums in the same order, so the poses are the same bit for bit."""
+        particle waiting for the slowest). Each round is the one ``climb_candidates`` + ``score`` +
+        ``climb_update`` make, with the same sums in the same order, so the poses are the same bit for bit."""
         p = wp.tid()
         B = ranges.shape[0]
         pose = start[p]
@@ -343,23 +343,7 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
         best_out[p] = best
         rounds_out[p] = rounds
 
-    @wp.kernel(module="unique")
-    def climb_moves(pose: wp.array(dtype=wp.vec3), steps: wp.array(dtype=wp.vec3), active: wp.array(dtype=wp.int32),
-                    T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32), beam_cs: wp.array(dtype=wp.vec2),
-                    usable: float, origin: wp.vec2, res: float, cells: wp.array3d(dtype=wp.vec4),
-                    part_score: wp.array3d(dtype=wp.float32)):
-        """One round of the GPU's hill climbing, its scoring half: the score partials [P, 6, J] of the 6 moves
-        (pose + move * steps) from each active particle's pose; ``climb_take_kernel`` sums them in beam order,
-        as ``reduce_partials`` does, and takes the best."""
-        p, m, j = wp.tid()
-        if active[p] == 0:
-            return
-        cand = pose[p] + wp.cw_mul(move(m), steps[p])
-        b0 = j * wp.static(beams_per_thread)
-        b1 = wp.min(b0 + wp.static(beams_per_thread), ranges.shape[0])
-        part_score[p, m, j] = score_beams(cells, p, cand, T_base_laser, ranges, beam_cs, usable, origin, res, b0, b1)[0]
-
-    return score, climb, climb_moves
+    return score, climb
 
 
 @wp.kernel
@@ -405,30 +389,29 @@ def motion_kernel(poses: wp.array(dtype=wp.vec3), deltas: wp.array(dtype=wp.vec3
 
 
 @wp.kernel
-def climb_take_kernel(part_score: wp.array3d(dtype=wp.float32), pose: wp.array(dtype=wp.vec3),
-                      best: wp.array(dtype=wp.float32), steps: wp.array(dtype=wp.vec3),
-                      halvings: wp.array(dtype=wp.int32), active: wp.array(dtype=wp.int32), iterations: int):
-    """One round of the GPU's hill climbing, its deciding half: each move's score summed from the partials in
-    beam order (``reduce_partials``'s sums); the best move (the first of equals) is taken if it raises the
-    score, else the steps are halved, and a particle is done when a round at the steps halved ``iterations``
-    times fails too (GMapping's optimize: iterations + 1 step sizes). The move is made again as
-    ``climb_moves`` made it, so the pose is the scored one bit for bit. With ``climb_moves``: two launches a
-    round (moves, scores, sums and the update were four before)."""
+def climb_candidates_kernel(pose: wp.array(dtype=wp.vec3), steps: wp.array(dtype=wp.vec3),
+                            cand: wp.array2d(dtype=wp.vec3)):
+    p, m = wp.tid()
+    cand[p, m] = pose[p] + wp.cw_mul(move(m), steps[p])
+
+
+@wp.kernel
+def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype=wp.float32),
+                        pose: wp.array(dtype=wp.vec3), best: wp.array(dtype=wp.float32),
+                        steps: wp.array(dtype=wp.vec3), halvings: wp.array(dtype=wp.int32),
+                        active: wp.array(dtype=wp.int32), iterations: int):
+    """Take the best move if it raises the score, else halve the steps; a particle is done when a round at
+    the steps halved ``iterations`` times fails too (GMapping's optimize: iterations + 1 step sizes)."""
     p = wp.tid()
     if active[p] == 0:
         return
     k = int(0)
-    top = float(0.0)
-    for m in range(6):
-        s = float(0.0)
-        for j in range(part_score.shape[2]):
-            s += part_score[p, m, j]
-        if m == 0 or s > top:
-            top = s
+    for m in range(1, 6):
+        if score[p, m] > score[p, k]:
             k = m
-    if top > best[p]:
-        pose[p] = pose[p] + wp.cw_mul(move(k), steps[p])
-        best[p] = top
+    if score[p, k] > best[p]:
+        pose[p] = cand[p, k]
+        best[p] = score[p, k]
     elif halvings[p] >= iterations:
         active[p] = 0
     else:
@@ -580,7 +563,7 @@ class Scorer:
         self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
         self._pool = None
         self._partials, self._beam_cs = {}, None
-        self.kernel, self.climb_kernel, self.climb_moves_kernel = make_score_kernel(
+        self.kernel, self.climb_kernel = make_score_kernel(
             int(kernel_size), float(fullness), float(sigma), float(lsigma), float(null_likelihood), float(free_delta_m),
             int(lskip) + 1, self.per_thread, bool(free_check))
 
@@ -607,17 +590,6 @@ class Scorer:
 
         self._run_blocks(run, P)
         wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)
-
-    def climb_moves(self, maps: ParticleMaps, pose: wp.array, steps: wp.array, active: wp.array, T_base_laser,
-                    ranges: wp.array, angles: wp.array) -> wp.array:
-        """The scoring half of one hill-climbing round launched over particles x 6 moves x beam blocks (the GPU's
-        way, RBPF.match): fills and returns the score partials [P, 6, J] that ``climb_take_kernel`` sums."""
-        P, B = pose.shape[0], ranges.shape[0]
-        part_s, _ = self.reserve(P, 6, B)
-        wp.launch(self.climb_moves_kernel, (P, 6, part_s.shape[2]),
-                  [pose, steps, active, wp.vec3(*map(float, T_base_laser)), ranges, self._beam_directions(angles),
-                   self.usable, maps.origin, maps.res, maps.cells, part_s], device=self.device)
-        return part_s
 
     def climb(self, maps: ParticleMaps, start: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
               first_steps, iterations: int, max_rounds: int, pose: wp.array, best: wp.array,

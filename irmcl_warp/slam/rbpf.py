@@ -36,7 +36,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, relative, relative_one, wrap_angle, wrap_angle_one
 from kernels import SLAM, pick_device
-from kernels.slam import ParticleMaps, climb_take_kernel
+from kernels.slam import ParticleMaps, climb_candidates_kernel, climb_update_kernel
 
 
 def low_variance_parents(w: np.ndarray, offset: float) -> np.ndarray:
@@ -266,11 +266,10 @@ class RBPF:
         Twin: irmcl_warp/reference/slam.py ``hill_climb``.
 
         Two ways to run it, the same poses bit for bit (tests/test_slam.py):
-        * on a GPU (``rounds_launched``, the default there), round by round: each round scores the 6 moves of
-          the current steps for all particles x moves x beams (one launch, ``Scorer.climb_moves``) and takes
-          the best move if it raises the score, else halves the steps (one launch, ``climb_take_kernel``);
-          the host looks at the active flags every ``check_every`` rounds only (first after FIRST_LOOK), and
-          the rounds are one CUDA graph;
+        * on a GPU (``rounds_launched``, the default there), round by round: each round builds the 6 moves
+          of the current steps (one launch), scores all particles x moves x beams (one launch) and takes
+          the best move if it raises the score, else halves the steps (one launch); the host looks at the
+          active flags every ``check_every`` rounds only, and the rounds are one CUDA graph;
         * on the CPU (the default there), each particle's whole climb in one thread (Scorer.climb): no
           launch per round, no particle waiting for the slowest one. Rounds = the most any particle took."""
         d, P = self.device, self.P
@@ -310,13 +309,14 @@ class RBPF:
         wp.copy(cand1.flatten(), st["pose"])
         self.scorer(self.maps, cand1, self.T_base_laser, self.ranges, self.angles, score1, loglik1)
         wp.copy(st["best"], score1.flatten())
+        cand, score, loglik = self._buf(6)
 
         def rounds_block():
             for _ in range(check_every):
-                part = self.scorer.climb_moves(self.maps, st["pose"], st["steps"], st["active"], self.T_base_laser,
-                                               self.ranges, self.angles)
-                wp.launch(climb_take_kernel, P, [part, st["pose"], st["best"], st["steps"], st["halvings"],
-                                                 st["active"], int(c.iterations)], device=d)
+                wp.launch(climb_candidates_kernel, (P, 6), [st["pose"], st["steps"], cand], device=d)
+                self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik, st["active"])
+                wp.launch(climb_update_kernel, P, [cand, score, st["pose"], st["best"], st["steps"], st["halvings"],
+                                                   st["active"], int(c.iterations)], device=d)
 
         self.scorer.reserve(P, 6, self.ranges.shape[0])  # no allocation inside the captured block
         if self._graph is None and wp.get_device(d).is_cuda:
