@@ -105,3 +105,67 @@ def test_gfs_path_is_read_from_gfs2logs_odom_lines(tmp_path):
         ref.read_gfs_path(f)
     assert reference_variant({"tool": "gfs_nogui", "settings": {}, "gfs_flags": []}) == "gfs"
     assert reference_variant({"settings": {}}) == ""
+
+
+FAKE_GFS = """#!{python}
+import sys
+args = dict(zip(sys.argv[1::2], sys.argv[2::2]))
+assert args["-randseed"] == "5" and open(args["-filename"]).readline().startswith("FLASER"), args
+open(args["-outfilename"], "w").write("stand-in\\n")
+open("rawpath.dat", "w").write("x\\n")
+print("DONE!")
+"""
+FAKE_GFS2LOG = """#!{python}
+import sys
+import numpy as np
+truth = np.loadtxt({truth!r})
+stamps = np.loadtxt({stamps!r})
+with open(sys.argv[2], "w") as out:
+    out.write("ODOM 0 0 0 0 0 0 0.000000 pippo 0\\n")
+    for t, (x, y, a) in zip(stamps{cut}, truth):
+        out.write(f"ODOM {{x:.6f}} {{y:.6f}} {{a:.6f}} 0 0 0 {{t:.6f}} pippo {{t:.6f}}\\n")
+        out.write("NEFF 20.0 0 pippo 0\\n")
+"""
+
+
+def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_path, monkeypatch):
+    """--gfs plumbing with stand-ins for gfs_nogui and gfs2log: the tool reads the plain-text log in its own
+    folder, seeded with seed + 1; the best path comes back from gfs2log's ODOM lines and is scored on the
+    relations like our runs; its scratch files are removed. A path that misses scans of the log is an error
+    naming the file, not a partial score."""
+    import gzip
+
+    log, _ = simulate(OmegaConf.structured(SimConfig(duration_s=12.0, num_beams=16, width_m=12, height_m=8)), "cpu")
+    k = np.arange(0, len(log) - 4, 2)
+    rel_file = tmp_path / "sim.relations"
+    motion = relative(log.ground_truth[k], log.ground_truth[k + 4])
+    rel_file.write_text("".join(f"{log.stamps[a]:.6f} {log.stamps[a + 4]:.6f} {m[0]:.6f} {m[1]:.6f} 0 0 0 {m[2]:.6f}\n"
+                                for a, m in zip(k, motion)))
+    clf = tmp_path / "sim.clf.gz"
+    clf.write_bytes(gzip.compress(b"FLASER 16 " + b"1.0 " * 16 + b"0 0 0 0 0 0 1.0 host 1.0\n"))
+    np.savetxt(tmp_path / "truth.txt", log.ground_truth, fmt="%.9f")
+    np.savetxt(tmp_path / "stamps.txt", log.stamps, fmt="%.6f")
+    for name, text in (("gfs_nogui", FAKE_GFS.format(python=sys.executable)),
+                       ("gfs2log", FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
+                                                       stamps=str(tmp_path / "stamps.txt"), cut=""))):
+        (tmp_path / name).write_text(text)
+        (tmp_path / name).chmod(0o755)
+    (tmp_path / "COMMIT").write_text("fake 0\n")
+    monkeypatch.setattr(ref, "GFS", tmp_path / "gfs_nogui")
+    monkeypatch.setattr(ref, "GFS2LOG", tmp_path / "gfs2log")
+    monkeypatch.setattr(ref, "BINARY", tmp_path / "gmapping_replay")
+    cfg = OmegaConf.create({"data": {"name": "sim", "format": "carmen", "path": str(clf),
+                                     "relations_path": str(rel_file), "relation_stamps_path": None}})
+    out = tmp_path / "runs"
+    m = ref.run_gfs_seed(cfg, log, 4, out)
+    assert m["run"] == "gfs-30p-seed4" and m["randseed"] == 5 and m["tool"] == "gfs_nogui"
+    assert m["processed_scans"] == len(log) and m["relations"]["trans_abs_mean_m"] < 1e-4  # the true path back
+    assert not list((out / "reference-gmapping-gfs-30p-seed4").glob("*.dat"))  # scratch removed
+    assert not (out / "reference-gmapping-gfs-30p-seed4" / "log.clf").exists()
+    # a path that misses the last scans: an error naming gfs2log's file (a finished run is kept, not run again)
+    (tmp_path / "gfs2log").write_text(FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
+                                                         stamps=str(tmp_path / "stamps.txt"), cut="[:-3]"))
+    assert ref.run_gfs_seed(cfg, log, 4, out) == m
+    (out / "reference-gmapping-gfs-30p-seed4" / "metrics.json").unlink()
+    with pytest.raises(RuntimeError, match="best.log: poses at"):
+        ref.run_gfs_seed(cfg, log, 4, out)
