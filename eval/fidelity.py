@@ -673,11 +673,13 @@ and its match is set against the released one:
 {trace_table()}
 
 {trace_findings()}
-- **How the data README's 9/10 was made is still open in part.** That README reports 9/10 for the released code on
-  fr079.revfix. Fed the wrapper's way, the released code converges far less often here (table). `gfs_nogui` cannot read
-  the derived `.clf` as shipped: it has no PARAM lines, so the CARMEN reader creates no FLASER sensor and skips
-  every scan. With `robot_use_laser on`, that reader would place 360 beams at ±0.5° ... ±90°: no centre beam, a
-  1° gap, maximum range 50 m.
+- **How the data README's 9/10 was made is still open.** That README reports 9/10 at 0.080 m (68 s a run) for the
+  released code on fr079.revfix. None of the three ways run here reaches it (the table above): the wrapper's way,
+  the laser at the base, and the released code's own CARMEN tool at its defaults. The tool took 150-256 s a run
+  here. A note of the tenth session said that `gfs_nogui` cannot read the derived `.clf` (no PARAM lines); it can:
+  its CARMEN reader takes the laser's beam count from the FLASER lines and switches the laser on itself
+  (`log/carmenconfiguration.cpp`), and it processed 590 of the 4934 scans, with 360 beams at ±0.5° ... ±90° (no
+  centre beam, a 1° gap), the beams' own 50 m unused by the matcher, whose range is the tool's maxrange (80 m).
 """
 
 
