@@ -1,8 +1,11 @@
 """``python -m eval.keep [--results results] RUN_DIR...``: keep finished runs in the repository, compactly.
 
 ``results/<group>/<exp>.json`` holds, per experiment, every kept run of one stage group (``nof``: train and
-synthesis, ``mcl``, ``slam``, ``globloc``, ``pipeline``) as ``{"runs": {folder: {"config": {...}, "metrics":
-{...}}}}``: the config sections the stage reads (its resolved ``config.yaml``) and its ``metrics.json``.
+synthesis, ``mcl``, ``slam``, ``globloc``, ``pipeline``) as ``{"exp": ..., "runs": {folder: {"config": {...},
+"metrics": {...}}}}``: the config sections the stage reads (its resolved ``config.yaml``) and its
+``metrics.json``. An experiment whose runs pass MAX_FILE_BYTES goes on in ``<exp>.2.json``, ``<exp>.3.json``
+(the same header, the next runs in folder order), so no file grows past what a repository should hold;
+``load_kept`` reads them back as one.
 That is all the tables, claims and plots read (eval/collect.py); trajectories, manifests and N_eff traces
 stay in ``outputs/``. Files a document shows are kept beside the JSON: the map of a SLAM run
 (``results/slam/maps/<exp>/<folder>.png``) when asked (``--maps``), the pipeline's report and figures
@@ -32,8 +35,29 @@ GROUPS = {"train": "nof", "synthesis": "nof", "localize": "mcl", "slam": "slam",
 PROTOCOL = ("mode", "tracking_std", "num_starts", "run_s", "kidnap_at_s", "reduce_after_s")  # mcl -> localize
 
 
+MAX_FILE_BYTES = 800_000  # one results file at most (the repository keeps no file over 1 MB)
+
+
 def stage_of(folder: str) -> str:
     return folder.split("-")[0]
+
+
+def kept_files(group_dir: Path, exp: str) -> list[Path]:
+    """The files holding ``exp``'s kept runs in results/<group>/: <exp>.json, then <exp>.2.json, ... in order."""
+    more = [f for f in group_dir.glob(f"{exp}.*.json") if f.stem.rsplit(".", 1)[1].isdigit()]
+    first = [group_dir / f"{exp}.json"] if (group_dir / f"{exp}.json").is_file() else []
+    return first + sorted(more, key=lambda f: int(f.stem.rsplit(".", 1)[1]))
+
+
+def load_kept(group_dir: Path, exp: str) -> dict | None:
+    """``exp``'s kept runs in results/<group>/ as one document (its files merged), or None when none is kept."""
+    files = kept_files(group_dir, exp)
+    if not files:
+        return None
+    doc = json.loads(files[0].read_text())
+    for f in files[1:]:
+        doc["runs"].update(json.loads(f.read_text())["runs"])
+    return doc
 
 
 def migrate(config: dict, metrics: dict, stage: str) -> tuple[dict, dict]:
@@ -92,7 +116,7 @@ def keep(runs: list[Path], results: Path, maps: bool = False) -> list[Path]:
         exp = run.parent.name
         path = results / group / f"{exp}.json"
         if path not in by_file:
-            by_file[path] = json.loads(path.read_text()) if path.is_file() else {"group": group, "exp": exp, "runs": {}}
+            by_file[path] = load_kept(results / group, exp) or {"group": group, "exp": exp, "runs": {}}
         pair = run.parent / ("train-" + run.name.split("-", 1)[1]) if stage_of(run.name) == "synthesis" else None
         by_file[path]["runs"][run.name] = read_run(run, pair)
         if group == "slam" and maps and (run / "map.png").is_file():
@@ -108,12 +132,27 @@ def keep(runs: list[Path], results: Path, maps: bool = False) -> list[Path]:
     return sorted(by_file)
 
 
-def write_kept(path: Path, doc: dict) -> None:
-    """One results file: its header, then one compact line per run (small, and a diff names the runs)."""
-    runs = dict(sorted(doc["runs"].items()))
-    lines = [f" {json.dumps(k)}: {json.dumps(v, sort_keys=True, separators=(',', ':'))}" for k, v in runs.items()]
-    head = json.dumps({k: v for k, v in doc.items() if k != "runs"}, sort_keys=True)[:-1]
-    atomic_write_bytes(path, (head + ', "runs": {\n' + ",\n".join(lines) + "\n}}\n").encode())
+def write_kept(path: Path, doc: dict, max_bytes: int = MAX_FILE_BYTES) -> None:
+    """An experiment's results file ``path`` (<exp>.json): its header, then one compact line per run (small, and a
+    diff names the runs), in folder order; the runs that would take it past ``max_bytes`` go on in <exp>.2.json
+    and so on, each with the same header. Files of a longer split that are no longer needed are removed."""
+    head = json.dumps({k: v for k, v in doc.items() if k != "runs"}, sort_keys=True)[:-1] + ', "runs": {\n'
+    tail = "\n}}\n"
+    shards, lines, size = [], [], len(head) + len(tail)
+    for k, v in sorted(doc["runs"].items()):
+        line = f" {json.dumps(k)}: {json.dumps(v, sort_keys=True, separators=(',', ':'))}"
+        if lines and size + len(line) + 2 > max_bytes:
+            shards.append(lines)
+            lines, size = [], len(head) + len(tail)
+        lines.append(line)
+        size += len(line) + 2
+    shards.append(lines)
+    exp = path.name.removesuffix(".json")
+    for i, part in enumerate(shards):
+        atomic_write_bytes(path if i == 0 else path.with_name(f"{exp}.{i + 1}.json"),
+                           (head + ",\n".join(part) + tail).encode())
+    for stale in kept_files(path.parent, exp)[len(shards):]:
+        stale.unlink()
 
 
 def main(argv=None) -> None:

@@ -23,7 +23,6 @@ take days. The commands of every kept figure are in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
-import json
 import itertools
 import subprocess
 import sys
@@ -32,6 +31,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+from eval.keep import load_kept
 from irmcl_warp.config import register
 from irmcl_warp.globloc.run import scenario_folder
 from irmcl_warp.mcl.stage import run_folder as localize_folder
@@ -136,9 +136,9 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
     if done:
         return "done", str(outputs / rel)
     exp, name = rel.split("/", 1)
-    kept = results / KEPT[sweep.module] / f"{exp}.json"
-    if not rerun_kept and kept.is_file() and name in json.loads(kept.read_text())["runs"]:
-        return "kept", f"{kept} [{name}]"
+    doc = load_kept(results / KEPT[sweep.module], exp)
+    if not rerun_kept and doc is not None and name in doc["runs"]:
+        return "kept", f"{results / KEPT[sweep.module] / exp}.json [{name}]"
     return "missing", why
 
 

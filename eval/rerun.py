@@ -10,11 +10,11 @@ not a silent new variant).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from eval.keep import load_kept
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.cli import guard
 from irmcl_warp.slam.stage import run_tag
@@ -48,16 +48,15 @@ def overrides(exp: str, config: dict, base=None) -> list[str]:
 def kept_jobs(exps=None, results: Path = REPO / "results" / "slam") -> list[list[str]]:
     """One override list per kept run of ``exps`` (every experiment kept when None), in a stable order."""
     jobs = []
-    for f in sorted(results.glob("gmapping_*.json")):
-        exp = f.stem
+    for exp in sorted({f.name.split(".")[0] for f in results.glob("gmapping_*.json")}):  # <exp>[.<k>].json
         if exps and exp not in exps:
             continue
         base = compose_config([f"+exp={exp}"])
-        for folder, run in sorted(json.loads(f.read_text())["runs"].items()):
+        for folder, run in sorted(load_kept(results, exp)["runs"].items()):
             line = overrides(exp, run["config"], base)
             cfg = compose_config(line)
             if run_tag(cfg.slam, cfg.data) != folder:
-                raise ValueError(f"{f}: kept run {folder} would run again as {run_tag(cfg.slam, cfg.data)} with {line}")
+                raise ValueError(f"{results / exp}.json: kept run {folder} would run again as {run_tag(cfg.slam, cfg.data)} with {line}")
             jobs.append(line)
     return jobs
 

@@ -48,6 +48,28 @@ def test_table_rows_come_from_files_and_later_roots_win(tmp_path):
     assert lines[3].startswith("| fr079 | test | OGM 5 cm | 0.330 |")
 
 
+
+def test_an_experiment_past_the_file_size_goes_on_in_numbered_files(tmp_path):
+    """write_kept splits an experiment's runs over <exp>.json, <exp>.2.json, ... under the size bound, in folder
+    order; load_kept and the tables read them as one; a shorter set removes the files no longer needed."""
+    from eval.collect import collect
+    from eval.keep import kept_files, load_kept, write_kept
+
+    group = tmp_path / "results" / "nof"
+    group.mkdir(parents=True)
+    runs = {f"synthesis-s{i:02d}": {"config": NOF_CONFIG, "metrics": _synthesis(0.3 + i / 1000, 0.33)} for i in range(12)}
+    doc = {"group": "nof", "exp": "fr079", "runs": runs}
+    one = len(json.dumps(runs["synthesis-s00"], sort_keys=True, separators=(",", ":")))
+    write_kept(group / "fr079.json", doc, max_bytes=4 * one)
+    files = kept_files(group, "fr079")
+    assert [f.name for f in files[:3]] == ["fr079.json", "fr079.2.json", "fr079.3.json"] and len(files) >= 4
+    assert all(f.stat().st_size <= 4 * one for f in files)
+    assert load_kept(group, "fr079") == doc
+    assert list(json.loads(files[1].read_text())["runs"])[0] > list(json.loads(files[0].read_text())["runs"])[-1]
+    assert len(collect("nof", ("synthesis",), results=tmp_path / "results", outputs=None)) == 12
+    write_kept(group / "fr079.json", {**doc, "runs": dict(list(runs.items())[:2])}, max_bytes=4 * one)
+    assert kept_files(group, "fr079") == [group / "fr079.json"] and not (group / "fr079.2.json").exists()
+
 def test_replace_block_keeps_the_rest_and_needs_markers():
     text = "intro\n<!-- table:nof -->\nold\n<!-- /table:nof -->\noutro\n"
     assert replace_block(text, "nof", "new") == "intro\n<!-- table:nof -->\nnew\n<!-- /table:nof -->\noutro\n"
