@@ -105,7 +105,7 @@ def reference_variant(m: dict) -> str:
     """The driver settings of a released-code run that differ from the ROS wrapper's defaults, then the
     overrides of the log's data config it ran with (``--data``); ``gfs`` for a run of the released code's
     own CARMEN-log tool (``--gfs``: its defaults, not the wrapper's)."""
-    return ", ".join([*(["gfs"] if m.get("tool") == "gfs_nogui" else []), *m.get("gfs_flags", []),
+    return ", ".join([*(["gfs"] if m.get("tool") == "gfs_nogui" else []),
                       *(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS),
                       *m.get("data_overrides", [])])
 

@@ -103,7 +103,7 @@ def test_gfs_path_is_read_from_gfs2logs_odom_lines(tmp_path):
     f.write_text("ODOM 1.0 2.0 0.5 0 0 0 10.25 pippo 10.25\nODOM 1.0 x 0.5\n")
     with pytest.raises(ValueError, match="best.log, line 2"):
         ref.read_gfs_path(f)
-    assert reference_variant({"tool": "gfs_nogui", "settings": {}, "gfs_flags": []}) == "gfs"
+    assert reference_variant({"tool": "gfs_nogui", "settings": {}}) == "gfs"
     assert reference_variant({"settings": {}}) == ""
 
 
@@ -157,15 +157,19 @@ def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_
     cfg = OmegaConf.create({"data": {"name": "sim", "format": "carmen", "path": str(clf),
                                      "relations_path": str(rel_file), "relation_stamps_path": None}})
     out = tmp_path / "runs"
-    m = ref.run_gfs_seed(cfg, log, 4, out)
+    out.mkdir()
+    plain = ref.gfs_log(cfg, out)  # the log in plain text, once for every seed
+    assert plain.read_bytes() == gzip.decompress(clf.read_bytes())
+    m = ref.run_gfs_seed(cfg, log, plain, 4, out)
     assert m["run"] == "gfs-30p-seed4" and m["randseed"] == 5 and m["tool"] == "gfs_nogui"
     assert m["processed_scans"] == len(log) and m["relations"]["trans_abs_mean_m"] < 1e-4  # the true path back
     assert not list((out / "reference-gmapping-gfs-30p-seed4").glob("*.dat"))  # scratch removed
-    assert not (out / "reference-gmapping-gfs-30p-seed4" / "log.clf").exists()
     # a path that misses the last scans: an error naming gfs2log's file (a finished run is kept, not run again)
     (tmp_path / "gfs2log").write_text(FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
                                                          stamps=str(tmp_path / "stamps.txt"), cut="[:-3]"))
-    assert ref.run_gfs_seed(cfg, log, 4, out) == m
+    assert ref.run_gfs_seed(cfg, log, plain, 4, out) == m
     (out / "reference-gmapping-gfs-30p-seed4" / "metrics.json").unlink()
     with pytest.raises(RuntimeError, match="best.log: poses at"):
-        ref.run_gfs_seed(cfg, log, 4, out)
+        ref.run_gfs_seed(cfg, log, plain, 4, out)
+    with pytest.raises(ValueError, match="gfs_nogui reads CARMEN logs"):
+        ref.gfs_log(OmegaConf.create({"data": {"name": "sim", "format": "sim"}}), out)

@@ -155,31 +155,41 @@ def read_gfs_path(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return stamps, np.array([poses[t] for t in stamps])
 
 
-def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
-    """The released code's own CARMEN-log tool, gfs_nogui, on the data config's CARMEN log with its defaults
-    (``extra``: more of its -flags), seeded with seed + 1; the best particle's path through gfs2log, scored
-    like our runs. Its defaults differ from the ROS wrapper's (rotational noise srt = stt = 0.1 instead of
-    0.2, a scan also processed 5 s after the last one, maxrange 80 m), and its reader gives FLASER beams
-    its own angles (irmcl_warp.io.carmen.gfs_flaser_angles) and puts the laser at the FLASER pose."""
+def gfs_log(cfg, out_root: Path) -> Path:
+    """The data config's CARMEN log as plain text (gfs_nogui reads no gzip), written once for all seeds."""
     if cfg.data.format != "carmen":
         raise ValueError(f"data={cfg.data.name}: gfs_nogui reads CARMEN logs; this one is {cfg.data.format}")
+    src, plain = resolve(cfg.data.path), out_root / "reference-gmapping-gfs-log.clf"
+    if str(src).endswith(".gz"):
+        with gzip.open(src) as f:
+            atomic_write_bytes(plain, f.read())
+    else:
+        atomic_write_bytes(plain, src.read_bytes())
+    return plain
+
+
+GFS_PARTICLES = 30  # gfs_nogui's default
+
+
+def run_gfs_seed(cfg, log, clf: Path, seed: int, out_root: Path) -> dict:
+    """The released code's own CARMEN-log tool, gfs_nogui, on ``clf`` (gfs_log) with its defaults, seeded with
+    seed + 1; the best particle's path through gfs2log, scored like our runs. Its defaults differ from the ROS
+    wrapper's (rotational noise srt = stt = 0.1 instead of 0.2, a scan also processed 5 s after the last one,
+    maxrange 80 m), and its reader gives FLASER beams its own angles (irmcl_warp.io.carmen.gfs_flaser_angles)
+    and puts the laser at the FLASER pose."""
     for exe in (GFS, GFS2LOG):
         if not exe.is_file():
             raise FileNotFoundError(f"{exe}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
-    flags = list(extra)
-    out = out_root / f"reference-gmapping-gfs-30p{'-' + data_tag([f.lstrip('-') for f in flags]) if flags else ''}-seed{seed}"
-    out.mkdir(parents=True, exist_ok=True)
+    out = out_root / f"reference-gmapping-gfs-{GFS_PARTICLES}p-seed{seed}"
+    out.mkdir(parents=True, exist_ok=True)  # gfs_nogui writes rawpath.dat and w-*.dat into its working folder
     done = out / "metrics.json"
     if done.is_file():
         m = json.loads(done.read_text())
-        if m.get("gfs_flags") == flags and m.get("randseed") == seed + 1:
+        if m.get("tool") == "gfs_nogui" and m.get("randseed") == seed + 1:
             return m
-    clf = out / "log.clf"  # gfs_nogui reads plain text; it writes rawpath.dat and w-*.dat into its folder
-    src = resolve(cfg.data.path)
-    clf.write_bytes(gzip.open(src).read() if str(src).endswith(".gz") else src.read_bytes())
     t0 = time.perf_counter()
-    ran = subprocess.run([str(GFS), "-filename", "log.clf", "-outfilename", "run.gfs", "-randseed", str(seed + 1),
-                          *flags], cwd=out, capture_output=True, text=True)
+    ran = subprocess.run([str(GFS), "-filename", str(clf.resolve()), "-outfilename", "run.gfs", "-randseed",
+                          str(seed + 1)], cwd=out, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if ran.returncode != 0 or "DONE!" not in ran.stdout:
         raise RuntimeError(f"gfs_nogui seed {seed} failed ({ran.returncode}): {ran.stderr[-1000:]}")
@@ -187,7 +197,7 @@ def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
     stamps, poses = read_gfs_path(out / "best.log")
     idx = match_stamps(log.stamps, stamps, 1e-5)
     if (idx < 0).any():
-        raise RuntimeError(f"{out / 'best.log'}: {int((idx < 0).sum())} stamps match no scan of {src}")
+        raise RuntimeError(f"{out / 'best.log'}: {int((idx < 0).sum())} stamps match no scan of {cfg.data.path}")
     if len(np.unique(idx)) != len(log):
         raise RuntimeError(f"{out / 'best.log'}: poses at {len(np.unique(idx))} of the log's {len(log)} scans")
     every = np.empty((len(log), 3))
@@ -197,15 +207,15 @@ def run_gfs_seed(cfg, log, seed: int, out_root: Path, extra=()) -> dict:
     rel = read_relations(resolve(cfg.data.relations_path))
     metrics = {"dataset": cfg.data.name, "implementation": "released GMapping (openslam_gmapping "
                f"{(BINARY.parent / 'COMMIT').read_text().split()[0]}), its gfs_nogui on the CARMEN log",
-               "tool": "gfs_nogui", "particles": 30, "seed": seed, "randseed": seed + 1, "gfs_flags": flags,
+               "tool": "gfs_nogui", "particles": GFS_PARTICLES, "seed": seed, "randseed": seed + 1,
                "scans": len(log), "processed_scans": len(neff), "wall_time_s": wall,
                "host": f"{os.cpu_count()}-core CPU",
-               "resamplings_upper_bound": int(sum(v < 15 for v in neff)),
+               "resamplings_upper_bound": int(sum(v < 0.5 * GFS_PARTICLES for v in neff)),
                "settings": {}, "data_overrides": [],
                "relations_frame": {"frame": "laser", "T_base_laser": [0.0, 0.0, 0.0]},
                "relations": relations_error(relation_stamps(cfg, log), every, rel)}
     metrics["run"] = out.name.removeprefix("reference-gmapping-")
-    for junk in [clf, out / "run.gfs", out / "rawpath.dat", *out.glob("w-*.dat")]:
+    for junk in [out / "run.gfs", out / "rawpath.dat", *out.glob("w-*.dat")]:
         junk.unlink(missing_ok=True)  # 10-20 MB a run; best.log keeps the path
     write_json(done, metrics)
     return metrics
@@ -557,8 +567,9 @@ def main(argv=None):
     if a.gfs:
         if a.data or a.set:
             raise ValueError("--gfs runs the released tool at its own defaults on the log as it is: no --data or --set")
+        clf = gfs_log(cfg, out_root)
         with ThreadPoolExecutor(a.jobs) as pool:
-            runs = list(pool.map(lambda s: run_gfs_seed(cfg, log, s, out_root), seeds_of(a.seeds)))
+            runs = list(pool.map(lambda s: run_gfs_seed(cfg, log, clf, s, out_root), seeds_of(a.seeds)))
         print(f"released GMapping's gfs_nogui on {exp} ({len(log)} scans, 30 particles, its defaults)")
     else:
         params = wrapper_params(cfg, log, a.set)

@@ -111,8 +111,6 @@ class RBPF:
         self.pending = []  # odometry steps not yet applied to the particles
         self.path_m = self.turn_rad = 0.0  # travelled and turned since the last processed scan
         self.last_stamp = None  # stamp of the last processed scan (temporal_update)
-        # the update thresholds, read every scan
-        self._update = (float(cfg.linear_update), float(cfg.angular_update), float(cfg.temporal_update))
         self._graph = None  # CUDA graph of check_every hill-climbing rounds
 
     # --- device helpers -----------------------------------------------------------------------------
@@ -216,8 +214,8 @@ class RBPF:
         self.turn_rad += abs(wrap_angle_one(pose[2] - prev[2]))
         if delta != (0.0, 0.0, 0.0):
             self.pending.append(delta)
-        linear, angular, _ = self._update
-        if self.path_m < linear and self.turn_rad < angular and not self._time_is_up(stamp):
+        c = self.cfg
+        if self.path_m < c.linear_update and self.turn_rad < c.angular_update and not self._time_is_up(stamp):
             return StepStats(processed=False)
         odom_pose = np.array(pose)
         self.last_stamp = stamp
@@ -253,7 +251,7 @@ class RBPF:
     def _time_is_up(self, stamp: float | None) -> bool:
         """temporal_update: more than that many seconds since the last processed scan (the released code's
         ``period_``; never when it is negative)."""
-        period = self._update[2]
+        period = self.cfg.temporal_update
         if period < 0:
             return False
         if stamp is None or self.last_stamp is None:
