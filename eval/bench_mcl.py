@@ -10,6 +10,9 @@ chunks of 500 particles; irmcl_warp/reference/weighting.py) on the same device, 
 * ``+b4``: four node loads in flight per beam before compositing (``mcl.march_batch``; same result);
 * ``+beam``: GPU threads ordered by beam, then particle (``mcl.march_order``);
 * ``warp+et+skip``: nodes below p_occ 0.01 read as empty and jumped over (``mcl.empty_below``);
+* ``table``, ``table360``: ``mcl.weighting=nog_table``, the ``warp+et`` march run once from every NOG node at
+  720 (360) headings, read per beam from that table (an approximation: each row also gives the table's build
+  time and how far its ranges lie from the march's on the benchmark's particles after the steps);
 
 each with the step's launches replayed as one captured graph (``graph``, mcl.step_graph=on) and launched
 one by one (``eager``), side by side (``--step-graph`` picks one). ``DEFAULT_VARIANT`` names the one
@@ -24,6 +27,7 @@ outputs/bench/mcl-<device>.json. Absolute times count only from a GPU; on a CPU 
 from __future__ import annotations
 
 import platform
+import time
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +54,8 @@ VARIANTS = {
     "warp+et+b4+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
     "warp+et+skip": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
     "warp+et+skip+beam": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
+    "table": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=720),
+    "table360": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=360),
 }
 DEFAULT_VARIANT = next((name for name, v in VARIANTS.items()
                         if all(getattr(MCLConfig, k) == value for k, value in v.items())), None)
@@ -93,7 +99,10 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
                  profile=False, around=None) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
+    started = time.perf_counter()
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
+    _sync(device)
+    build_s = time.perf_counter() - started
     if around is None:
         pf.init_uniform()
     else:  # a converged filter: a Gaussian around the pose the scan was taken from (pose, std)
@@ -112,10 +121,26 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
         "read back": lambda: pf.weights.summary(),
     }
     part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
-    return {"method": f"{variant} {'graph' if pf.use_graph else 'eager'}", "variant": variant, "graph": pf.use_graph,
-            "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
-            "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
-            "weighting_ms": part_ms["weighting"], "parts_ms": part_ms}
+    row = {"method": f"{variant} {'graph' if pf.use_graph else 'eager'}", "variant": variant, "graph": pf.use_graph,
+           "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
+           "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
+           "weighting_ms": part_ms["weighting"], "parts_ms": part_ms, "build_s": build_s}
+    if cfg.weighting == "nog_table":
+        row["table_vs_march_m"] = table_error(pf, nog, cfg, far, device)
+    return row
+
+
+def table_error(pf, nog, cfg, far, device) -> dict:
+    """|table range - march range| over the filter's particles and beams where both see a wall: median, 90th
+    percentile, maximum (m)."""
+    march = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=pf.num_particles, num_beams=len(pf.beam_index),
+                            num_samples=cfg.num_samples, near_m=cfg.near_m, far_m=far, t_min=cfg.t_min, device=device)
+    want = march.render(pf.particles, pf.T_base_laser, pf.angles).numpy()
+    got = pf.weighting.render(pf.particles, pf.T_base_laser, pf.angles).numpy()
+    both = (want > 0) & (got > 0)
+    off = np.abs(got - want)[both]
+    return {"median": float(np.median(off)), "p90": float(np.quantile(off, 0.9)), "max": float(off.max()),
+            "rays": int(both.sum())}
 
 
 def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
@@ -183,6 +208,11 @@ def run_mcl_bench(a) -> list[dict]:
                 else "-")
         sp = f"{r['speedup_vs_torch']:.0f}" if "speedup_vs_torch" in r else "-"
         print(f"| {r['method']} | {r['particles']:,} | {step} | {r['weighting_ms']:.3f} | {sp} |")
+    for r in rows:
+        if "table_vs_march_m" in r:
+            e = r["table_vs_march_m"]
+            print(f"{r['method']} {r['particles']:,}: table built in {r['build_s']:.2f} s; |table - march| median "
+                  f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays")
     print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
         f"{k} {v:.3f}" for k, v in r["parts_ms"].items()) for r in rows if "parts_ms" in r))
     out = Path(a.out) / f"mcl-{device.split(':')[0]}.json"

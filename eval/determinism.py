@@ -23,10 +23,11 @@ from kernels import pick_device
 from kernels.motion import odometry_step
 
 
-def run(log, nog, maps, weighting: str, seed: int, graph: str, device: str):
+def run(log, nog, maps, weighting: str, seed: int, graph: str, device: str, **settings):
     """One filter run over the log: 600 particles around the first true pose, reduced to 300 halfway (a
-    reduce() reallocates what a graph was captured on). (estimates [K, 3], N_eff [K], the filter)."""
-    cfg = MCLConfig(num_particles=600, num_samples=64, seed=seed, weighting=weighting, step_graph=graph)
+    reduce() reallocates what a graph was captured on); ``settings``: more MCLConfig fields. (estimates [K, 3],
+    N_eff [K], the filter)."""
+    cfg = MCLConfig(num_particles=600, num_samples=64, seed=seed, weighting=weighting, step_graph=graph, **settings)
     pf = build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, device, maps)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
     out = []

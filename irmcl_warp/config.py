@@ -147,7 +147,7 @@ class TrainConfig:
 @dataclass
 class MCLConfig:
     """Monte Carlo localization; IR-MCL's values (Kuang et al. 2023, Sec. IV and their configs) cited."""
-    weighting: str = "nog_raymarch"  # nog_raymarch | likelihood_field | beam_model
+    weighting: str = "nog_raymarch"  # nog_raymarch | nog_table (the march read from a range table) | nof_direct | likelihood_field | beam_model
     num_particles: int = 100_000  # IR-MCL global localization
     num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
     beam_pick: str = "spread"  # spread (the paper: first to last beam) | stride (the authors' code: every (n // num_beams)-th from the first)
@@ -157,6 +157,7 @@ class MCLConfig:
     empty_below: float = 0.0  # NOG nodes below this p_occ read as 0 and are jumped over (0 = authors')
     march_batch: int = 1  # NOG nodes loaded together per beam before compositing (1 = one at a time; same result)
     march_order: str = "beam"  # GPU threads by beam then particle (beam: 1.6x faster on an H100) | particle
+    table_angles: int = 720  # nog_table: headings per NOG node in its range table (720: 0.5 deg apart)
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
     motion: str = "odometry"  # odometry (Thrun / AMCL, noise mcl.alphas) | irmcl (IR-MCL's code, noise mcl.motion_noise)
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
@@ -340,7 +341,7 @@ CHOICES = {
     "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
     "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"),
     "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),
-    "mcl.weighting": ("nog_raymarch", "nof_direct", "likelihood_field", "beam_model"),
+    "mcl.weighting": ("nog_raymarch", "nog_table", "nof_direct", "likelihood_field", "beam_model"),
     "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.beam_pick": ("spread", "stride"),
     "mcl.resample": ("low_variance", "multinomial"),
     "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
@@ -365,7 +366,7 @@ RANGES = {
     "train.grid_resolution_m": ("> 0", None), "train.grid_threshold": (0, 1), "train.grid_decay": (0, 1),
     "train.grid_every": (1, None), "train.grid_dilate": (0, None), "train.grid_t_min": (0, 1),
     "mcl.num_particles": (1, None), "mcl.num_beams": (1, None), "mcl.num_samples": (2, None), "mcl.near_m": (0, None),
-    "mcl.t_min": (0, 1), "mcl.empty_below": (0, 1), "mcl.sigma_m": ("> 0", None), "mcl.estimate_share": ("> 0", 1),
+    "mcl.t_min": (0, 1), "mcl.empty_below": (0, 1), "mcl.table_angles": (4, None), "mcl.sigma_m": ("> 0", None), "mcl.estimate_share": ("> 0", 1),
     "mcl.cluster_cell_m": ("> 0", None), "mcl.cluster_yaw_bins": (1, None), "mcl.reduce_to": (0, None),
     "mcl.update_min_trans_m": (0, None), "mcl.update_min_rot_rad": (0, None), "mcl.resample_threshold": (0, 1),
     "mcl.map_resolution_m": ("> 0", None), "mcl.recovery_alpha_slow": (0, 1), "mcl.recovery_alpha_fast": (0, 1),

@@ -39,13 +39,13 @@ def _world_and_map(duration_s=30.0, res=0.1, extra=()):
 
 def _filter(nog, cfg, log, weighting=None):
     """The filter on the stand-in NOG (its zero nodes: free space), weighted by ``weighting`` when given,
-    else by IR-MCL's nog_raymarch on the NOG; 10 m far bound."""
+    else by the NOG weighting ``cfg`` names (IR-MCL's nog_raymarch by default); 10 m far bound."""
     if weighting is None:
         return build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, WeightingMaps(nog=nog))
     return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, DEVICE)
 
 
-@pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
+@pytest.mark.parametrize("weighting", ["nog_raymarch", "nog_table", "likelihood_field"])
 def test_pose_tracking_stays_within_a_bound(weighting):
     from kernels import WEIGHTING
 
@@ -55,7 +55,8 @@ def test_pose_tracking_stays_within_a_bound(weighting):
         corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
         lf = WEIGHTING.build("likelihood_field", occupancy=nog.walls, origin_xy=corner,
                              resolution_m=nog.resolution_m, max_range_m=20.0, device=DEVICE)
-    pf = _filter(nog, MCLConfig(num_particles=1000, num_samples=128, seed=3), log, lf)
+    table = dict(weighting="nog_table", table_angles=120) if weighting == "nog_table" else {}
+    pf = _filter(nog, MCLConfig(num_particles=1000, num_samples=128, seed=3, **table), log, lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
     errors, neffs = [], []
     for k in range(1, len(log)):
@@ -255,7 +256,7 @@ def test_reduce_keeps_the_heaviest_particles_and_their_weights():
     assert pf.num_particles == 400
 
 
-@pytest.mark.parametrize("weighting", ["nog_raymarch", "likelihood_field"])
+@pytest.mark.parametrize("weighting", ["nog_raymarch", "nog_table", "likelihood_field"])
 def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rng):
     """mcl.step_graph=on (one captured graph per step; Warp's CPU graph here, a CUDA graph on a GPU) against
     off: the same estimates, N_eff and particles bit for bit, through selective resampling (both ways) and a
@@ -267,10 +268,13 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
     maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
     seed = int(rng.integers(1 << 16))
     runs = {}
+    table = dict(table_angles=48) if weighting == "nog_table" else {}
     for mode in ("off", "on"):
-        poses, neffs, pf = run(log, nog, maps, weighting, seed, mode, DEVICE)  # the run eval.determinism repeats
+        poses, neffs, pf = run(log, nog, maps, weighting, seed, mode, DEVICE, **table)  # the run eval.determinism repeats
         assert pf.use_graph == (mode == "on") and len(pf.graphs) == (2 if mode == "on" else 0)
         runs[mode] = (poses, neffs, pf.particles.numpy())
+        if weighting == "nog_table":  # built once: the second run and every reduce() read the first table
+            assert list(maps.built.values()) == [pf.weighting.table]
     neffs = runs["off"][1]
     assert (neffs < 0.5 * 600).any() and (neffs >= 0.5 * 300).any(), "both resampling decisions taken"
     # no float atomics in a step (sums in a fixed order, PartialSums): bit for bit on a GPU as on the CPU

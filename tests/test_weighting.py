@@ -244,3 +244,76 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     lw = wp.zeros(2, dtype=wp.float32, device=DEVICE)
     wall(two, (0, 0, 0), wp.zeros(1, dtype=wp.float32, device=DEVICE), wp.array([2.0], dtype=wp.float32, device=DEVICE), lw)
     assert lw.numpy()[0] > -0.01 > lw.numpy()[1]  # 2 m before the wall: right; 1 m before: 1 m off
+
+
+@pytest.mark.parametrize("kind, t_min, empty_below", [("noise", 0.0, 0.0), ("rooms", 1e-3, 0.0), ("rooms", 1e-3, 0.01)])
+def test_range_table_matches_numpy_twin(rng, kind, t_min, empty_below):
+    """nog_table: the table built by the march on the device against the twin's march from every node, and
+    the reads (nearest node, two headings, the move along the beam) against the twin on the same table."""
+    from irmcl_warp.reference.weighting import nog_table_build, nog_table_ranges
+
+    occ = _random_nog_grid(rng, kind)[:30, :45]
+    nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
+    P, B, A, far = 70, 12, int(rng.integers(16, 40)), 8.0
+    w = WEIGHTING.build("nog_table", nog=nog, num_particles=P, num_beams=B, num_angles=A, num_samples=64,
+                        near_m=0.02, far_m=far, t_min=t_min, empty_below=empty_below, device=DEVICE)
+    table = w.table.numpy()
+    twin = nog_table_build(occ, nog.origin_xy, nog.resolution_m, A, 64, 0.02, far, t_min, empty_below)
+    off = np.abs(table.astype(int) - twin.astype(int))
+    assert (off <= 1).mean() > 0.99, f"seed {rng.seed}: {(off <= 1).mean():.4f} of entries within a quantum"
+    assert (twin > 0).mean() > 0.3  # walls to hit
+    # particles partly off the grid (they read its edge); headings anywhere, past +-pi included
+    particles = np.stack([rng.uniform(-3, 4, P), rng.uniform(-3, 2, P), rng.uniform(-7, 7, P)], -1).astype(np.float32)
+    angles = np.sort(rng.uniform(-2.0, 2.0, B)).astype(np.float32)
+    T_bl = (0.1, -0.05, 0.02)
+    measured = rng.uniform(0.5, 6.0, B).astype(np.float32)
+    measured[2] = np.nan
+    logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
+    w(wp.array(particles, dtype=wp.vec3, device=DEVICE), T_bl, wp.array(angles, dtype=wp.float32, device=DEVICE),
+      wp.array(measured, dtype=wp.float32, device=DEVICE), logw)
+    ours = w.rendered.numpy()
+    twin_r = nog_table_ranges(table, occ.shape, nog.origin_xy, nog.resolution_m, far, particles, T_bl, angles)
+    assert np.allclose(ours, twin_r, atol=2e-4), f"seed {rng.seed}: {np.abs(ours - twin_r).max()}"
+    assert np.allclose(logw.numpy(), nog_log_weights(ours.astype(np.float64), measured.astype(np.float64), 0.5),
+                       rtol=1e-4, atol=1e-4)
+
+
+def test_range_table_reads_what_the_march_renders():
+    """At a node and one of the table's headings the table gives the march's range (to a quantum); off the
+    node, moving along the beam shortens the range by the move (a wall across the beam); between headings
+    the range of a straight wall stays close to the march's."""
+    from kernels.weighting import TABLE_LEVELS, table_headings
+
+    nog, far = _wall_nog(x_wall=2.0), 10.0
+    A = 72
+    table = WEIGHTING.build("nog_table", nog=nog, num_particles=64, num_beams=1, num_angles=A, num_samples=256,
+                            near_m=0.0, far_m=far, device=DEVICE)
+    march = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=64, num_beams=1, num_samples=256, near_m=0.0,
+                            far_m=far, device=DEVICE)
+    beam = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device=DEVICE)
+    at_nodes = np.array([[x, y, h] for x, y in [(0.0, 0.0), (0.5, -0.3), (1.2, 0.65)] for h in table_headings(A)[[0, 3, 69]]],
+                        np.float32)
+    pw = wp.array(at_nodes, dtype=wp.vec3, device=DEVICE)
+    got, want = table.render(pw, (0, 0, 0), beam).numpy()[:9, 0], march.render(pw, (0, 0, 0), beam).numpy()[:9, 0]
+    assert np.all(np.abs(got - want) <= far / TABLE_LEVELS), (got, want)
+    xs = np.linspace(0.0, 0.5, 41)  # along the beam (heading 0) through nodes and between them
+    along = wp.array(np.stack([xs, np.full_like(xs, 0.01), np.zeros_like(xs)], -1).astype(np.float32), dtype=wp.vec3,
+                     device=DEVICE)
+    r = table.render(along, (0, 0, 0), beam).numpy()[:41, 0]
+    assert np.all(np.abs(r - (2.0 - xs)) < 0.05), np.abs(r - (2.0 - xs)).max()
+    assert np.all(np.diff(r) < 0)  # smooth: the march itself moves in steps of its samples
+    tilted = np.deg2rad(np.linspace(-20, 20, 17))  # between the table's 5-degree headings
+    pt = wp.array(np.stack([np.zeros(17), np.zeros(17), tilted], -1).astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    r = table.render(pt, (0, 0, 0), beam).numpy()[:17, 0]
+    assert np.all(np.abs(r - 2.0 / np.cos(tilted)) < 0.06), np.abs(r - 2.0 / np.cos(tilted)).max()
+
+
+def test_range_table_too_large_or_too_coarse_is_a_clear_error(monkeypatch):
+    import kernels.weighting as kw
+
+    nog = _wall_nog()
+    monkeypatch.setattr(kw, "TABLE_MAX_BYTES", 1 << 20)
+    with pytest.raises(ValueError, match=r"81x121 nodes x 720 headings need .*mcl.table_angles"):
+        WEIGHTING.build("nog_table", nog=nog, num_particles=1, num_beams=1, num_angles=720, device=DEVICE)
+    with pytest.raises(ValueError, match="at least 4 headings"):
+        WEIGHTING.build("nog_table", nog=nog, num_particles=1, num_beams=1, num_angles=2, device=DEVICE)

@@ -13,6 +13,9 @@
 #   width    issue 17: the NOG with the authors' motion model and sigma 0.25 m (the likelihood field's heading width
 #            per scan, docs/fidelity.md), global, 100k, train=fast, fr079 and intel
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
+#   table    issue 18: mcl.weighting=nog_table beside nog_raymarch: the step benchmark on the fr079 NOG (10k / 100k /
+#            1M, the torch reference) and global (100k) and tracking (10k) runs on fr079 and intel, train=fast
+#            (their NOFs and NOGs carried in outputs/<exp>/{train-fast,nog})
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
 set -uo pipefail
@@ -55,6 +58,15 @@ for part in "$@"; do
            find outputs -path "*localize-*-global-100k-*sigma*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
              > "$OUT/width-files.txt"
            tar czf "$OUT/width-results.tgz" -T "$OUT/width-files.txt" ;;
+    table) python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" \
+             --variants warp+et+beam warp+et+skip+beam table table360 --step-graph on --out "$OUT/bench-table" 2>&1 \
+             | grep -v "^{" | tail -22
+           for exp in ${TABLE_EXPS:-fr079 intel}; do
+             python -m irmcl_warp.localize -m +exp="$exp" train=fast localize.mode=global mcl.num_particles=100000 \
+               mcl.weighting=nog_raymarch,nog_table 2>&1 | grep -E "success|Error|ms"
+             python -m irmcl_warp.localize -m +exp="$exp" train=fast localize.mode=tracking mcl.num_particles=10000 \
+               mcl.weighting=nog_raymarch,nog_table 2>&1 | grep -E "success|Error|ms"
+           done ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;

@@ -1,4 +1,4 @@
-"""Numpy twin of kernels/weighting.py (``nog_raymarch``): the same steps, vectorised over particles and beams."""
+"""Numpy twin of kernels/weighting.py (``nog_raymarch``, ``nog_table``): the same steps, vectorised over particles and beams."""
 
 from __future__ import annotations
 
@@ -31,6 +31,37 @@ def nog_render(grid, origin, res, particles, T_base_laser, angles, num_samples, 
     T = np.cumprod(np.concatenate([np.ones_like(occ[..., :1]), 1.0 - occ[..., :-1]], -1), -1)
     w = occ * T * (T >= t_min)
     return (w * z).sum(-1) / (w.sum(-1) + eps)
+
+
+def nog_table_build(grid, origin, res, num_angles, num_samples, near, far, t_min=0.0, empty_below=0.0):
+    """``nog_table``'s table [nodes, headings] (uint16, range / (far / 65535)): ``nog_render`` from every node
+    (row-major, x fastest) at headings 2 pi k / num_angles."""
+    H, W = grid.shape
+    iy, ix = np.divmod(np.arange(H * W), W)
+    nodes = np.stack([origin[0] + ix * res, origin[1] + iy * res, np.zeros(H * W)], -1)
+    headings = (2.0 * np.pi * np.arange(num_angles) / num_angles).astype(np.float32)
+    r = nog_render(grid, origin, res, nodes, (0.0, 0.0, 0.0), headings, num_samples, near, far, t_min, empty_below)
+    return np.clip(np.rint(r * (65535 / far)), 0, 65535).astype(np.uint16)
+
+
+def nog_table_ranges(table, shape, origin, res, far, particles, T_base_laser, angles):
+    """Ranges [P, B] read from the table: the laser's nearest node (clamped to the grid), linear between the two
+    nearest headings, moved by the laser's offset from the node along the beam (0 stays 0: no wall)."""
+    H, W = shape
+    pose = laser_poses(particles, T_base_laser)
+    a = pose[:, 2:3] + np.asarray(angles, np.float64)[None, :]
+    n = table.shape[1]
+    u = np.mod(a * (n / (2.0 * np.pi)), n)
+    k0 = np.floor(u).astype(int)
+    f = u - k0
+    k0 %= n
+    k1 = (k0 + 1) % n
+    ix = np.clip(np.rint((pose[:, 0] - origin[0]) / res).astype(int), 0, W - 1)[:, None]
+    iy = np.clip(np.rint((pose[:, 1] - origin[1]) / res).astype(int), 0, H - 1)[:, None]
+    node = iy * W + ix
+    r = ((1.0 - f) * table[node, k0] + f * table[node, k1]) * (far / 65535)
+    along = (pose[:, :1] - origin[0] - ix * res) * np.cos(a) + (pose[:, 1:2] - origin[1] - iy * res) * np.sin(a)
+    return np.where(r > 0, np.maximum(r - along, 0.0), r)
 
 
 def nog_log_weights(rendered, measured, sigma):

@@ -14,7 +14,7 @@ scratch arrays sized for the larger set.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -24,7 +24,7 @@ from irmcl_warp.nog import NOG
 from kernels import WEIGHTING
 
 FREE_BELOW_P = 0.35  # a known cell under this p_occ is free space for the particles' uniform start
-NOF_WEIGHTINGS = ("nog_raymarch", "nof_direct")  # the observation models that read the trained field
+NOF_WEIGHTINGS = ("nog_raymarch", "nog_table", "nof_direct")  # the observation models that read the trained field
 
 
 def free_space_view(probability: np.ndarray, origin_xy, resolution_m: float, known: np.ndarray | None = None) -> NOG:
@@ -41,11 +41,13 @@ def free_space_view(probability: np.ndarray, origin_xy, resolution_m: float, kno
 @dataclass
 class WeightingMaps:
     """What an observation model reads; only the one ``mcl.weighting`` names needs to be set."""
-    nog: NOG | None = None  # nog_raymarch
+    nog: NOG | None = None  # nog_raymarch, nog_table
     model: object | None = None  # nof_direct: a NOF (torch module)
     occupancy: np.ndarray | None = None  # grid models: p_occ per cell (unknown cells as the model wants them)
     origin_xy: tuple[float, float] | None = None  # ... the grid's lower-left corner
     resolution_m: float | None = None
+    built: dict = field(default_factory=dict)  # device arrays made from these maps once (nog_table's table), kept
+    # for the filter's next make_weighting (reduce() resizes the scratch, not the map)
 
 
 def grid_maps(grid, weighting: str) -> WeightingMaps:
@@ -67,6 +69,12 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct; lazy: it needs torch)
 
             return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
+        if w == "nog_table":
+            key = ("nog_table", mcl.table_angles, mcl.num_samples, mcl.near_m, far_m, mcl.t_min, mcl.empty_below, device)
+            made = WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), num_angles=mcl.table_angles, t_min=mcl.t_min,
+                                   empty_below=mcl.empty_below, table=maps.built.get(key), **shared)
+            maps.built = {key: made.table}  # one table at a time
+            return made
         return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below,
                              batch=mcl.march_batch, beam_major=_march_order(mcl.march_order), **shared)
     return WEIGHTING.build(w, occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
