@@ -249,16 +249,13 @@ def quantize_ranges(rendered: wp.array2d(dtype=wp.float32), first_node: int, inv
     table[first_node + i, k] = wp.uint16(wp.clamp(wp.round(rendered[i, k] * inv_quantum), 0.0, wp.static(float(TABLE_LEVELS))))
 
 
-@wp.kernel
-def table_ranges(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
-                 quantum: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-                 angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
-    """One thread per (beam, particle): the range the march renders from the laser's nearest node, linear in
-    heading between the table's two nearest headings, moved by the laser's offset from that node along the
-    beam (exact for a wall across the beam)."""
-    b, p = wp.tid()
-    pose = laser_pose(particles[p], T_base_laser)
-    a = pose[2] + angles[b]
+@wp.func
+def table_range(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
+                quantum: float, pose: wp.vec3, angle: float) -> float:
+    """The range the march renders from the laser's nearest node, linear in heading between the table's two
+    nearest headings, moved by the laser's offset from that node along the beam (exact for a wall across the
+    beam); ``pose``: the laser's, ``angle``: the beam's in the laser frame."""
+    a = pose[2] + angle
     n = table.shape[1]
     u = a * (float(n) / (2.0 * wp.pi))
     u = u - wp.floor(u / float(n)) * float(n)
@@ -273,7 +270,41 @@ def table_ranges(table: wp.array2d(dtype=wp.uint16), width: int, height: int, or
     if r > 0.0:  # 0: no wall rendered (the beam leaves the grid)
         along = (pose[0] - origin[0] - float(ix) * res) * wp.cos(a) + (pose[1] - origin[1] - float(iy) * res) * wp.sin(a)
         r = wp.max(r - along, 0.0)
-    out[p, b] = r
+    return r
+
+
+@wp.kernel
+def table_ranges(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
+                 quantum: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
+                 angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
+    """The ranges alone [P, B], one thread per (beam, particle)."""
+    b, p = wp.tid()
+    out[p, b] = table_range(table, width, height, origin, res, quantum, laser_pose(particles[p], T_base_laser),
+                            angles[b])
+
+
+def make_table_likelihood_kernel(sigma: float):
+    """IR-MCL eq. 6 on the table's ranges, one thread per particle: its beams read one node's row of the
+    table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array."""
+
+    @wp.kernel(module="unique")
+    def likelihood(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
+                   quantum: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
+                   angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
+                   log_weights: wp.array(dtype=wp.float32)):
+        p = wp.tid()
+        pose = laser_pose(particles[p], T_base_laser)
+        n = float(0.0)
+        err = float(0.0)
+        for b in range(measured.shape[0]):
+            m = measured[b]
+            if m == m:  # NaN: invalid beam
+                n += 1.0
+                err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
+        D = err / wp.max(n, 1.0)
+        log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
+
+    return likelihood
 
 
 class NogTable:
@@ -301,8 +332,9 @@ class NogTable:
         elif tuple(table.shape) != (H * W, num_angles):
             raise ValueError(f"nog_table: a table of {tuple(table.shape)} for {H * W} nodes x {num_angles} headings")
         self.table = table
-        self.rendered = wp.zeros((num_particles, num_beams), dtype=wp.float32, device=self.device)
-        self.likelihood_kernel = make_likelihood_kernel(sigma_m)
+        self.num_particles = num_particles
+        self._rendered = None  # [P, B] for render() only: a filter step never fills it
+        self.likelihood_kernel = make_table_likelihood_kernel(sigma_m)
 
     @staticmethod
     def build(nog, num_angles, num_samples, near_m, far_m, t_min, empty_below, device) -> wp.array:
@@ -331,22 +363,26 @@ class NogTable:
         return table
 
     def render(self, particles: wp.array, T_base_laser, angles: wp.array) -> wp.array:
-        """The ranges read from the table [P, B] (the first P rows of the scratch array)."""
-        if particles.shape[0] > self.rendered.shape[0]:
-            raise ValueError(f"nog_table: {particles.shape[0]} particles, built for {self.rendered.shape[0]}")
-        wp.launch(table_ranges, (angles.shape[0], particles.shape[0]),
-                  [self.table, self.shape[1], self.shape[0], self.origin, self.res, self.quantum, particles,
-                   wp.vec3(*map(float, T_base_laser)), angles, self.rendered], device=self.device)
-        return self.rendered
+        """The ranges read from the table [P, B] (for tests and diagnostics; the weighting never stores them)."""
+        if particles.shape[0] > self.num_particles:
+            raise ValueError(f"nog_table: {particles.shape[0]} particles, built for {self.num_particles}")
+        if self._rendered is None or self._rendered.shape != (particles.shape[0], angles.shape[0]):
+            self._rendered = wp.zeros((particles.shape[0], angles.shape[0]), dtype=wp.float32, device=self.device)
+        wp.launch(table_ranges, (angles.shape[0], particles.shape[0]), self._args(particles, T_base_laser, angles)
+                  + [self._rendered], device=self.device)
+        return self._rendered
+
+    def _args(self, particles, T_base_laser, angles) -> list:
+        return [self.table, self.shape[1], self.shape[0], self.origin, self.res, self.quantum, particles,
+                wp.vec3(*map(float, T_base_laser)), angles]
 
     def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
                  log_weights: wp.array) -> None:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
             raise ValueError(f"nog_table: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                              f"built for {self.num_beams} beams")
-        self.render(particles, T_base_laser, angles)
-        wp.launch(self.likelihood_kernel, particles.shape[0], [self.rendered, measured, log_weights],
-                  device=self.device)
+        wp.launch(self.likelihood_kernel, particles.shape[0], self._args(particles, T_base_laser, angles)
+                  + [measured, log_weights], device=self.device)
 
 
 def table_headings(num_angles: int) -> np.ndarray:

@@ -66,7 +66,7 @@ def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
 
 ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",
                  "resample": "", "estimate": "", "sigma_m": "sigma", "motion": "", "beam_pick": "",
-                 "resample_threshold": "neff", "table_angles": "angles"}
+                 "resample_threshold": "neff", "table_angles": "angles", "seed": "seed"}
 
 
 def cell_tag(m, loc) -> str:
