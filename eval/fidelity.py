@@ -27,6 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 YAW = REPO / "results" / "checks" / "fr079_yaw"
 GLOBAL = REPO / "results" / "checks" / "global_motion"
 THEIRS = REPO / "results" / "checks" / "irmcl_reference"
+TABLE = REPO / "results" / "checks" / "nog_table"  # nog_table beside nog_raymarch: <log>/<folder>/seed<k>.json
 HALF_BEAM = "amin-1.57517"  # data.angle_min_rad=-1.5751716: the released wrapper's beam layout on fr079
 
 YAW_RUNS = [  # (folder, what it is)
@@ -187,6 +188,45 @@ def settings_findings() -> str:
         "- Defaults stay as they are (the paper's \"32 beams evenly spread\" and N_eff < N/2); the settings are "
         "`mcl.beam_pick` and `mcl.resample_threshold`.",
     ])
+
+
+def table_runs() -> dict:
+    """{(log, mode, weighting): [summary per seed]} of the kept runs of the range table and the march."""
+    out = {}
+    for path in sorted(TABLE.glob("*/localize-*/seed*.json")):
+        s = json.loads(path.read_text())["summary"]
+        out.setdefault((path.parts[-3], s["mode"], s["weighting"]), []).append(s)
+    return out
+
+
+def table_table() -> str:
+    rows = ["| log | mode, particles | weighting | seeds | success | location RMSE (cm), median [min-max] | "
+            "yaw RMSE (deg), median [min-max] | converged after (s), median [min-max] | ms per step, median [min-max] |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for (log, mode, w), runs in table_runs().items():
+        ok = f"{sum(r['successes'] for r in runs)}/{sum(r['starts'] for r in runs)}"
+        rows.append(f"| {log} | {mode}, {runs[0]['num_particles'] // 1000}k | `{w}` | {len(runs)} | {ok} | "
+                    f"{_spread([r['location_rmse_cm_mean'] for r in runs])} | {_spread([r['yaw_rmse_deg_mean'] for r in runs])} | "
+                    f"{_spread([r['time_to_converge_s_mean'] for r in runs])} | "
+                    f"{_spread([r['ms_per_step_median'] for r in runs])} |")
+    return "\n".join(rows)
+
+
+def table_findings() -> str:
+    """How far the table's runs lie from the march's, in words, from the kept runs."""
+    runs = table_runs()
+    lines = []
+    for (log, mode, w), rs in runs.items():
+        march = runs.get((log, mode, "nog_raymarch"))
+        if w != "nog_table" or not march:
+            continue
+        d_loc = np.median([r["location_rmse_cm_mean"] for r in rs]) - np.median([r["location_rmse_cm_mean"] for r in march])
+        d_yaw = np.median([r["yaw_rmse_deg_mean"] for r in rs]) - np.median([r["yaw_rmse_deg_mean"] for r in march])
+        ok_t, ok_m = sum(r["successes"] for r in rs), sum(r["successes"] for r in march)
+        lines.append(f"  - {log}, {mode}: location {d_loc:+.2f} cm, yaw {d_yaw:+.2f} deg; {ok_t} successes against {ok_m}.")
+    if not lines:
+        return "- No kept runs of the range table: no finding."
+    return "\n".join(["- The table's medians over the seeds minus the march's:"] + lines)
 
 
 def theirs_speed() -> str:
@@ -579,6 +619,21 @@ run on the H100). Kept in results/checks/irmcl_reference/<log>/settings/ and ref
 - **Their estimate** is the mean of the top 80 % of the particles by weight, taken after resampling, when every
   weight has been reset to 1. The "top 80 %" is then whichever 80 % the sort leaves first: an unweighted mean of
   most of the resampled set. In expectation that is the weighted mean before resampling; it was not run alone.
+
+## IR-MCL: the range table (`nog_table`) beside the march
+
+`mcl.weighting=nog_table` reads IR-MCL's rendered ranges from a table that the march fills once from every
+NOG node at 720 headings (kernels/weighting.py `NogTable`), instead of marching 256 samples per beam at every
+step: an approximation, made for issue 18's step goals. Does it cost accuracy? Both on the same `fast` field,
+defaults otherwise (Thrun's motion model, sigma 0.5 m), 10 starts per run, 5 seeds, on the H100.
+Command: `python -m irmcl_warp.localize -m +exp=<log> train=fast localize.mode=global|tracking
+mcl.num_particles=100000|10000 mcl.weighting=nog_raymarch,nog_table mcl.seed=0,1,2,3,4` (`eval/gpu/mcl.sh table`
+ran seed 0 first); kept in results/checks/nog_table/<log>/<folder>/seed<k>.json. ms per step: the filter's
+median step, global runs at 5k particles after 20 s (`mcl.reduce_to`).
+
+{table_table()}
+
+{table_findings()}
 
 ## IR-MCL: the field, by their evaluation and their recipe
 
