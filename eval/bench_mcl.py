@@ -95,8 +95,35 @@ def host_profile(fn, sync, steps: int, what: str) -> None:
     print(f"host profile ({what}, {steps} steps):\n" + "\n".join(text.getvalue().splitlines()[4:24]))
 
 
+def device_profile(fn, steps: int, what: str) -> dict:
+    """Where a step's GPU time goes: the CUDA kernels and copies of ``steps`` calls as CUPTI records them
+    (torch.profiler; a captured graph's kernels are recorded one by one), per step: each kernel's time, their
+    sum, and the wall time. The gap between the two is launch latency and the host."""
+    from torch.profiler import ProfilerActivity, profile
+
+    torch.cuda.synchronize()
+    with profile(activities=[ProfilerActivity.CUDA, ProfilerActivity.CPU]) as prof:
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            fn()
+        torch.cuda.synchronize()
+        wall = (time.perf_counter() - t0) / steps
+    kernels = {}
+    for e in prof.events():
+        if e.device_type.name == "CUDA":
+            kernels.setdefault(e.name[:60], []).append(e.device_time_total if hasattr(e, "device_time_total") else e.cuda_time_total)
+    per_step = {k: sum(v) / steps / 1e3 for k, v in kernels.items()}  # us -> ms
+    busy = sum(per_step.values())
+    print(f"device profile ({what}, {steps} steps): wall {1e3 * wall:.3f} ms per step, kernels and copies "
+          f"{busy:.3f} ms, {sum(len(v) for v in kernels.values()) / steps:.0f} per step")
+    for k, ms in sorted(per_step.items(), key=lambda kv: -kv[1])[:14]:
+        print(f"  {ms * 1e3:8.1f} us  x{len(kernels[k]) / steps:.0f}  {k}")
+    return {"wall_ms": 1e3 * wall, "device_ms": busy, "per_step_us": {k: 1e3 * v for k, v in per_step.items()},
+            "launches_per_step": sum(len(v) for v in kernels.values()) / steps}
+
+
 def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on",
-                 profile=False, around=None) -> dict:
+                 profile=False, around=None, cuda_trace=False) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     started = time.perf_counter()
@@ -112,6 +139,9 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
     step = repeated(lambda: pf.step(u, measured), sync, steps, repeats)  # median and spread of ``repeats``
     if profile:
         host_profile(lambda: pf.step(u, measured), sync, steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
+    trace = None
+    if cuda_trace and device.startswith("cuda"):
+        trace = device_profile(lambda: pf.step(u, measured), steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
     parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
         "motion": lambda: pf.motion(pf.particles, u, seed=1),
         "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
@@ -125,6 +155,8 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
            "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
            "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
            "weighting_ms": part_ms["weighting"], "parts_ms": part_ms, "build_s": build_s}
+    if trace is not None:
+        row["device_profile"] = trace
     if cfg.weighting == "nog_table":
         row["table_vs_march_m"] = table_error(pf, nog, cfg, far, device)
     return row
@@ -188,7 +220,7 @@ def run_mcl_bench(a) -> list[dict]:
         for v in a.variants:
             for graph in (["on", "off"] if a.step_graph == "both" else [a.step_graph]):
                 rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats,
-                                         graph=graph, profile=a.profile, around=around))
+                                         graph=graph, profile=a.profile, around=around, cuda_trace=a.cuda_trace))
                 print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
@@ -234,6 +266,8 @@ def add_parser(sub) -> None:
     p.add_argument("--step-graph", default="both", choices=["both", "on", "off"],
                    help="a step replayed as one captured graph (on), launched one by one (off), or both side by side")
     p.add_argument("--profile", action="store_true", help="also print where the host time of a step goes (cProfile)")
+    p.add_argument("--cuda-trace", action="store_true",
+                   help="also list the CUDA kernels of a step with their device times (torch.profiler / CUPTI)")
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
     p.add_argument("--around", type=float, nargs=3, metavar=("SX", "SY", "SYAW"),
