@@ -17,7 +17,7 @@ def test_every_registry_entry_has_a_reference_twin():
     assert MAPPING.names() == ["logodds"]
     assert SIM.names() == ["camera", "rasterize", "segment_lidar"]
     assert RENDER.names() == ["composite", "occupied_samples"]
-    assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch"]
+    assert WEIGHTING.names() == ["beam_model", "likelihood_field", "nof_direct", "nog_raymarch", "nog_table"]
     assert MOTION.names() == ["irmcl", "odometry"] and RESAMPLE.names() == ["low_variance", "multinomial"]
     from irmcl_warp.reference import motion
 

@@ -39,7 +39,8 @@ class StepInputs:
     two copies: float32 [rot1, trans, rot2, resampling draw, measured ranges of the B beams] and int32
     [motion seed, multinomial seed]. The kernels get views of the device buffers (``odom``, ``draw``,
     ``measured``, ``motion_seed``, ``resample_seed``), so a captured step reads each scan's values. On a
-    GPU the host buffers are pinned (the copies are asynchronous); on a CPU they are the device buffers."""
+    GPU the host buffers are pinned and ``send()``'s two copies are the first launches of a step (a captured
+    step copies the values the host wrote before replaying it); on a CPU they are the device buffers."""
 
     def __init__(self, num_beams: int, device: str):
         self.values = wp.zeros(4 + num_beams, dtype=wp.float32, device=device)
@@ -49,11 +50,15 @@ class StepInputs:
         self.host_seeds = wp.zeros_like(self.seeds, device="cpu", pinned=True) if on_gpu else self.seeds
         self.odom, self.draw, self.measured = self.values[0:3], self.values[3:4], self.values[4:]
         self.motion_seed, self.resample_seed = self.seeds[0:1], self.seeds[1:2]
+        self._values, self._seeds = self.host_values.numpy(), self.host_seeds.numpy()  # views, made once
 
     def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
-        v = self.host_values.numpy()
+        """Write a step's inputs into the host buffers (``send`` copies them to the device)."""
+        v = self._values
         v[0:3], v[3], v[4:] = odom_step, draw, measured
-        self.host_seeds.numpy()[:] = np.array([motion_seed, resample_seed], np.int64).astype(np.int32, casting="unsafe")
+        self._seeds[:] = np.array([motion_seed, resample_seed], np.int64).astype(np.int32, casting="unsafe")
+
+    def send(self) -> None:
         if self.host_values is not self.values:
             wp.copy(self.values, self.host_values)
             wp.copy(self.seeds, self.host_seeds)
@@ -103,6 +108,7 @@ class ParticleFilter:
         self.measured = self.inputs.measured
         # read back per step: the 8 weight sums, then the estimator's 5 (pinned on a GPU: one async copy each)
         self.readback = wp.zeros(13, dtype=wp.float32, device="cpu", pinned=d.startswith("cuda"))
+        self._readback = self.readback.numpy()  # a view, made once
         self.use_graph = self._graph_choice()
         self.graphs = {}  # the particle buffer a step starts from -> its captured launches
         self.rng = np.random.default_rng(cfg.seed)
@@ -197,8 +203,10 @@ class ParticleFilter:
         return self.cfg.recovery_alpha_slow > 0 and self.cfg.recovery_alpha_fast > 0
 
     def _launch_update(self) -> None:
-        """Motion, weighting, the accumulated weights and the estimate: launches only."""
+        """The step's inputs to the device, motion, weighting, the accumulated weights and the estimate:
+        launches only."""
         inp = self.inputs
+        inp.send()
         self.motion.launch(self.particles, inp.odom, inp.motion_seed)
         self.weighting(self.particles, self.T_base_laser, self.angles, inp.measured, self.log_lik)
         wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
@@ -256,7 +264,7 @@ class ParticleFilter:
         if p_inject > 0 and self.free_xy is not None:
             wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.free_space.resolution_m,
                       float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
-        sums = self.readback.numpy()
+        sums = self._readback
         pose, neff, self.spread = self.weights.summary(sums[:8])
         if self.estimator is not None:
             pose = self.estimator.result(sums[8:])
