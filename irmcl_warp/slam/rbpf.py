@@ -100,6 +100,7 @@ class RBPF:
         self.grid_offsets = offs * np.array([ls, ls, as_])
         self._buffers = {}
         self._cuda, self._mirrors = wp.get_device(d).is_cuda, {}  # pinned host mirrors of device arrays (_read)
+        self._sources, self._in_flight = {}, set()  # pinned host sources of device arrays (_write), copies not yet waited for
         self.log_w = np.zeros(P)  # since the last resampling
         self.log_w_total = np.zeros(P)  # over the whole run (inherited on resampling): picks the best particle
         self.history = History()
@@ -126,8 +127,32 @@ class RBPF:
         if mirror is None:
             mirror = self._mirrors[key] = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
         wp.copy(mirror, a)
-        wp.synchronize_stream(wp.get_stream(self.device))
+        self._wait()
         return mirror.numpy()
+
+    def _write(self, a: wp.array, values: np.ndarray) -> None:
+        """``a.assign(values)`` without its cost on a GPU: assign makes a device array of the values (an
+        allocation and a copy through pageable memory) at every call; here each device array has one pinned
+        host source, filled on the host and copied to the device in the stream's order. A source whose last
+        copy may not have run yet is waited for before it is filled again. On the CPU, a.assign itself."""
+        if not self._cuda:
+            a.assign(values)
+            return
+        key = (a.ptr, a.shape)
+        if key not in self._sources:
+            src = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+            self._sources[key] = (src, src.numpy())
+        src, view = self._sources[key]
+        if key in self._in_flight:
+            self._wait()
+        view[...] = values
+        wp.copy(a, src)
+        self._in_flight.add(key)
+
+    def _wait(self) -> None:
+        """Wait for the device's stream: every copy to or from a pinned buffer has run."""
+        wp.synchronize_stream(wp.get_stream(self.device))
+        self._in_flight.clear()
 
     def _buf(self, C: int):
         if C not in self._buffers:
@@ -142,7 +167,7 @@ class RBPF:
         if r.shape != (self.ranges.shape[0],):
             raise ValueError(f"slam: a scan of {r.size} beams, the filter was built for {self.ranges.shape[0]} "
                              f"(set data.beam_policy to reject or resample such scans when reading the log)")
-        self.ranges.assign(r)
+        self._write(self.ranges, r)
         self._ranges_np = r.astype(np.float64)
 
     def _cover_scan(self, poses: np.ndarray) -> None:
@@ -176,7 +201,7 @@ class RBPF:
     def _score(self, candidates: np.ndarray) -> tuple[wp.array, wp.array]:
         """The device's (score, log-likelihood) [P, C] of candidate poses [P, C, 3], each on its particle's map."""
         cand, score, loglik = self._buf(candidates.shape[1])
-        cand.assign(candidates.astype(np.float32))
+        self._write(cand, candidates.astype(np.float32))
         self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik)
         return score, loglik
 
@@ -193,7 +218,7 @@ class RBPF:
     def start(self, odom_pose, ranges_m, stamp: float | None = None) -> None:
         """All particles at the first odometry pose; the first scan is integrated as it is."""
         pose = np.asarray(odom_pose, np.float64)
-        self.poses.assign(np.tile(pose, (self.P, 1)).astype(np.float32))
+        self._write(self.poses, np.tile(pose, (self.P, 1)).astype(np.float32))
         self._set_ranges(ranges_m)
         self._add_scan(np.tile(pose, (self.P, 1)))
         self.last_odom, self.prev_odom = pose, tuple(pose)
@@ -231,14 +256,14 @@ class RBPF:
         t = self._tick("matching", t)
         self.log_w += gain
         self.log_w_total += gain
-        self.poses.assign(new.astype(np.float32))
+        self._write(self.poses, new.astype(np.float32))
         w = self.smoothed_weights()
         neff = 1.0 / np.sum(w ** 2)
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
             parents = self.maps.resample(low_variance_parents(w, self.rng.uniform()))
-            self.poses.assign(new[parents].astype(np.float32))
+            self._write(self.poses, new[parents].astype(np.float32))
             self.log_w = np.zeros(self.P)
             self.log_w_total = self.log_w_total[parents]
         t = self._tick("weights_resampling", t)
@@ -299,8 +324,8 @@ class RBPF:
         """match's GPU way: rounds launched over particles x moves x beams, ``check_every`` of them per CUDA
         graph between looks at the active flags; returns the rounds launched."""
         c, d, P, st = self.cfg, self.device, self.P, self._climb
-        st["pose"].assign(start.astype(np.float32))
-        st["steps"].assign(np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32))
+        self._write(st["pose"], start.astype(np.float32))
+        self._write(st["steps"], np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32))
         st["halvings"].zero_()
         st["active"].fill_(1)
         cand1, score1, loglik1 = self._buf(1)
@@ -388,6 +413,7 @@ class RBPF:
         import time
 
         wp.synchronize_device(self.device)
+        self._in_flight.clear()
         now = time.perf_counter()
         if part is not None:
             self.timing[part] += now - since
