@@ -5,9 +5,6 @@ into motion (all scans since the last processed one), scan matching, weights + r
 integration, per particle count. Prints a table and writes outputs/bench/slam-<exp>-<device>.json. The
 default log is the simulator (no data needed); real logs need their stream cache or raw files.
 
-``--stage-timing off``: the filter does not time its stages, and so does not wait for the device four times
-per processed scan to do it (the wall time without that; the table's stage columns are then empty).
-
 ``--released``: in each repeat, the released C++ (eval/reference/gmapping.py's build, one core, the ROS
 wrapper's settings, seed 0) runs on the same log right after ours, so that the ratio of the two is
 measured side by side on a machine whose speed drifts from hour to hour.
@@ -28,18 +25,16 @@ from irmcl_warp.slam.stage import start_filter
 from kernels import pick_device
 
 
-def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=(), stage_timing: bool = True) -> dict:
+def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
     cfg = compose_config([f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}", *overrides])
     log = load_stream(cfg)
     n = len(log) if scans is None else min(int(scans), len(log))
     rbpf, odom = start_filter(cfg, log, device)
-    rbpf.stage_timing = stage_timing
     t0 = time.perf_counter()
     processed = sum(rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k])).processed for k in range(1, n))
     wall = time.perf_counter() - t0
     return {"exp": exp, "particles": particles, "device": rbpf.device, "scans": n, "processed_scans": processed,
-            "wall_s": wall, "stage_timing": stage_timing,
-            "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}
+            "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}
 
 
 def repeat_runs(runs: list[dict]) -> dict:
@@ -78,7 +73,7 @@ def run_slam_bench(a) -> list[dict]:
     for p in a.particles:
         runs, released = [], []
         for _ in range(a.repeats):
-            runs.append(run_one(a.exp, p, device, a.scans, a.override, a.stage_timing == "on"))
+            runs.append(run_one(a.exp, p, device, a.scans, a.override))
             if a.released:
                 released.append(run_released(a.exp, p, a.scans))
         row = repeat_runs(runs)
@@ -97,7 +92,7 @@ def run_slam_bench(a) -> list[dict]:
           "weights + resampling | integration |  (ms per processed scan, of the median run)")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        t = r["ms_per_processed_scan"] if r["stage_timing"] else {k: float("nan") for k in r["ms_per_processed_scan"]}
+        t = r["ms_per_processed_scan"]
         print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} [{r['wall_s_min']:.1f}-{r['wall_s_max']:.1f}] | "
               f"{t['matching']:.1f} | {t['motion']:.1f} | {t['weights_resampling']:.1f} | {t['integration']:.1f} |")
     for r in rows:
@@ -123,6 +118,4 @@ def add_parser(sub) -> None:
     p.add_argument("--repeats", type=int, default=5, help="runs per particle count; the table shows the median run")
     p.add_argument("--released", action="store_true",
                    help="time the released C++ on the same log after each repeat (eval/reference/build_gmapping.sh)")
-    p.add_argument("--stage-timing", default="on", choices=["on", "off"],
-                   help="off: the filter neither times its stages nor waits for the device to do so")
     p.add_argument("--out", default="outputs/bench")

@@ -107,7 +107,6 @@ class RBPF:
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
         self.timing = {"motion": 0.0, "matching": 0.0, "weights_resampling": 0.0, "integration": 0.0}
-        self.stage_timing = True  # False: no timing, and none of the four waits for the device per processed scan it takes
         self.last_odom = None  # odometry at the last processed scan
         self.prev_odom = None  # odometry at the previous scan
         self.pending = []  # odometry steps not yet applied to the particles
@@ -410,12 +409,9 @@ class RBPF:
         return w / w.sum()
 
     def _tick(self, part: str | None = None, since: float = 0.0) -> float:
-        """Time stamp after the device finished; adds the time since ``since`` to ``part``. Without
-        ``stage_timing``, nothing: no wait, no time."""
+        """Time stamp after the device finished; adds the time since ``since`` to ``part``."""
         import time
 
-        if not self.stage_timing:
-            return 0.0
         wp.synchronize_device(self.device)
         self._in_flight.clear()
         now = time.perf_counter()
