@@ -72,6 +72,14 @@ def slab(o: float, d: float, lo: float, hi: float) -> wp.vec2:
     return wp.vec2(wp.min(a, b), wp.max(a, b))
 
 
+@wp.func
+def mean_l1_log_weight(err: float, n: float, sigma2: float) -> float:
+    """IR-MCL eq. 6 from the summed |r_rendered - r_measured| of the n valid beams: D = err / n (0 without a
+    valid beam), log w = -0.5 D^2 / sigma^2."""
+    D = err / wp.max(n, 1.0)
+    return -0.5 * D * D / sigma2
+
+
 def make_likelihood_kernel(sigma: float):
     """IR-MCL eq. 6 from the rendered ranges [P, B]: D = sum over the valid beams of |r_rendered - r_measured|
     / their number, log w = -0.5 D^2 / sigma^2. One thread per particle adds its beams in beam order, so the
@@ -90,8 +98,7 @@ def make_likelihood_kernel(sigma: float):
             if m == m:  # NaN: invalid beam
                 n += 1.0
                 err += wp.abs(rendered[p, b] - m)
-        D = err / wp.max(n, 1.0)
-        log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
+        log_weights[p] = mean_l1_log_weight(err, n, wp.static(sigma * sigma))
 
     return likelihood
 
@@ -301,8 +308,7 @@ def make_table_likelihood_kernel(sigma: float):
             if m == m:  # NaN: invalid beam
                 n += 1.0
                 err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
-        D = err / wp.max(n, 1.0)
-        log_weights[p] = -0.5 * D * D / wp.static(sigma * sigma)
+        log_weights[p] = mean_l1_log_weight(err, n, wp.static(sigma * sigma))
 
     return likelihood
 
