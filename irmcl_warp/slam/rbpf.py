@@ -122,13 +122,10 @@ class RBPF:
         the same array. On the CPU, a.numpy() itself (a view, no copy)."""
         if not self._cuda:
             return a.numpy()
-        key = (a.ptr, a.shape)
-        mirror = self._mirrors.get(key)
-        if mirror is None:
-            mirror = self._mirrors[key] = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+        mirror, view = self._pinned(self._mirrors, a)
         wp.copy(mirror, a)
         self._wait()
-        return mirror.numpy()
+        return view
 
     def _write(self, a: wp.array, values: np.ndarray) -> None:
         """``a.assign(values)`` without its cost on a GPU: assign makes a device array of the values (an
@@ -138,16 +135,21 @@ class RBPF:
         if not self._cuda:
             a.assign(values)
             return
-        key = (a.ptr, a.shape)
-        if key not in self._sources:
-            src = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
-            self._sources[key] = (src, src.numpy())
-        src, view = self._sources[key]
-        if key in self._in_flight:
+        src, view = self._pinned(self._sources, a)
+        if src.ptr in self._in_flight:
             self._wait()
         view[...] = values
         wp.copy(a, src)
-        self._in_flight.add(key)
+        self._in_flight.add(src.ptr)
+
+    @staticmethod
+    def _pinned(store: dict, a: wp.array) -> tuple[wp.array, np.ndarray]:
+        """The pinned host buffer of device array ``a`` in ``store`` (made on first use) and its numpy view."""
+        key = (a.ptr, a.shape)
+        if key not in store:
+            host = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+            store[key] = (host, host.numpy())
+        return store[key]
 
     def _wait(self) -> None:
         """Wait for the device's stream: every copy to or from a pinned buffer has run."""
@@ -218,13 +220,14 @@ class RBPF:
     def start(self, odom_pose, ranges_m, stamp: float | None = None) -> None:
         """All particles at the first odometry pose; the first scan is integrated as it is."""
         pose = np.asarray(odom_pose, np.float64)
-        self._write(self.poses, np.tile(pose, (self.P, 1)).astype(np.float32))
+        poses = np.tile(pose, (self.P, 1))
+        self._write(self.poses, poses.astype(np.float32))
         self._set_ranges(ranges_m)
-        self._add_scan(np.tile(pose, (self.P, 1)))
+        self._add_scan(poses)
         self.last_odom, self.prev_odom = pose, tuple(pose)
         self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
         self.last_stamp = stamp
-        self._record(0, np.arange(self.P), np.tile(pose, (self.P, 1)))
+        self._record(0, np.arange(self.P), poses)
 
     def step(self, k: int, odom_pose, ranges_m, stamp: float | None = None) -> StepStats:
         """Scan k with its odometry pose (and its stamp, which ``temporal_update`` needs); returns what
@@ -295,12 +298,14 @@ class RBPF:
           active flags every ``check_every`` rounds only, and the rounds are one CUDA graph;
         * on the CPU (the default there), each particle's whole climb in one thread (Scorer.climb): no
           launch per round, no particle waiting for the slowest one. Rounds = the most any particle took."""
-        d, P = self.device, self.P
+        c, d, P = self.cfg, self.device, self.P
         if not hasattr(self, "_climb"):
             self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
                                steps=wp.zeros(P, dtype=wp.vec3, device=d), halvings=wp.zeros(P, dtype=wp.int32, device=d),
                                active=wp.zeros(P, dtype=wp.int32, device=d), start=wp.zeros(P, dtype=wp.vec3, device=d),
-                               rounds=wp.zeros(P, dtype=wp.int32, device=d))
+                               rounds=wp.zeros(P, dtype=wp.int32, device=d),
+                               steps0=wp.array(np.tile(np.float32([c.lstep, c.lstep, c.astep]), (P, 1)), dtype=wp.vec3,
+                                               device=d))  # every climb's first steps
         st = self._climb
         if rounds_launched is None:
             rounds_launched = wp.get_device(d).is_cuda
@@ -325,7 +330,7 @@ class RBPF:
         graph between looks at the active flags; returns the rounds launched."""
         c, d, P, st = self.cfg, self.device, self.P, self._climb
         self._write(st["pose"], start.astype(np.float32))
-        self._write(st["steps"], np.tile([c.lstep, c.lstep, c.astep], (P, 1)).astype(np.float32))
+        wp.copy(st["steps"], st["steps0"])
         st["halvings"].zero_()
         st["active"].fill_(1)
         cand1, score1, loglik1 = self._buf(1)
