@@ -216,8 +216,8 @@ def make_window_search(kernel_size: int, fullness: float, free_check: bool, read
     def search(cells: wp.array3d(dtype=wp.vec4), p: int, hit_cell: wp.vec2i, free_cell: wp.vec2i, ex: float,
                ey: float, res: float) -> float:
         best = float(1.0e30)
-        for oy in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):  # row by row in memory
-            for ox in range(-wp.static(kernel_size), wp.static(kernel_size) + 1):
+        for oy in range(wp.static(-kernel_size), wp.static(kernel_size + 1)):  # row by row in memory
+            for ox in range(wp.static(-kernel_size), wp.static(kernel_size + 1)):
                 h = read(cells, p, hit_cell[0] + ox, hit_cell[1] + oy)
                 # hits / visits > fullness, and the free cell's < fullness (or unvisited), without dividing
                 if h[0] > 0.0 and h[1] > wp.static(fullness) * h[0]:
