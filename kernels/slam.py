@@ -358,7 +358,81 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
         best_out[p] = best
         rounds_out[p] = rounds
 
-    return score, climb
+    return score, climb, make_block_climb_kernel(score_beams)
+
+
+vec6 = wp.types.vector(6, wp.float32)
+
+
+def make_block_climb_kernel(score_beams):
+    """GMapping's hill climbing for a GPU, one block of threads per particle and one thread per beam, the whole
+    climb in one launch. Every thread holds the same climb state (pose, best, steps); per round each thread
+    scores its beam at the 6 moves, the block shares the 6 contributions of every beam through a tile, and
+    every thread adds them up in beam order, so all threads take the same decision and the sums are the
+    partial sums ``score`` + ``reduce_partials_kernel`` make, in the same order: the same poses, bit for bit,
+    as the launched rounds (tests/test_gpu.py), without a launch or a look from the host per round. Launch
+    with ``wp.launch_tiled(..., dim=[P], block_dim=b)``, b >= the beams (``block_dim_for``)."""
+
+    @wp.func
+    def beam_score(cells: wp.array3d(dtype=wp.vec4), p: int, pose: wp.vec3, T_base_laser: wp.vec3,
+                   ranges: wp.array(dtype=wp.float32), beam_cs: wp.array(dtype=wp.vec2), usable: float,
+                   origin: wp.vec2, res: float, lane: int) -> float:
+        """The beam ``lane``'s term of the score at ``pose`` (0 for a thread past the last beam)."""
+        B = ranges.shape[0]
+        return score_beams(cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, wp.min(lane, B),
+                           wp.min(lane + 1, B))[0]
+
+    @wp.kernel(module="unique")
+    def climb_block(start: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
+                    beam_cs: wp.array(dtype=wp.vec2), usable: float, origin: wp.vec2, res: float,
+                    cells: wp.array3d(dtype=wp.vec4), first_steps: wp.vec3, iterations: int, max_rounds: int,
+                    pose_out: wp.array(dtype=wp.vec3), best_out: wp.array(dtype=wp.float32),
+                    rounds_out: wp.array(dtype=wp.int32)):
+        p, lane = wp.tid()
+        B = ranges.shape[0]
+        pose = start[p]
+        t0 = wp.tile(beam_score(cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, lane))
+        best = float(0.0)
+        for j in range(B):
+            best += t0[j]
+        steps = first_steps
+        halvings = int(0)
+        rounds = int(0)
+        while rounds < max_rounds:
+            rounds += 1
+            mine = vec6()
+            for m in range(6):
+                mine[m] = beam_score(cells, p, pose + wp.cw_mul(move(m), steps), T_base_laser, ranges, beam_cs,
+                                     usable, origin, res, lane)
+            t = wp.tile(mine, preserve_type=True)
+            sums = vec6()
+            for j in range(B):  # in beam order, as reduce_partials_kernel
+                sums += t[j]
+            k = int(0)
+            for m in range(1, 6):
+                if sums[m] > sums[k]:
+                    k = m
+            if sums[k] > best:
+                pose = pose + wp.cw_mul(move(k), steps)
+                best = sums[k]
+            elif halvings >= iterations:
+                break
+            else:
+                steps = 0.5 * steps
+                halvings += 1
+        if lane == 0:
+            pose_out[p] = pose
+            best_out[p] = best
+            rounds_out[p] = rounds
+
+    return climb_block
+
+
+def block_dim_for(beams: int) -> int:
+    """Threads per block of the block climb: the beams rounded up to whole warps of 32."""
+    if not 1 <= beams <= 1024:
+        raise ValueError(f"slam: the GPU climb runs a thread per beam, at most 1024; this scan has {beams}")
+    return 32 * ((beams + 31) // 32)
 
 
 @wp.kernel
@@ -578,7 +652,7 @@ class Scorer:
         self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
         self._pool = None
         self._partials, self._beam_cs = {}, None
-        self.kernel, self.climb_kernel = make_score_kernel(
+        self.kernel, self.climb_kernel, self.block_climb_kernel = make_score_kernel(
             int(kernel_size), float(fullness), float(sigma), float(lsigma), float(null_likelihood), float(free_delta_m),
             int(lskip) + 1, self.per_thread, bool(free_check))
 
@@ -622,6 +696,21 @@ class Scorer:
                       device=self.device)
 
         self._run_blocks(run, start.shape[0])
+
+    def climb_blocks(self, maps: ParticleMaps, start: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
+                     first_steps, iterations: int, max_rounds: int, pose: wp.array, best: wp.array,
+                     rounds: wp.array) -> None:
+        """climb's GPU way: one block per particle, a thread per beam, the whole climb in one launch
+        (``make_block_climb_kernel``); the same arguments and results as ``climb``. On the CPU only with
+        ``wp.config.enable_cpu_blocks`` (Warp's CPU runs a block as one thread otherwise: the tests use it)."""
+        if not wp.get_device(self.device).is_cuda and not wp.config.enable_cpu_blocks:
+            raise ValueError("Scorer.climb_blocks: a block per particle needs a GPU, or wp.config.enable_cpu_blocks "
+                             "on the CPU; use Scorer.climb there")
+        wp.launch_tiled(self.block_climb_kernel, dim=[start.shape[0]],
+                        inputs=[start, wp.vec3(*map(float, T_base_laser)), ranges, self._beam_directions(angles),
+                                self.usable, maps.origin, maps.res, maps.cells, wp.vec3(*map(float, first_steps)),
+                                int(iterations), int(max_rounds), pose, best, rounds],
+                        block_dim=block_dim_for(ranges.shape[0]), device=self.device)
 
     def reserve(self, P: int, C: int, B: int):
         """The partial-sum buffers for P x C candidates of B beams (allocate before a CUDA graph capture)."""

@@ -241,18 +241,24 @@ def test_device_hill_climbing_matches_the_host_twin(rng):
     assert np.allclose(score[close], want_score[close], rtol=1e-4)
 
 
-def test_the_climb_in_one_thread_equals_the_launched_rounds(rng):
-    """Scorer.climb (a particle's whole climb in one thread, the CPU's default) against the rounds launched
-    over particles x moves x beams (the GPU's): the same poses and scores bit for bit, from starts off the
-    true pose so that the climbs take different numbers of rounds."""
+@pytest.mark.parametrize("how", ["threads", "blocks"])
+def test_the_climb_in_one_launch_equals_the_launched_rounds(rng, monkeypatch, how):
+    """Scorer.climb (a particle's whole climb in one thread, the CPU's default) and Scorer.climb_blocks (a block
+    per particle, a thread per beam, the GPU's) against the rounds launched over particles x moves x beams:
+    the same poses and scores bit for bit, from starts off the true pose so that the climbs take different
+    numbers of rounds. On the CPU the blocks run with Warp's CPU blocks switched on."""
     log = _sim(10.0)
     P = 8
     rbpf = _matcher(log, P=P)
     _map_from_true_poses(rbpf, log)
     rbpf._set_ranges(log.ranges_m[20])
     start = log.ground_truth[20] + rng.normal(0, [0.12, 0.12, 0.05], (P, 3))
-    launched, launched_score, launched_rounds = rbpf.match(start, rounds_launched=True)
-    fused, fused_score, fused_rounds = rbpf.match(start, rounds_launched=False)
+    launched, launched_score, launched_rounds = rbpf.match(start, how="rounds")
+    if how == "blocks" and not wp.get_device(rbpf.device).is_cuda:
+        with pytest.raises(ValueError, match="enable_cpu_blocks"):  # a CPU block would be one thread: wrong sums
+            rbpf.match(start, how=how)
+        monkeypatch.setattr(wp.config, "enable_cpu_blocks", True)
+    fused, fused_score, fused_rounds = rbpf.match(start, how=how)
     assert np.array_equal(fused, launched), f"seed {rng.seed}: {fused - launched}"
     assert np.array_equal(fused_score, launched_score)
     assert np.abs(fused[:, :2] - start[:, :2]).max() > 0.05  # the climbs moved

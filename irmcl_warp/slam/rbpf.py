@@ -286,18 +286,22 @@ class RBPF:
             raise ValueError("slam.temporal_update needs each scan's stamp: pass it to RBPF.start and RBPF.step")
         return stamp - self.last_stamp > period
 
-    def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8, rounds_launched: bool | None = None):
+    CLIMBS = ("blocks", "threads", "rounds")
+
+    def match(self, start: np.ndarray, max_rounds: int = 200, check_every: int = 8, how: str | None = None):
         """GMapping's hill climbing for every particle at once; a particle stops when a round fails after
         ``iterations`` halvings of the steps. Returns (poses [P, 3], scores [P], rounds).
         Twin: irmcl_warp/reference/slam.py ``hill_climb``.
 
-        Two ways to run it, the same poses bit for bit (tests/test_slam.py):
-        * on a GPU (``rounds_launched``, the default there), round by round: each round builds the 6 moves
-          of the current steps (one launch), scores all particles x moves x beams (one launch) and takes
-          the best move if it raises the score, else halves the steps (one launch); the host looks at the
-          active flags every ``check_every`` rounds only, and the rounds are one CUDA graph;
-        * on the CPU (the default there), each particle's whole climb in one thread (Scorer.climb): no
-          launch per round, no particle waiting for the slowest one. Rounds = the most any particle took."""
+        Three ways to run it (``how``), the same poses bit for bit (tests/test_slam.py, tests/test_gpu.py):
+        * ``blocks`` (the default on a GPU): one block per particle, a thread per beam, the whole climb in one
+          launch (Scorer.climb_blocks); no launch and no look from the host per round;
+        * ``threads`` (the default on the CPU): each particle's whole climb in one thread (Scorer.climb), one
+          launch per block of particles on each core;
+        * ``rounds``: round by round over particles x moves x beams (the moves, the scores, the update: three
+          launches a round, ``check_every`` rounds per CUDA graph between looks at the active flags), the
+          reference the other two are tested against.
+        Rounds: the most any particle took (``rounds``: the rounds launched)."""
         c, d, P = self.cfg, self.device, self.P
         if not hasattr(self, "_climb"):
             self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
@@ -307,23 +311,20 @@ class RBPF:
                                steps0=wp.array(np.tile(np.float32([c.lstep, c.lstep, c.astep]), (P, 1)), dtype=wp.vec3,
                                                device=d))  # every climb's first steps
         st = self._climb
-        if rounds_launched is None:
-            rounds_launched = wp.get_device(d).is_cuda
-        climb = self._climb_launching_rounds if rounds_launched else self._climb_in_threads
-        rounds = climb(start, max_rounds, check_every)
+        how = how or ("blocks" if wp.get_device(d).is_cuda else "threads")
+        if how not in self.CLIMBS:
+            raise ValueError(f"RBPF.match: how={how!r}, choose one of {list(self.CLIMBS)}")
+        if how == "rounds":
+            rounds = self._climb_launching_rounds(start, max_rounds, check_every)
+        else:
+            self._write(st["start"], start.astype(np.float32))
+            climb = self.scorer.climb_blocks if how == "blocks" else self.scorer.climb
+            climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles, (c.lstep, c.lstep, c.astep),
+                  int(c.iterations), int(max_rounds), st["pose"], st["best"], st["rounds"])
+            rounds = int(self._read(st["rounds"]).max())
         pose = self._read(st["pose"]).astype(np.float64)
         pose[:, 2] = wrap_angle(pose[:, 2])
         return pose, self._read(st["best"]).astype(np.float64), rounds
-
-    def _climb_in_threads(self, start: np.ndarray, max_rounds: int, check_every: int) -> int:
-        """match's CPU way: Scorer.climb, each particle's whole climb in one thread; returns the most rounds any
-        particle took (``check_every`` is the GPU way's)."""
-        c, st = self.cfg, self._climb
-        st["start"].assign(start.astype(np.float32))
-        self.scorer.climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles,
-                          (c.lstep, c.lstep, c.astep), int(c.iterations), int(max_rounds), st["pose"], st["best"],
-                          st["rounds"])
-        return int(st["rounds"].numpy().max())
 
     def _climb_launching_rounds(self, start: np.ndarray, max_rounds: int, check_every: int) -> int:
         """match's GPU way: rounds launched over particles x moves x beams, ``check_every`` of them per CUDA
