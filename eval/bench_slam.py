@@ -8,6 +8,10 @@ default log is the simulator (no data needed); real logs need their stream cache
 ``--released``: in each repeat, the released C++ (eval/reference/gmapping.py's build, one core, the ROS
 wrapper's settings, seed 0) runs on the same log right after ours, so that the ratio of the two is
 measured side by side on a machine whose speed drifts from hour to hour.
+
+``--match-at N``: the hill climb alone, at the first processed scan after scan N, in each way RBPF.match has
+on the device (GPU: blocks, threads, rounds; CPU: threads, rounds), alternating, with an md5 of each way's
+poses (they are the same bits).
 """
 
 from __future__ import annotations
@@ -66,9 +70,57 @@ def run_released(exp: str, particles: int, scans: int | None) -> float:
         return ref.run_binary(scans_file, Path(tmp), 0, params)
 
 
+def run_match_bench(a, device: str) -> dict:
+    """``--match-at N``: the filter run over the first N scans, then the hill climb of the next processed scan
+    (its motion-model samples, on the maps of that moment) timed ``--match-repeats`` times in each way that
+    runs on the device (RBPF.match ``how``), alternating; prints each way's median [min-max] ms and an md5 of
+    its poses and scores (the ways give the same bits)."""
+    import hashlib
+
+    cfg = compose_config([f"+exp={a.exp}", f"device={device}", f"slam.num_particles={a.particles[0]}", *a.override])
+    log = load_stream(cfg)
+    rbpf, odom = start_filter(cfg, log, device)
+    k = 1
+    while k < min(int(a.match_at), len(log) - 1):
+        rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
+        k += 1
+    caught, propose = [], rbpf.propose
+    rbpf.propose = lambda sampled, moved: (caught.append(sampled.copy()), propose(sampled, moved))[1]
+    while not caught and k < len(log):
+        rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
+        k += 1
+    if not caught:
+        raise ValueError(f"--match-at {a.match_at}: no scan is processed after it in {a.exp}'s {len(log)} scans")
+    ways = ["blocks", "threads", "rounds"] if device.startswith("cuda") else ["threads", "rounds"]
+    times, digest, rounds = {w: [] for w in ways}, {}, {}
+    for w in ways:  # once each first: compiles, and the poses' digest
+        pose, best, rounds[w] = rbpf.match(caught[0], how=w)
+        digest[w] = hashlib.md5(pose.tobytes() + best.tobytes()).hexdigest()
+    for _ in range(int(a.match_repeats)):
+        for w in ways:
+            t0 = time.perf_counter()
+            rbpf.match(caught[0], how=w)
+            times[w].append(1e3 * (time.perf_counter() - t0))
+    print(f"\nGMapping hill climb of {a.particles[0]} particles at scan {k - 1} of {a.exp} ({device}: its motion-model samples, on "
+          f"the maps as the filter left them after that scan), {a.match_repeats} repeats per way, alternating")
+    print("| way (RBPF.match how=) | ms: median [min-max] | rounds | md5 of poses and scores |")
+    print("|---|---|---|---|")
+    for w in ways:
+        t = times[w]
+        print(f"| {w} | {np.median(t):.2f} [{min(t):.2f}-{max(t):.2f}] | {rounds[w]} | {digest[w]} |")
+    out = Path(a.out) / f"slam-match-{a.exp}-{device.split(':')[0]}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    res = {"device": device, "argv": vars(a), "scan": k - 1, "ms": times, "rounds": rounds, "md5": digest}
+    write_json(out, res)
+    print(f"-> {out}")
+    return res
+
+
 def run_slam_bench(a) -> list[dict]:
 
     device = pick_device(a.device or "auto")
+    if a.match_at is not None:
+        return [run_match_bench(a, device)]
     rows = []
     for p in a.particles:
         runs, released = [], []
@@ -118,4 +170,7 @@ def add_parser(sub) -> None:
     p.add_argument("--repeats", type=int, default=5, help="runs per particle count; the table shows the median run")
     p.add_argument("--released", action="store_true",
                    help="time the released C++ on the same log after each repeat (eval/reference/build_gmapping.sh)")
+    p.add_argument("--match-at", type=int, default=None,
+                   help="time the hill climb alone, in each way, at the first processed scan after scan N")
+    p.add_argument("--match-repeats", type=int, default=15, help="with --match-at: timings per way")
     p.add_argument("--out", default="outputs/bench")
