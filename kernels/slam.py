@@ -370,8 +370,9 @@ def make_block_climb_kernel(score_beams):
     scores its beam at the 6 moves, the block shares the 6 contributions of every beam through a tile, and
     every thread adds them up in beam order, so all threads take the same decision and the sums are the
     partial sums ``score`` + ``reduce_partials_kernel`` make, in the same order: the same poses, bit for bit,
-    as the launched rounds (tests/test_gpu.py), without a launch or a look from the host per round. Launch
-    with ``wp.launch_tiled(..., dim=[P], block_dim=b)``, b >= the beams (``block_dim_for``)."""
+    as the launched rounds (tests/test_slam.py, on cuda:0 by eval/gpu/tests.sh), without a launch or a look
+    from the host per round. Launch with ``wp.launch_tiled(..., dim=[P], block_dim=b)``, b >= the beams
+    (``block_dim_for``; a scan of more than ``MAX_BLOCK_BEAMS`` beams climbs in launched rounds instead)."""
 
     @wp.func
     def beam_score(cells: wp.array3d(dtype=wp.vec4), p: int, pose: wp.vec3, T_base_laser: wp.vec3,
@@ -428,10 +429,14 @@ def make_block_climb_kernel(score_beams):
     return climb_block
 
 
+MAX_BLOCK_BEAMS = 1024  # threads per block on NVIDIA GPUs
+
+
 def block_dim_for(beams: int) -> int:
     """Threads per block of the block climb: the beams rounded up to whole warps of 32."""
-    if not 1 <= beams <= 1024:
-        raise ValueError(f"slam: the GPU climb runs a thread per beam, at most 1024; this scan has {beams}")
+    if not 1 <= beams <= MAX_BLOCK_BEAMS:
+        raise ValueError(f"slam: the block climb runs a thread per beam, at most {MAX_BLOCK_BEAMS}; this scan has "
+                         f"{beams} (RBPF.match(how='rounds') climbs such scans)")
     return 32 * ((beams + 31) // 32)
 
 

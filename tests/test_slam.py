@@ -267,6 +267,20 @@ def test_the_climb_in_one_launch_equals_the_launched_rounds(rng, monkeypatch, ho
     assert launched_rounds >= fused_rounds and launched_rounds % 8 == 0  # the host checked every 8 rounds
 
 
+def test_a_gpu_climbs_a_scan_too_long_for_one_block_in_launched_rounds():
+    """A thread per beam fits a block up to MAX_BLOCK_BEAMS beams; a longer scan (a 1081-beam Hokuyo's) climbs in
+    launched rounds by default, and asking for blocks says why not."""
+    from irmcl_warp.slam.rbpf import default_climb
+    from kernels.slam import MAX_BLOCK_BEAMS, block_dim_for
+
+    assert default_climb(False, 180) == "threads" and default_climb(False, 1081) == "threads"
+    assert default_climb(True, 180) == "blocks" and default_climb(True, MAX_BLOCK_BEAMS) == "blocks"
+    assert default_climb(True, MAX_BLOCK_BEAMS + 57) == "rounds"
+    assert [block_dim_for(b) for b in (1, 180, 181, 360, 1024)] == [32, 192, 192, 384, 1024]
+    with pytest.raises(ValueError, match="how='rounds'"):
+        block_dim_for(1081)
+
+
 def test_paper_proposal_keeps_the_sample_where_the_match_scores_too_low(rng):
     """slam.minimum_score: a particle whose match scores at or below it keeps its motion-model sample, weighted
     by the sample's own likelihood; above it the pose is drawn around the match."""

@@ -36,7 +36,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, relative, relative_one, wrap_angle, wrap_angle_one
 from kernels import SLAM, pick_device
-from kernels.slam import ParticleMaps, climb_candidates_kernel, climb_update_kernel
+from kernels.slam import MAX_BLOCK_BEAMS, ParticleMaps, climb_candidates_kernel, climb_update_kernel
 
 
 def low_variance_parents(w: np.ndarray, offset: float) -> np.ndarray:
@@ -295,7 +295,8 @@ class RBPF:
 
         Three ways to run it (``how``), the same poses bit for bit (tests/test_slam.py, tests/test_gpu.py):
         * ``blocks`` (the default on a GPU): one block per particle, a thread per beam, the whole climb in one
-          launch (Scorer.climb_blocks); no launch and no look from the host per round;
+          launch (Scorer.climb_blocks); no launch and no look from the host per round (scans of up to
+          MAX_BLOCK_BEAMS beams; longer ones, a 1081-beam Hokuyo's, climb in ``rounds`` by default);
         * ``threads`` (the default on the CPU): each particle's whole climb in one thread (Scorer.climb), one
           launch per block of particles on each core;
         * ``rounds``: round by round over particles x moves x beams (the moves, the scores, the update: three
@@ -311,7 +312,7 @@ class RBPF:
                                steps0=wp.array(np.tile(np.float32([c.lstep, c.lstep, c.astep]), (P, 1)), dtype=wp.vec3,
                                                device=d))  # every climb's first steps
         st = self._climb
-        how = how or ("blocks" if wp.get_device(d).is_cuda else "threads")
+        how = how or default_climb(wp.get_device(d).is_cuda, self.ranges.shape[0])
         if how not in self.CLIMBS:
             raise ValueError(f"RBPF.match: how={how!r}, choose one of {list(self.CLIMBS)}")
         if how == "rounds":
@@ -444,6 +445,14 @@ class RBPF:
             out.append(h.poses[t][i])
             i = int(h.parents[t][i])  # poses[t] were recorded after resampling at t: step to the parent before it
         return np.array(h.scans), np.array(out[::-1])
+
+
+def default_climb(cuda: bool, beams: int) -> str:
+    """RBPF.match's way on a device: ``threads`` on the CPU; on a GPU ``blocks`` (a thread per beam) where the
+    scan fits in one block of threads, else ``rounds``."""
+    if not cuda:
+        return "threads"
+    return "blocks" if beams <= MAX_BLOCK_BEAMS else "rounds"
 
 
 def fit_gaussian(cand: np.ndarray, log_tau: np.ndarray, floor=(1e-6, 1e-6, 1e-7)):
