@@ -1,5 +1,7 @@
 """``python -m eval.rerun [--exp gmapping_fr079 ...] > jobs.txt``: the Hydra overrides that make every kept SLAM
 run again, one line per run, for a sweep after the code changed (``bash eval/gpu/slam_sweep.sh kept``).
+``python -m eval.rerun --compare <outputs>``: whether the runs made again (``<outputs>/<exp>/<run>/metrics.json``,
+e.g. a sweep's unpacked archive) give their kept runs' errors to the last digit; exits 1 where one does not.
 
 A kept run records the config sections it ran with (``results/slam/<exp>.json``, eval.keep). Its line is
 ``+exp=<exp>`` and every slam setting and data field that differs from what that experiment composes to, so
@@ -61,10 +63,41 @@ def kept_jobs(exps=None, results: Path = REPO / "results" / "slam") -> list[list
     return jobs
 
 
+POSE_METRICS = ("relations", "trajectory")  # the parts of metrics.json that follow from the poses alone
+
+
+def compare(outputs: Path, results: Path = REPO / "results" / "slam") -> tuple[list[str], list[str], list[str]]:
+    """The runs under ``outputs`` (<exp>/<run>/metrics.json) against their kept metrics: the names of those whose
+    relations and trajectory errors are the kept ones to the last digit, of those that differ, and of those not
+    kept."""
+    import json
+
+    same, differ, not_kept, kept = [], [], [], {}
+    for path in sorted(Path(outputs).glob("*/*/metrics.json")):
+        exp, run = path.parent.parent.name, path.parent.name
+        if exp not in kept:
+            kept[exp] = (load_kept(results, exp) or {"runs": {}})["runs"]
+        name, old = f"{exp}/{run}", kept[exp].get(run)
+        if old is None:
+            not_kept.append(name)
+            continue
+        new = json.loads(path.read_text())
+        (same if all(new.get(k) == old["metrics"].get(k) for k in POSE_METRICS) else differ).append(name)
+    return same, differ, not_kept
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m eval.rerun")
     ap.add_argument("--exp", nargs="+", help="only these experiments (e.g. gmapping_fr079)")
+    ap.add_argument("--compare", metavar="OUTPUTS", help="check runs made again under OUTPUTS against the kept ones")
     a = ap.parse_args(argv)
+    if a.compare:
+        same, differ, not_kept = compare(Path(a.compare))
+        print(f"{len(same)} of {len(same) + len(differ)} runs give their kept runs' relations and trajectory errors to "
+              f"the last digit" + (f"; {len(not_kept)} not kept: {', '.join(not_kept)}" if not_kept else ""))
+        for name in differ:
+            print(f"differs: {name}")
+        return 1 if differ or not (same or differ) else 0
     for line in kept_jobs(a.exp):
         print(" ".join(line))
     return 0

@@ -560,3 +560,30 @@ def test_kept_runs_are_made_again_under_their_own_folder_names():
     assert OmegaConf.to_container(again.slam) == kept["slam"] and OmegaConf.to_container(again.data) == kept["data"]
     assert run_tag(again.slam, again.data) == run_tag(cfg.slam, cfg.data) == \
         "slam-gmapping_code-selective-30p-seed3-srt0.4-laserframe-offset0_0_0"
+
+
+def test_rerun_compare_says_which_runs_made_again_give_their_kept_errors(tmp_path):
+    """``python -m eval.rerun --compare``: a run made again is the same when its relations and trajectory errors are
+    the kept ones to the last digit; one that differs (even in the 17th digit) fails the check, and runs that were
+    never kept are named, not counted."""
+    import json
+
+    from eval.keep import write_kept
+    from eval.rerun import compare
+
+    results, outputs = tmp_path / "results", tmp_path / "outputs"
+    metrics = {"relations": {"trans_abs_mean_m": 0.06745453373839877}, "trajectory": {"ate_rmse_m": 0.113}}
+    runs = {f"slam-paper-selective-30p-seed{k}": {"config": {}, "metrics": metrics} for k in range(3)}
+    results.mkdir()
+    write_kept(results / "gmapping_fr079.json", {"exp": "gmapping_fr079", "group": "slam", "runs": runs})
+    again = {0: metrics, 1: {**metrics, "relations": {"trans_abs_mean_m": 0.06745453373839878}}, 7: metrics}
+    for k, m in again.items():
+        d = outputs / "gmapping_fr079" / f"slam-paper-selective-30p-seed{k}"
+        d.mkdir(parents=True)
+        (d / "metrics.json").write_text(json.dumps({**m, "wall_s": 1.0 + k}))  # other fields may differ
+    same, differ, not_kept = compare(outputs, results)
+    assert same == ["gmapping_fr079/slam-paper-selective-30p-seed0"]
+    assert differ == ["gmapping_fr079/slam-paper-selective-30p-seed1"]
+    assert not_kept == ["gmapping_fr079/slam-paper-selective-30p-seed7"]
+    (outputs / "gmapping_fr079" / "slam-paper-selective-30p-seed1").rename(tmp_path / "gone")
+    assert compare(outputs, results)[1] == []
