@@ -29,11 +29,17 @@ from irmcl_warp.slam.stage import start_filter
 from kernels import pick_device
 
 
-def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
+def new_filter(exp: str, particles: int, device: str, overrides=()):
+    """(filter, log, odometry) of ``exp`` with ``particles`` particles on ``device``, started at its first scan."""
     cfg = compose_config([f"+exp={exp}", f"device={device}", f"slam.num_particles={particles}", *overrides])
     log = load_stream(cfg)
-    n = len(log) if scans is None else min(int(scans), len(log))
     rbpf, odom = start_filter(cfg, log, device)
+    return rbpf, log, odom
+
+
+def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=()) -> dict:
+    rbpf, log, odom = new_filter(exp, particles, device, overrides)
+    n = len(log) if scans is None else min(int(scans), len(log))
     t0 = time.perf_counter()
     processed = sum(rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k])).processed for k in range(1, n))
     wall = time.perf_counter() - t0
@@ -77,15 +83,18 @@ def run_match_bench(a, device: str) -> dict:
     its poses and scores (the ways give the same bits)."""
     import hashlib
 
-    cfg = compose_config([f"+exp={a.exp}", f"device={device}", f"slam.num_particles={a.particles[0]}", *a.override])
-    log = load_stream(cfg)
-    rbpf, odom = start_filter(cfg, log, device)
+    rbpf, log, odom = new_filter(a.exp, a.particles[0], device, a.override)
     k = 1
     while k < min(int(a.match_at), len(log) - 1):
         rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
         k += 1
     caught, propose = [], rbpf.propose
-    rbpf.propose = lambda sampled, moved: (caught.append(sampled.copy()), propose(sampled, moved))[1]
+
+    def catch(sampled, moved):  # the proposal's input: the climb's start at the next processed scan
+        caught.append(sampled.copy())
+        return propose(sampled, moved)
+
+    rbpf.propose = catch
     while not caught and k < len(log):
         rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k]))
         k += 1

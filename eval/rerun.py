@@ -12,6 +12,7 @@ not a silent new variant).
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -70,8 +71,6 @@ def compare(outputs: Path, results: Path = REPO / "results" / "slam") -> tuple[l
     """The runs under ``outputs`` (<exp>/<run>/metrics.json) against their kept metrics: the names of those whose
     relations and trajectory errors are the kept ones to the last digit, of those that differ, and of those not
     kept."""
-    import json
-
     same, differ, not_kept, kept = [], [], [], {}
     for path in sorted(Path(outputs).glob("*/*/metrics.json")):
         exp, run = path.parent.parent.name, path.parent.name

@@ -293,7 +293,7 @@ class RBPF:
         ``iterations`` halvings of the steps. Returns (poses [P, 3], scores [P], rounds).
         Twin: irmcl_warp/reference/slam.py ``hill_climb``.
 
-        Three ways to run it (``how``), the same poses bit for bit (tests/test_slam.py, tests/test_gpu.py):
+        Three ways to run it (``how``), the same poses bit for bit (tests/test_slam.py, on cuda:0 too):
         * ``blocks`` (the default on a GPU): one block per particle, a thread per beam, the whole climb in one
           launch (Scorer.climb_blocks); no launch and no look from the host per round (scans of up to
           MAX_BLOCK_BEAMS beams; longer ones, a 1081-beam Hokuyo's, climb in ``rounds`` by default);
