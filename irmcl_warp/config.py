@@ -122,6 +122,11 @@ class TrainConfig:
     lr: float = 1e-4
     lr_milestones: List[int] = field(default_factory=lambda: [4, 8])
     lr_gamma: float = 0.5
+    lr_schedule: str = "multistep"  # multistep (the authors': x lr_gamma after each milestone epoch) | cosine (per step, below)
+    warmup_steps: int = 0  # cosine: lr rises linearly from 0 over these steps ...
+    lr_final: float = 0.01  # ... then falls along a cosine to lr * lr_final at the last step of the last epoch
+    bn_recalibrate: int = 0  # before each validation, batch norm's running statistics recomputed over this many batches (0 = as trained)
+    ema_decay: Optional[float] = None  # evaluate and keep an exponential moving average of the weights (e.g. 0.999); None = the weights themselves
     weight_decay: float = 1e-3
     loss: str = "smooth_l1"  # smooth_l1 (authors' code) | l1 (paper)
     lambda_opacity: float = 1e-5  # weight of the occupancy regulariser (authors' code)

@@ -153,10 +153,14 @@ def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
         prepare_beams(_cfg(["+exp=fr079"]))
 
 
-def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_does(tmp_path, monkeypatch):
+@pytest.mark.parametrize("extra", [[], ["train.lr_schedule=cosine", "train.warmup_steps=5", "train.ema_decay=0.9",
+                                         "train.bn_recalibrate=2"]],
+                         ids=["multistep", "cosine-ema"])
+def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_does(tmp_path, monkeypatch, extra):
     """train.sampler=occupancy: the grid (and the RNG its readings draw from) are in last.pt, so a run
     stopped after its first epoch and resumed gives the same weights and grid, bit for bit, as one that
-    never stopped; and the sampler does skip most samples."""
+    never stopped; and the sampler does skip most samples. With a per-step schedule and a weight average,
+    the learning rate and the average resume too."""
     from irmcl_warp.nof.stage import make_validator
     from irmcl_warp.nof.trainer import Trainer
     from irmcl_warp.services.data import prepare_beams
@@ -164,7 +168,7 @@ def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_
     monkeypatch.chdir(tmp_path)
     cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=40", "train=quick", "train.sampler=occupancy",
                 "train.epochs=2", "train.steps_per_epoch=12", "train.grid_every=5", "train.val_scans=2",
-                "train.batch_rays=128", "train.num_samples=64", "render.num_samples=64", "train.max_time_s=null"])
+                "train.batch_rays=128", "train.num_samples=64", "render.num_samples=64", "train.max_time_s=null", *extra])
     sets = prepare_beams(cfg)
     cpu = torch.device("cpu")
 
@@ -183,7 +187,98 @@ def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_
     resumed.run()
     for k, v in straight.model.state_dict().items():
         assert torch.equal(v, resumed.model.state_dict()[k]), k
+    for k, v in straight.kept_model.state_dict().items():
+        assert torch.equal(v, resumed.kept_model.state_dict()[k]), k
     assert torch.equal(straight.grid.values, resumed.grid.values)
+    assert straight.opt.param_groups[0]["lr"] == resumed.opt.param_groups[0]["lr"]
+    if extra:  # the average is not the weights, and the schedule ended near lr * lr_final
+        assert not torch.equal(straight.kept_model.out.weight, straight.model.out.weight)
+        assert straight.opt.param_groups[0]["lr"] == pytest.approx(cfg.train.lr * cfg.train.lr_final)
+        saved = torch.load(tmp_path / "a" / "nof.pt", weights_only=False)["model"]
+        best = straight.best["epoch"] == 2  # nof.pt holds the average of its epoch
+        assert not best or torch.equal(saved["out.weight"], straight.kept_model.out.weight)
     h = straight.history[-1]
     assert h["samples_per_beam"] < 0.5 * cfg.train.num_samples and h["read_per_beam"] >= h["samples_per_beam"]
     assert h["mlp_gflop_per_step"] > 0 and 0 < h["grid_occupied_share"] <= 1
+
+
+def test_cosine_schedule_and_weight_average_follow_their_formulas():
+    """The per-step schedule against its formula, step by step; the weight average against a numpy twin of
+    avg <- avg + (1 - d) (w - avg), d = min(decay, (1 + n) / (10 + n)), over parameters and batch norm's
+    running statistics, with fresh random weights at every step."""
+    from types import SimpleNamespace
+
+    from irmcl_warp.nof.trainer import WeightAverage, make_scheduler
+
+    tc = SimpleNamespace(lr_schedule="cosine", warmup_steps=4, lr_final=0.05, lr_milestones=[], lr_gamma=0.5)
+    w = torch.nn.Parameter(torch.zeros(3))
+    opt = torch.optim.SGD([w], lr=2.0)
+    sched, per_step = make_scheduler(opt, tc, total_steps=20)
+    assert per_step
+    seen = []
+    for _ in range(20):
+        seen.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    assert seen[:4] == pytest.approx([0.5, 1.0, 1.5, 2.0])  # warm-up to the peak
+    t = (np.arange(4, 20) - 4) / 15
+    assert seen[4:] == pytest.approx(list(2.0 * (0.05 + 0.95 * 0.5 * (1 + np.cos(np.pi * t)))))
+    assert seen[-1] == pytest.approx(0.1) and max(seen) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="lr_schedule='linear'"):
+        make_scheduler(opt, SimpleNamespace(lr_schedule="linear"), 10)
+
+    rng = np.random.default_rng()
+    model = torch.nn.Sequential(torch.nn.Linear(3, 4), torch.nn.BatchNorm1d(4))
+    avg = WeightAverage(model, decay=0.8)
+    twin = {k: v.detach().numpy().astype(np.float64).copy() for k, v in model.state_dict().items() if v.is_floating_point()}
+    for n in range(12):
+        with torch.no_grad():
+            for k, v in model.state_dict().items():
+                if v.is_floating_point():
+                    v.copy_(torch.from_numpy(rng.normal(size=v.shape)))
+        avg.update()
+        d = min(0.8, (1 + n) / (10 + n))
+        for k, v in model.state_dict().items():
+            if k in twin:
+                twin[k] = twin[k] + (1 - d) * (v.numpy().astype(np.float64) - twin[k])
+    for k, v in avg.module.state_dict().items():
+        if k in twin:
+            np.testing.assert_allclose(v.numpy(), twin[k], rtol=1e-5, atol=1e-6, err_msg=k)
+    assert not avg.module.training and not any(p.requires_grad for p in avg.module.parameters())
+    with pytest.raises(ValueError, match="ema_decay=1.5"):
+        WeightAverage(model, 1.5)
+
+
+@pytest.mark.parametrize("sampler", ["uniform", "occupancy"])
+def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path, monkeypatch, sampler):
+    """train.bn_recalibrate=K: each batch norm's running mean becomes the mean of its K batch means (a hook
+    records them), its count K; the occupancy sampler's batches keep fewer samples than the uniform ones."""
+    from irmcl_warp.nof.stage import make_validator
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=30", "train=quick", f"train.sampler={sampler}",
+                "train.batch_rays=64", "train.num_samples=32", "render.num_samples=32", "train.val_scans=2"])
+    sets = prepare_beams(cfg)
+    cpu = torch.device("cpu")
+    tr = Trainer(NOF(ModelConfig(**cfg.model)), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, tmp_path, "key",
+                 make_validator(sets["val"], cfg, 0.02, 20.0, cpu), {})
+    for _ in range(3):
+        tr.step(torch.randint(len(tr.ranges), (64,)))
+    bn = tr.model.head[1][1]
+    means, sizes = [], []
+
+    def record(module, inputs, output):  # batches in train mode (the sampler reads the field in eval mode)
+        if not module.training:
+            return
+        means.append(inputs[0].double().mean(0))
+        sizes.append(len(inputs[0]))
+    hook = bn.register_forward_hook(record)
+    before = bn.running_mean.clone()
+    tr.recalibrate_batch_norm(4)
+    hook.remove()
+    assert len(means) == 4 and int(bn.num_batches_tracked) == 4 and bn.momentum == 0.1
+    torch.testing.assert_close(bn.running_mean.double(), torch.stack(means).mean(0), rtol=1e-5, atol=1e-6)
+    assert not torch.allclose(bn.running_mean, before)
+    assert max(sizes) <= 64 * 32 and (min(sizes) < 64 * 32) == (sampler == "occupancy")

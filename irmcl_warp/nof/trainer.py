@@ -7,12 +7,19 @@ The regulariser (from the authors' code, zero at p = 0 and p = 1, largest at p =
 towards certainty. Invalid (no return / out of range) beams are never in the training rays.
 ``train.sampler=occupancy`` asks the MLP only about the samples a coarse grid of the field says may be
 occupied (irmcl_warp/nof/occupancy.py); the loss is the same formula over the same depths.
+``train.bn_recalibrate=K`` recomputes batch norm's running statistics over K batches before each
+validation (an average over K batches instead of the last ~10 steps' momentum average).
+``train.lr_schedule=cosine`` changes the learning rate after every step (warm-up, then a cosine to
+``lr * lr_final`` at the run's last step); ``train.ema_decay`` validates and keeps an average of the weights.
 Resumable: ``last.pt`` is written at the end of every epoch and every ``checkpoint_every_s``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
+import itertools
+import math
 import time
 from pathlib import Path
 
@@ -37,6 +44,55 @@ def range_loss(pred, target, kind: str):
     raise ValueError(f"train.loss={kind!r}: expected smooth_l1 or l1")
 
 
+def make_scheduler(opt, tc, total_steps: int):
+    """(scheduler, stepped after every optimiser step?): ``multistep`` is stepped once per epoch (the authors'),
+    ``cosine`` once per step, over the run's ``total_steps``."""
+    if tc.lr_schedule == "multistep":
+        return torch.optim.lr_scheduler.MultiStepLR(opt, list(tc.lr_milestones), tc.lr_gamma), False
+    if tc.lr_schedule != "cosine":
+        raise ValueError(f"train.lr_schedule={tc.lr_schedule!r}: expected multistep or cosine")
+    warm, final = int(tc.warmup_steps), float(tc.lr_final)
+
+    def factor(step: int) -> float:
+        if step < warm:
+            return (step + 1) / warm
+        t = min(1.0, (step - warm) / max(1, total_steps - 1 - warm))
+        return final + (1.0 - final) * 0.5 * (1.0 + math.cos(math.pi * t))
+    return torch.optim.lr_scheduler.LambdaLR(opt, factor), True
+
+
+class WeightAverage:
+    """An exponential moving average of a model's floating-point parameters and buffers (batch norm's
+    running statistics too), updated after every step: avg <- avg + (1 - d) (w - avg) with
+    d = min(decay, (1 + n) / (10 + n)) at the n-th update, so the first steps do not tie it to the initial
+    weights. ``module`` is the averaged copy, always in eval mode."""
+
+    def __init__(self, model, decay: float):
+        if not 0.0 < decay < 1.0:
+            raise ValueError(f"train.ema_decay={decay}: expected a value in (0, 1), or null for no average")
+        self.module, self.decay, self.n = copy.deepcopy(model).eval(), float(decay), 0
+        for p in self.module.parameters():
+            p.requires_grad_(False)
+        self._avg, self._live = self._floats(self.module), self._floats(model)
+
+    @staticmethod
+    def _floats(model) -> list[torch.Tensor]:
+        return [t for t in itertools.chain(model.parameters(), model.buffers()) if t.is_floating_point()]
+
+    @torch.no_grad()
+    def update(self) -> None:
+        d = min(self.decay, (1 + self.n) / (10 + self.n))
+        torch._foreach_lerp_(self._avg, [t.detach() for t in self._live], 1.0 - d)
+        self.n += 1
+
+    def state_dict(self) -> dict:
+        return {"model": self.module.state_dict(), "n": self.n}
+
+    def load_state_dict(self, s: dict) -> None:
+        self.module.load_state_dict(s["model"])
+        self.n = int(s["n"])
+
+
 class Trainer:
     """Owns the model, optimiser, schedule and rays of one run; ``run()`` trains and returns the history."""
 
@@ -58,10 +114,16 @@ class Trainer:
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
         self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay,
                                     fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None)
-        self.sched = torch.optim.lr_scheduler.MultiStepLR(self.opt, list(tc.lr_milestones), tc.lr_gamma)
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
         # an epoch is one pass over the rays, or ``steps_per_epoch`` batches (fewer or more than a pass)
         self.steps_per_epoch = tc.steps_per_epoch or -(-len(self.ranges) // tc.batch_rays)
+        self.sched, self.sched_per_step = make_scheduler(self.opt, tc, tc.epochs * self.steps_per_epoch)
+        self.ema = WeightAverage(self.model, tc.ema_decay) if tc.ema_decay is not None else None
+
+    @property
+    def kept_model(self):
+        """The weights validated and written to nof.pt: the average when ``train.ema_decay`` is set."""
+        return self.ema.module if self.ema is not None else self.model
 
     # --- checkpointing -------------------------------------------------------------------------
     def state(self) -> dict:
@@ -71,7 +133,8 @@ class Trainer:
         return {"key": self.key, "model": self.model.state_dict(), "opt": self.opt.state_dict(),
                 "sched": self.sched.state_dict(), "epoch": self.epoch, "step_in_epoch": self.step_in_epoch,
                 "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng,
-                "grid": None if self.grid is None else self.grid.state_dict()}
+                "grid": None if self.grid is None else self.grid.state_dict(),
+                "ema": None if self.ema is None else self.ema.state_dict()}
 
     def try_resume(self) -> bool:
         path = self.out / "last.pt"
@@ -91,6 +154,8 @@ class Trainer:
         self.best, self.train_time_s = s["best"], s["train_time_s"]
         if self.grid is not None and s.get("grid") is not None:
             self.grid.load_state_dict(s["grid"])
+        if self.ema is not None:
+            self.ema.load_state_dict(s["ema"])
         torch.set_rng_state(s["rng"]["cpu"].cpu())  # map_location moved it to the device
         if "cuda" in s["rng"] and torch.cuda.is_available():
             torch.cuda.set_rng_state_all([t.cpu() for t in s["rng"]["cuda"]])
@@ -119,7 +184,40 @@ class Trainer:
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         self.opt.step()
+        if self.sched_per_step:
+            self.sched.step()
+        if self.ema is not None:
+            self.ema.update()
         return loss.detach()
+
+    @torch.no_grad()
+    def recalibrate_batch_norm(self, batches: int) -> None:
+        """Batch norm's running statistics of the kept weights as the plain average over ``batches`` fresh
+        training batches (sampled as a step samples them, from a generator of their own; the MLP in train
+        mode, no gradient). The batches are drawn first: the occupancy sampler reads the field with the
+        statistics as they were."""
+        gen = torch.Generator(device=self.device).manual_seed(self.tc.seed * 7919 + self.epoch)
+        drawn = []
+        for _ in range(batches):
+            idx = torch.randint(len(self.ranges), (self.tc.batch_rays,), device=self.device, generator=gen)
+            z = sample_depths(len(idx), self.tc.num_samples, self.near_m, self.far_m, self.tc.perturb,
+                              device=self.device, generator=gen)
+            o, d = self.origins[idx], self.dirs[idx]
+            keep = None if self.grid is None else self.grid.keep(sample_points(o, d, z), self.model, self.amp)
+            drawn.append((o, d, z, keep))
+        model = self.kept_model
+        bns = [m for m in model.modules() if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)]
+        momenta, was_training = [m.momentum for m in bns], model.training
+        for m in bns:
+            m.reset_running_stats()
+            m.momentum = None  # a cumulative average
+        model.train()
+        for o, d, z, keep in drawn:
+            with self.amp():
+                render_rays(model, self.renderer, o, d, z, keep)
+        for m, mom in zip(bns, momenta):
+            m.momentum = mom
+        model.train(was_training)
 
     def run(self) -> list[dict]:
         tc = self.tc
@@ -158,7 +256,8 @@ class Trainer:
             torch.cuda.synchronize(self.device)  # the epoch's time includes the work still queued
         self.train_time_s += time.time() - t_ckpt
         epoch_s = time.time() - t_epoch
-        self.sched.step()
+        if not self.sched_per_step:
+            self.sched.step()
         record = {"epoch": self.epoch + 1, "steps": steps, "loss": float(torch.stack(losses).mean()) if losses else None,
                   "epoch_s": epoch_s, "rays_per_s": steps * B / max(epoch_s, 1e-9), "train_time_s": self.train_time_s,
                   "lr": self.opt.param_groups[0]["lr"],
@@ -172,13 +271,20 @@ class Trainer:
                        "mlp_tflop_per_s": flop / max(epoch_s, 1e-9) / 1e12})
         if self.grid is not None:
             record["grid_occupied_share"] = self.grid.occupied_share()
-        record["val"] = self.validate(self.model)
+        if tc.bn_recalibrate:  # part of making the field: counted as training time
+            t0 = time.time()
+            self.recalibrate_batch_norm(tc.bn_recalibrate)
+            if self.device.type == "cuda":
+                torch.cuda.synchronize(self.device)
+            self.train_time_s += time.time() - t0
+            record["train_time_s"] = self.train_time_s
+        record["val"] = self.validate(self.kept_model)
         self.epoch, self.step_in_epoch = self.epoch + 1, 0
         self.history.append(record)
         improved = self.best is None or record["val"]["mae_m"] < self.best["val"]["mae_m"]
         if improved:
             self.best = record
-            atomic_torch_save({**self.meta, "model": self.model.state_dict(), "epoch": record["epoch"],
+            atomic_torch_save({**self.meta, "model": self.kept_model.state_dict(), "epoch": record["epoch"],
                                "val": record["val"]}, self.out / "nof.pt")
         print(f"epoch {record['epoch']}: loss {record['loss']:.4f}, val MAE {record['val']['mae_m']:.3f} m, "
               f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s, "
