@@ -24,6 +24,31 @@ def _synthesis(runs, exp, preset, method="NOF"):
     return next((m for name, m in syn["methods"].items() if name.startswith(method)), None) if syn else None
 
 
+def _minute_spans(runs, exp: str = "fr079") -> dict[str, str]:
+    """The one-minute preset's kept runs on ``exp`` (train.name minute, minute_s1, ...): seeds, and medians
+    [min-max] over them of test MAE, Chamfer (m) and training time (s); {} when none is kept."""
+    found = []
+    for (e, preset), (syn, train) in runs.items():
+        if e == exp and (preset == "minute" or preset.startswith("minute_s")) and syn and train:
+            m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None)
+            if m:
+                found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
+    if not found:
+        return {}
+    mae, cham, secs = (sorted(v) for v in zip(*found))
+    mid = len(found) // 2  # the median of an odd count; the upper middle of an even one
+
+    def span(v, f):
+        return f"{v[mid]:{f}} [{v[0]:{f}}-{v[-1]:{f}}]"
+    return {"seeds": str(len(found)), "mae": span(mae, ".3f"), "chamfer": span(cham, ".3f"), "time": span(secs, ".1f")}
+
+
+def _minute_note(runs, exp: str = "fr079") -> str:
+    m = _minute_spans(runs, exp)
+    return (f"; `train=minute`, {m['seeds']} seeds each trained alone on an H100: MAE {m['mae']} m, "
+            f"Chamfer {m['chamfer']} m in {m['time']} s") if m else ""
+
+
 def _loc(runs, exp, tag):
     m = _pick(runs, exp, tag)
     return None if m is None else m["summary"]
@@ -169,7 +194,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
     rows.append(("IR-MCL", "the NOF synthesises fr079's test scans better than occupancy grids (Table I)",
                  "MAE 0.250 m, F-score 97.4 % (authors' code and recipe)",
                  f"MAE {s['mae_m']:.3f} m, F-score {s['fscore_pct']:.1f} %" + (f"; 5 cm grid {g5['mae_m']:.3f} m" if g5 else "")
-                 + _their_recipe_note() if s else "not run",
+                 + _their_recipe_note() + _minute_note(nof) if s else "not run",
                  NOT_RUN if not s else "reproduced" if s["mae_m"] <= 1.10 * 0.250 and s["fscore_pct"] >= 97.4 - 1.0 else
                  f"partly: MAE {100 * (s['mae_m'] / 0.250 - 1):+.0f} % against the authors'",
                  "python -m irmcl_warp.train +exp=fr079 train=paper && python -m eval.synthesis +exp=fr079 train=paper"))
@@ -279,7 +304,7 @@ def claims(nof: dict, loc: dict, slam: dict, gl: dict, pipe: dict, released: dic
     return rows
 
 
-def facts(slam: dict, released: dict) -> dict[str, str]:
+def facts(slam: dict, released: dict, nof: dict | None = None) -> dict[str, str]:
     """The figures the README's prose quotes, by name, from the kept runs: ``eval.tables --write`` puts each
     between ``<!-- fact:<name> -->`` and ``<!-- /fact -->``, and tests/test_tables.py fails when the prose and
     the results disagree."""
@@ -337,6 +362,9 @@ def facts(slam: dict, released: dict) -> dict[str, str]:
         m = json.loads(THEIR_RECIPE.read_text())
         out["nof_theirs_mae"] = f"{m['their_eval']['mae_m']:.3f} m"
         out["nof_theirs_epochs"] = str(len(m.get("their_val_per_epoch") or []))
+    for ds in ("fr079", "intel"):  # the one-minute preset's kept seeds
+        for key, value in _minute_spans(nof or {}, ds).items():
+            out[f"nof_minute_{ds}_{key}"] = value
     return out
 
 

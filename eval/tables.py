@@ -369,7 +369,7 @@ def main(argv=None):
         text = readme.read_text()
         for name, (_, table) in tables.items():
             text = replace_block(text, name, table)
-        text = write_facts(text, facts(slam, reference))
+        text = write_facts(text, facts(slam, reference, runs))
         atomic_write_bytes(readme, text.encode())
         print(f"-> {readme}")
 

@@ -178,12 +178,12 @@ def test_readme_prose_agrees_with_the_kept_results():
     """Every figure the README's prose quotes as a fact is what the kept runs give (eval.tables --write sets
     them); an edited figure, or results that moved under the prose, fail here."""
     from eval.claims import facts, readme_facts, write_facts
-    from eval.collect import REPO, collect_slam, collect_slam_reference
+    from eval.collect import REPO, collect_slam, collect_slam_reference, collect_synthesis
 
     text = (REPO / "README.md").read_text()
     quoted = readme_facts(text)
     assert len(quoted) >= 8
-    values = facts(collect_slam(outputs=None), collect_slam_reference(outputs=None))
+    values = facts(collect_slam(outputs=None), collect_slam_reference(outputs=None), collect_synthesis(outputs=None))
     assert {k: v for k, v in quoted.items() if values.get(k) != v} == {}
     name = next(iter(quoted))
     edited = text.replace(f"<!-- fact:{name} -->{quoted[name]}", f"<!-- fact:{name} -->99/10", 1)
