@@ -73,7 +73,9 @@ class WeightAverage:
         self.module, self.decay, self.n = copy.deepcopy(model).eval(), float(decay), 0
         for p in self.module.parameters():
             p.requires_grad_(False)
-        self._avg, self._live = self._floats(self.module), self._floats(model)
+        # detached views of the live tensors, made once: they share storage with the weights the optimiser
+        # and batch norm update in place, so every update reads the current values
+        self._avg, self._live = self._floats(self.module), [t.detach() for t in self._floats(model)]
 
     @staticmethod
     def _floats(model) -> list[torch.Tensor]:
@@ -82,7 +84,7 @@ class WeightAverage:
     @torch.no_grad()
     def update(self) -> None:
         d = min(self.decay, (1 + self.n) / (10 + self.n))
-        torch._foreach_lerp_(self._avg, [t.detach() for t in self._live], 1.0 - d)
+        torch._foreach_lerp_(self._avg, self._live, 1.0 - d)
         self.n += 1
 
     def state_dict(self) -> dict:
