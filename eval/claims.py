@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.collect import REPO, converged, released_errors, slam_errors, slam_variant
+from eval.collect import REPO, converged, median_span, released_errors, slam_errors, slam_variant
 from irmcl_warp.config import GlobLocConfig
 
 
@@ -35,12 +35,9 @@ def _minute_spans(runs, exp: str = "fr079") -> dict[str, str]:
                 found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
     if not found:
         return {}
-    mae, cham, secs = (sorted(v) for v in zip(*found))
-    mid = len(found) // 2  # the median of an odd count; the upper middle of an even one
-
-    def span(v, f):
-        return f"{v[mid]:{f}} [{v[0]:{f}}-{v[-1]:{f}}]"
-    return {"seeds": str(len(found)), "mae": span(mae, ".3f"), "chamfer": span(cham, ".3f"), "time": span(secs, ".1f")}
+    mae, cham, secs = zip(*found)
+    return {"seeds": str(len(found)), "mae": median_span(mae, ".3f"), "chamfer": median_span(cham, ".3f"),
+            "time": median_span(secs, ".1f")}
 
 
 def _minute_note(runs, exp: str = "fr079") -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import statistics
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -123,6 +124,13 @@ def released_errors(runs: dict, ds: str, particles: int = 30, variant: str = "")
     return [m["relations"]["trans_abs_mean_m"] for m in runs.values()
             if m.get("dataset") == ds and m.get("particles") == particles and isinstance(m.get("relations"), dict)
             and reference_variant(m) == variant]
+
+
+def median_span(values, fmt: str = ".2f") -> str:
+    """``median [min-max]`` of several runs' figures, each written with ``fmt``: how every figure of several
+    runs is quoted (a median with its spread, never the best run)."""
+    v = [float(x) for x in values]
+    return f"{statistics.median(v):{fmt}} [{min(v):{fmt}}-{max(v):{fmt}}]"
 
 
 def converged(errs) -> tuple[int, int, float | None, float]:

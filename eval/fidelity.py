@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.collect import CONVERGED_M, collect_slam, collect_slam_reference, converged, released_errors, slam_errors
+from eval.collect import (CONVERGED_M, collect_slam, collect_slam_reference, converged, median_span, released_errors,
+                          slam_errors)
 from irmcl_warp.io.atomic import atomic_write_bytes
 
 REPO = Path(__file__).resolve().parents[1]
@@ -133,11 +134,6 @@ SETTINGS = [  # (folder suffix after localize-nog_raymarch-tracking-10k-5cm-irmc
 ]
 
 
-def _spread(values) -> str:
-    v = np.asarray(values, float)
-    return f"{np.median(v):.2f} [{v.min():.2f}-{v.max():.2f}]"
-
-
 def setting_runs(log: str) -> dict:
     """{what: [summary per draw]}: the authors' code's kept draws (their filter seeds itself) and our NOG runs
     with their motion model under each setting of SETTINGS, one per seed (results/checks/irmcl_reference/<log>/
@@ -159,8 +155,8 @@ def settings_table() -> str:
                 rows.append(f"| {log} | {what} | not run | | | |")
                 continue
             ok = "/".join(str(v) for v in (sum(r["successes"] for r in runs), sum(r["starts"] for r in runs)))
-            rows.append(f"| {log} | {what} | {len(runs)} | {ok} | {_spread([r['location_rmse_cm_mean'] for r in runs])} | "
-                        f"{_spread([r['yaw_rmse_deg_mean'] for r in runs])} |")
+            rows.append(f"| {log} | {what} | {len(runs)} | {ok} | {median_span([r['location_rmse_cm_mean'] for r in runs])} | "
+                        f"{median_span([r['yaw_rmse_deg_mean'] for r in runs])} |")
     return "\n".join(rows)
 
 
@@ -206,9 +202,9 @@ def table_table() -> str:
     for (log, mode, w), runs in table_runs().items():
         ok = f"{sum(r['successes'] for r in runs)}/{sum(r['starts'] for r in runs)}"
         rows.append(f"| {log} | {mode}, {runs[0]['num_particles'] // 1000}k | `{w}` | {len(runs)} | {ok} | "
-                    f"{_spread([r['location_rmse_cm_mean'] for r in runs])} | {_spread([r['yaw_rmse_deg_mean'] for r in runs])} | "
-                    f"{_spread([r['time_to_converge_s_mean'] for r in runs])} | "
-                    f"{_spread([r['ms_per_step_median'] for r in runs])} |")
+                    f"{median_span([r['location_rmse_cm_mean'] for r in runs])} | {median_span([r['yaw_rmse_deg_mean'] for r in runs])} | "
+                    f"{median_span([r['time_to_converge_s_mean'] for r in runs])} | "
+                    f"{median_span([r['ms_per_step_median'] for r in runs])} |")
     return "\n".join(rows)
 
 
