@@ -7,16 +7,17 @@ and for the simulator the log as a ROS1 bag (sim.bag) that ``data=bag`` reads ba
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import hydra
 import numpy as np
 
 from irmcl_warp.config import register
-from irmcl_warp.io import load_log, resolve, write_bag
+from irmcl_warp import runs
+from irmcl_warp.io import write_bag
 from irmcl_warp.mapping import build_map, save_map
-from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.outputs import write_json
 from irmcl_warp.types import LaserLog
 from kernels import pick_device
 from irmcl_warp.services.cli import run_entry
@@ -41,10 +42,16 @@ def summarize(log: LaserLog) -> dict:
 
 
 def run_inspect(cfg) -> Path:
-    started = time.time()
+    with runs.start(cfg, "inspect") as run:
+        if run.done:
+            return run.path
+        return inspect_log(run)
+
+
+def inspect_log(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
-    out = stage_dir(cfg, "inspect")
-    log = load_log(cfg)
+    log = load_stream(cfg)
     summary = summarize(log)
     poses, label = (log.ground_truth, "ground truth") if log.num_ground_truth else (log.odom, "odometry")
     m = cfg.mapping
@@ -56,17 +63,15 @@ def run_inspect(cfg) -> Path:
     if cfg.data.format == "sim":
         write_bag(log, out / "sim.bag")
     write_json(out / "summary.json", summary)
-    inputs = [resolve(p) for p in (cfg.data.path, cfg.data.ground_truth_path, cfg.data.laser_frame_path) if p]
-    write_manifest(out, cfg, inputs, device, started)
+    path = run.finish(None, device)
     print(f"{cfg.data.name}: {summary['scans']} scans of {summary['beams']} beams over {summary['fov_deg']:.1f} deg, "
           f"{summary['duration_s']:.0f} s, {summary['ground_truth_poses']} ground-truth poses")
     print(f"  odometry path {summary['odometry_path_m']:.1f} m, ground-truth path {summary['ground_truth_path_m']:.1f} m, "
           f"valid beams {100 * summary['valid_beam_share']:.1f} %, no return at {summary['no_return_m']:.2f} m")
     for line in log.defects.lines() or ["no defects found"]:
         print(f"  defect: {line}" if log.defects else f"  {line}")
-    print(f"  map from {label}: {grid.shape[1]}x{grid.shape[0]} cells -> {out / 'map.png'}")
-    return out
-
+    print(f"  map from {label}: {grid.shape[1]}x{grid.shape[0]} cells -> {path / 'map.png'}")
+    return path
 
 register()
 

@@ -1,23 +1,24 @@
 """``python -m irmcl_warp.pipeline [data=bag data.path=run.bag] [pipeline.path=other.bag]``: from a raw log
 to a localized robot, every artifact made by a command.
 
-1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam-<tag>/ (map, trajectory.tum)
-2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/pipeline-training-poses/
-             slam_poses.tum (one file for the mapping log, whichever second drive is localized)
-3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train-<preset>/nof.pt
+1. slam      GMapping over the mapping log (``data.*``) -> outputs/<exp>/slam/<run>/ (map, trajectory.tum)
+2. poses     the SLAM pose of every scan (or of the processed ones) -> outputs/<exp>/slam_poses/<slam id>-every.tum
+             (one file per SLAM run, whichever second drive is localized)
+3. train     the NOF on those scans and poses (``data.train_poses_path``) -> outputs/<exp>/train/<run>/nof.pt
 4. nog       the NOF baked into a neural occupancy grid over the SLAM map (cached by checkpoint digest)
 5. localize  global MCL with the NOG over the second log (``pipeline.*``; the simulator's second session,
-             or the mapping log again) -> outputs/<exp>/pipeline/localization.tum
-6. report    outputs/<exp>/pipeline/report.md: the map, trajectories, error plot, timing per stage
+             or the mapping log again) -> outputs/<exp>/pipeline/<run>/localization.tum
+6. report    outputs/<exp>/pipeline/<run>/report.md: the map, trajectories, error plot, timing per stage
 
-A stage whose folder is complete for the same settings and inputs (``outputs.stage_complete``) is skipped;
-an interrupted or edited one is redone. Where the logs have ground truth, the SLAM map frame is tied to
+Each stage is a run of its own (irmcl_warp.runs): a finished one with the same settings and inputs is
+reused, an interrupted or edited one is redone. Where the logs have ground truth, the SLAM map frame is tied to
 the ground truth's by a rigid alignment of the SLAM trajectory of the *mapping* log (evo's --align); the
 localization of the second log is scored through that transform, never aligned to its own truth.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -31,15 +32,15 @@ from irmcl_warp.io import load_log, read_tum, write_tum
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.track import follow, window
-from irmcl_warp.nof.stage import run_train, train_dir
+from irmcl_warp.nof.stage import run_train
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.pipeline_report import failure_note, write_report
-from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp import runs
+from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
 from irmcl_warp.services.metrics import localization_metrics
-from irmcl_warp.services.outputs import SECTIONS, file_digest, stage_complete, stage_dir, write_json, write_manifest
-from irmcl_warp.slam.stage import run_slam, run_tag as slam_tag
+from irmcl_warp.slam.stage import run_slam
 from kernels import pick_device
 from irmcl_warp.services.cli import run_entry
 
@@ -56,25 +57,15 @@ def _cm(v) -> str:
     return "-" if v is None else f"{v:.1f} cm"
 
 
-def run_folder(cfg) -> str:
-    """``pipeline``, and for the simulator's second drive its path seed (``pipeline-path3``): the drives share
-    the mapping log's SLAM and NOF, each has its own localization."""
-    second_drive = cfg.data.format == "sim" and cfg.pipeline.path is None
-    return "pipeline" + (f"-path{cfg.pipeline.sim_path_seed}" if second_drive else "")
-
-
-def run_stage(name: str, out: Path, cfg, inputs, run, timing: dict) -> Path:
-    """Run ``run()`` unless ``out`` already holds a complete stage ``name`` for ``cfg`` and ``inputs``."""
+def run_stage(name: str, cfg, run, timing: dict) -> Path:
+    """Run stage ``name`` through ``run(cfg)`` and note its time, or 0 s and "skipped" where its finished run
+    was already there."""
     t0 = time.time()
-    done, why = stage_complete(out, cfg, inputs, SECTIONS[name])
+    done = runs.finished(runs.identify(cfg, name)) is not None
+    out = run(cfg)
+    timing[name] = {"s": 0.0 if done else time.time() - t0, "skipped": done}
     if done:
         print(f"[{name}] up to date: {out}")
-        timing[name] = {"s": 0.0, "skipped": True}
-        return out
-    if (out / "manifest.json").exists():
-        print(f"[{name}] redoing: {why}")
-    out = run()
-    timing[name] = {"s": time.time() - t0, "skipped": False}
     return out
 
 
@@ -136,38 +127,44 @@ def stage_summary(out: Path) -> dict:
 
 
 def run_pipeline(cfg) -> Path:
-    started, device, timing = time.time(), pick_device(cfg.device), {}
     cfg = with_overrides(cfg, **{"data.train_poses_path": None})
-    out = stage_dir(cfg, run_folder(cfg))
+    with runs.start(cfg, "pipeline") as run:
+        if run.done:
+            print(f"pipeline up to date: {run.path / 'report.md'}")
+            return run.path
+        return pipeline(run)
+
+
+def training_poses(cfg, slam_dir: Path, log) -> Path:
+    """The SLAM pose of every scan (or of the processed ones) of the mapping log: the NOF's training poses, a
+    file named by the SLAM run it comes from (its content is what the training run depends on)."""
+    every = cfg.pipeline.train_every_scan
+    scans, poses = slam_poses(slam_dir, log, every)
+    slam_id = json.loads((slam_dir / "manifest.json").read_text())["id"]
+    path = runs.cache_dir(cfg, "slam_poses") / f"{slam_id[:runs.ID_CHARS]}-{'every' if every else 'processed'}.tum"
+    if not path.is_file():
+        write_tum(path, log.stamps[scans], poses)
+    return path
+
+
+def pipeline(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
+    device, timing = pick_device(cfg.device), {}
     # 1. SLAM over the mapping log
-    slam_dir = run_stage("slam", stage_dir(cfg, slam_tag(cfg.slam, cfg.data)), cfg, recorded_inputs(cfg),
-                         lambda: run_slam(cfg), timing)
+    slam_dir = run_stage("slam", cfg, run_slam, timing)
     log = load_stream(cfg)
-    # 2. the SLAM poses: the NOF's training poses, one file for the mapping log whatever drive is localized
+    # 2. the SLAM poses: the NOF's training poses
     scans, poses = slam_poses(slam_dir, log, cfg.pipeline.train_every_scan)
-    posed = stage_dir(cfg, "pipeline-training-poses") / "slam_poses.tum"
-    tmp = posed.with_name("slam_poses.tum.new")
-    write_tum(tmp, log.stamps[scans], poses)
-    if posed.is_file() and file_digest(tmp) == file_digest(posed):
-        tmp.unlink()  # unchanged: keep the file (and the caches keyed on its mtime)
-    else:
-        tmp.replace(posed)
+    posed = training_poses(cfg, slam_dir, log)
     # 3. the NOF, trained on those (interleaved train / val / test over the posed scans)
-    cfg_train = with_overrides(cfg, **{"data.train_poses_path": str(posed.resolve()),
-                                       "data.splits_path": None})
-    train_out = run_stage("train", train_dir(cfg_train), cfg_train, recorded_inputs(cfg_train),
-                          lambda: run_train(cfg_train), timing)
-    # what the localization depends on beyond the settings: the log, the SLAM map and the NOF
-    inputs = recorded_inputs(cfg) + [slam_dir / "map.npz", train_out / "nof.pt"]
-    if stage_complete(out, cfg, inputs)[0]:
-        print(f"pipeline up to date: {out / 'report.md'}")
-        return out
+    cfg_train = with_overrides(cfg, **{"data.train_poses_path": str(posed.resolve()), "data.splits_path": None})
+    train_out = run_stage("train", cfg_train, run_train, timing)
     # 4. the NOG over the SLAM map's extent of the scans
     t0 = time.time()
     far = far_bound_m(cfg, log.info.range_max_m)
     T_map_laser = compose(poses, log.T_base_laser)
     nog = bake_nog(train_out / "nof.pt", laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
-                   cfg.mcl.map_resolution_m, cache_dir=stage_dir(cfg, "nog"),
+                   cfg.mcl.map_resolution_m, cache_dir=runs.cache_dir(cfg, "nog"),
                    device="cuda" if device.startswith("cuda") else "cpu")
     timing["nog"] = {"s": time.time() - t0, "skipped": False}
     # 5. global localization of the second log
@@ -188,8 +185,8 @@ def run_pipeline(cfg) -> Path:
         metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
         metrics["failure"] = failure_note(log2.stamps[idx], est, gt_map, metrics["localization"])
     write_report(out, cfg, metrics, slam_map, poses, log2.stamps[idx], est, gt_map, particles)
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, inputs, device, started)
+    upstream = {"slam": {"path": str(slam_dir)}, "train": {"path": str(train_out)}}
+    out = run.finish(metrics, device, extra={"stages": upstream})
     loc = metrics.get("localization")
     print(f"pipeline: NOF trained on {len(scans)} SLAM-posed scans, {len(idx)} scans localized"
           + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {_cm(loc['location_rmse_cm'])}"

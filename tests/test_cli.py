@@ -89,7 +89,8 @@ def test_data_tests_skip_without_the_data_and_fail_when_ci_requires_it(tmp_path)
 
 
 @pytest.mark.parametrize("entry", ["irmcl_warp.slam", "irmcl_warp.train", "irmcl_warp.localize", "irmcl_warp.globloc",
-                                   "irmcl_warp.inspect", "irmcl_warp.pipeline", "eval.synthesis", "eval.relations"])
+                                   "irmcl_warp.inspect", "irmcl_warp.pipeline", "irmcl_warp.synthesis",
+                                   "irmcl_warp.relations"])
 def test_every_hydra_entry_point_starts_and_checks_its_settings(tmp_path, entry):
     _one_clean_line(_run([entry, "mcl.num_particles=0"], tmp_path), "mcl.num_particles=0", ">= 1")
 
@@ -98,4 +99,4 @@ def test_argparse_entry_points_report_bad_input_without_a_traceback(tmp_path):
     _one_clean_line(_run(["eval.bench", "mcl", "--nog", str(tmp_path / "none.npz"), "--out", str(tmp_path)], tmp_path),
                     "none.npz")
     kept = _run(["eval.keep", str(tmp_path / "not-a-run"), "--results", str(tmp_path / "results")], tmp_path)
-    assert kept.returncode != 0 and "not a finished stage folder" in kept.stderr and "Traceback" not in kept.stderr
+    assert kept.returncode == 2 and "not a finished run" in kept.stderr and "Traceback" not in kept.stderr

@@ -1,53 +1,53 @@
-"""Stage bookkeeping: a finished stage is recognised (manifest digests, settings, inputs) and an
-interrupted, edited or re-configured one is not; TUM trajectories round-trip."""
+"""Stage bookkeeping: a finished run is recognised by its manifest (its id, the digest of every file it
+wrote), and an interrupted, edited or truncated one is not; TUM trajectories round-trip."""
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from hydra import compose, initialize_config_dir
 
-from irmcl_warp.config import register
+from irmcl_warp import runs
+from irmcl_warp.config import compose_config
 from irmcl_warp.io import LogFormatError, read_tum
 from irmcl_warp.io import write_tum
-from irmcl_warp.services.outputs import stage_complete, write_json, write_manifest
-
-CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def _cfg(*overrides):
-    register()
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
+def _finished(root: Path, cfg) -> Path:
+    with runs.start(cfg, "inspect", root) as run:
+        (run.dir / "sub").mkdir()
+        (run.dir / "sub" / "trajectory.tum").write_text("1.0 0 0 0 0 0 0 1\n")
+        return run.finish({"value": 1.0}, "cpu")
 
 
-def _finished_stage(out: Path, cfg, inp: Path) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "metrics.json", {"value": 1.0})
-    (out / "sub").mkdir(exist_ok=True)
-    (out / "sub" / "trajectory.tum").write_text("1.0 0 0 0 0 0 0 1\n")
-    write_manifest(out, cfg, [inp], "cpu", 0.0)
-
-
-def test_finished_stage_is_recognised_and_damage_is_not(tmp_path):
-    cfg, inp = _cfg(), tmp_path / "input.log"
-    inp.write_text("scan data\n")
-    out = tmp_path / "stage"
-    assert stage_complete(out, cfg)[0] is False  # never run
-    _finished_stage(out, cfg, inp)
-    assert stage_complete(out, cfg, [inp]) == (True, "")
-    assert "other settings" in stage_complete(out, _cfg("mcl.num_particles=7"), [inp])[1]
-    inp.write_text("another log\n")
-    assert "input" in stage_complete(out, cfg, [inp])[1]
-    inp.write_text("scan data\n")
+def test_finished_run_is_recognised_and_damage_is_not(tmp_path):
+    cfg = compose_config(["device=cpu"])
+    ident = runs.identify(cfg, "inspect")
+    assert runs.finished(ident, tmp_path) is None  # never run
+    out = _finished(tmp_path, cfg)
+    assert out == ident.folder(tmp_path) and runs.intact(out, ident.id) == (True, "")
+    assert json.loads((out / "manifest.json").read_text())["id"] == ident.id
+    assert "another run" in runs.intact(out, "0" * 64)[1]
     (out / "sub" / "trajectory.tum").write_text("1.0 0 0")  # half-rewritten by an interrupted rerun
-    assert "differs" in stage_complete(out, cfg, [inp])[1]
-    _finished_stage(out, cfg, inp)
+    assert "differs" in runs.intact(out)[1]
+    (out / "sub" / "trajectory.tum").write_text("1.0 0 0 0 0 0 0 1\n")
+    assert runs.intact(out)[0]
     (out / "metrics.json").unlink()
-    assert "missing" in stage_complete(out, cfg, [inp])[1]
-    _finished_stage(out, cfg, inp)
+    assert "missing" in runs.intact(out)[1]
+    out = _finished(tmp_path, cfg)  # redone: whole again
     (out / "manifest.json").write_text('{"outputs": {')  # a manifest cut off mid-write by hand
-    assert "malformed" in stage_complete(out, cfg, [inp])[1]
+    assert "malformed" in runs.intact(out)[1] and runs.finished(ident, tmp_path) is None
+
+
+def test_a_run_left_unfinished_leaves_no_finished_run(tmp_path):
+    cfg = compose_config(["device=cpu"])
+    with pytest.raises(KeyboardInterrupt):
+        with runs.start(cfg, "inspect", tmp_path) as run:
+            (run.dir / "summary.json").write_text("{}")
+            raise KeyboardInterrupt  # Ctrl-C in the middle of the stage
+    assert runs.finished(runs.identify(cfg, "inspect"), tmp_path) is None
+    out = _finished(tmp_path, cfg)  # the next run starts afresh: nothing of the interrupted one in it
+    assert not (out / "summary.json").exists() and runs.intact(out)[0]
 
 
 def test_tum_round_trip_and_errors(tmp_path, rng):

@@ -36,7 +36,7 @@ from irmcl_warp.globloc.methods import laser_angles, run_method
 from irmcl_warp.globloc.pnp import OrbPnP
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.io import write_tum
-from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp import runs
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import office
@@ -212,19 +212,18 @@ def summarise(rows: list, hours: float) -> dict:
     return out
 
 
-def scenario_folder(cfg) -> str:
-    return f"globloc-{cfg.globloc.scenario}"
-
-
 def run_globloc(cfg) -> Path:
-    started, device = time.time(), pick_device(cfg.device)
-    g, s = cfg.globloc, cfg.sim
-    bad = [m for m in g.methods if m not in METHODS]
+    bad = [m for m in cfg.globloc.methods if m not in METHODS]
     if bad:
         raise ValueError(f"globloc.methods: unknown {bad}; choose from {list(METHODS)}")
-    out = stage_dir(cfg, scenario_folder(cfg))
-    if up_to_date(out, cfg, stage="globloc"):
-        return out
+    with runs.start(cfg, "globloc") as run:
+        return run.path if run.done else localize_runs(run)
+
+
+def localize_runs(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
+    device = pick_device(cfg.device)
+    g, s = cfg.globloc, cfg.sim
     rng = np.random.default_rng(g.seed)
     world = world_of(cfg)
     look = appearance(world, s.seed, g.lookalike_share)
@@ -247,10 +246,10 @@ def run_globloc(cfg) -> Path:
     try:
         from tqdm import tqdm
 
-        runs = tqdm(range(g.runs), desc=f"globloc {g.scenario}", unit="run")
+        loop = tqdm(range(g.runs), desc=f"globloc {g.scenario}", unit="run")
     except ImportError:  # pragma: no cover
-        runs = range(g.runs)
-    for k in runs:
+        loop = range(g.runs)
+    for k in loop:
         st = make_stream(cfg, world, look, rng, k, device)
         hyps = [hyp(st.rgb[j], st.ranges[i]) for j, i in enumerate(st.cam_idx)]
         for m in g.methods:
@@ -272,8 +271,7 @@ def run_globloc(cfg) -> Path:
                "ms_per_camera_frame": {k: 1e3 * v / frames for k, v in hyp.timing.items() if k != "frames"},
                "first_run": first_run,
                "settings": OmegaConf.to_container(g)}
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, [], device, started)
+    out = run.finish(metrics, device)
     for m in g.methods:
         sm = metrics["methods"][m]["summary"]
         print(f"  {m:12s} localized {sm['localized']}/{sm['runs']}"

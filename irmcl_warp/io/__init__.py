@@ -33,11 +33,15 @@ def data_root() -> Path:
 
 
 def resolve(path: str) -> Path:
+    """A file a setting names: as given (absolute, or from the working directory) when it exists there, else
+    under the data root (``IRMCL_DATA``), where the shared logs' paths are relative to."""
     p = Path(path).expanduser()
+    if p.exists():
+        return p
     if not p.is_absolute():
         p = data_root() / p
     if not p.exists():
-        raise FileNotFoundError(f"{p} not found (data paths are relative to IRMCL_DATA={data_root()})")
+        raise FileNotFoundError(f"{path} not found, neither from the working directory nor under IRMCL_DATA={data_root()}")
     return p
 
 

@@ -6,7 +6,9 @@
 
 The map is a ROS map_server YAML (+ PGM or PNG) or a ``.npz`` grid (what the slam stage writes); the filter
 starts uniform over its free cells, or around ``localize.initial_pose`` with ``localize.tracking_std``. One
-run over ``localize.start_s`` .. ``+ run_s`` (None: to the end). Writes outputs/<exp>/<run>/: trajectory.tum,
+run over ``localize.start_s`` .. ``+ run_s`` (None: to the end). Writes outputs/<exp>/localize/<weighting>-
+<global|pose>-<particles>-in-<map>-<id>/ (the id follows the map's and the NOF's content, so two maps both
+called map.yaml are two runs): trajectory.tum,
 spread.csv (the particles' spread and N_eff over time), run.png (the map, the trajectory, the final particles,
 the spread over time), particles.gif (the particles on the map as the run goes on) and metrics.json (where
 the log has ground truth, the trajectory error after a rigid alignment to it: your map need not share its frame).
@@ -20,43 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.geometry import align_rigid, compose, inverse
-from irmcl_warp.io import resolve, write_tum
+from irmcl_warp.io import write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
-from irmcl_warp.mcl.folders import particles_tag
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp.nof.checkpoint import load_nof
-from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp import runs
+from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import aligned_error
 from irmcl_warp.services.nog import bake_nog
-from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.services.plots import animate_particles, plot_own_map
 from kernels import pick_device
 
 FRAMES = 60  # animation frames over the run
-
-
-def user_file(path: str) -> Path:
-    """A file the user names: as given (absolute or from the working directory), else under the data root."""
-    p = Path(path).expanduser()
-    return p if p.exists() else resolve(path)
-
-
-def map_inputs(map_file: Path) -> list[Path]:
-    """The map file and, for a YAML, its image (both decide whether a run is up to date)."""
-    if map_file.suffix != ".npz":
-        from omegaconf import OmegaConf  # the YAML's image name; load_map has checked the file already
-
-        image = OmegaConf.load(map_file).get("image")
-        return [map_file] + ([map_file.parent / image] if image else [])
-    return [map_file]
-
-
-def own_map_folder(cfg) -> str:
-    m, loc = cfg.mcl, cfg.localize
-    start = "pose" if loc.initial_pose is not None else "global"
-    return f"localize-{m.weighting}-{start}-{particles_tag(m.num_particles)}-in-{Path(loc.map_path).stem}"
 
 
 def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
@@ -65,25 +44,29 @@ def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
         return grid_maps(grid, m.weighting)
     if not loc.nof_path:
         raise ValueError(f"mcl.weighting={m.weighting} reads a trained NOF: set localize.nof_path=<nof.pt>")
-    ckpt = user_file(loc.nof_path)
+    ckpt = runs.locate_file("localize.nof_path", loc.nof_path)
     torch_device = "cuda" if device.startswith("cuda") else "cpu"
     if m.weighting == "nof_direct":
         return WeightingMaps(model=load_nof(ckpt, torch_device)[0])
     H, W = grid.shape
     x0, y0 = grid.origin_xy
     bounds = (x0, y0, x0 + W * grid.resolution_m, y0 + H * grid.resolution_m)
-    return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=stage_dir(cfg, "nog"), device=torch_device))
+    return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=runs.cache_dir(cfg, "nog"),
+                                      device=torch_device))
 
 
 def run_in_map(cfg) -> Path:
-    started, device = time.time(), pick_device(cfg.device)
+    map_file = runs.locate_file("localize.map_path", cfg.localize.map_path)
+    load_map(map_file)  # a malformed map is an error naming it before anything else
+    with runs.start(cfg, "localize") as run:
+        return run.path if run.done else localize_in_map(run, map_file)
+
+
+def localize_in_map(run: runs.Run, map_file: Path) -> Path:
+    cfg, out = run.cfg, run.dir
+    device = pick_device(cfg.device)
     m, loc = cfg.mcl, cfg.localize
-    map_file = user_file(loc.map_path)
     grid = load_map(map_file)
-    inputs = recorded_inputs(cfg) + map_inputs(map_file) + ([user_file(loc.nof_path)] if loc.nof_path else [])
-    out = stage_dir(cfg, own_map_folder(cfg))
-    if up_to_date(out, cfg, inputs, "localize"):
-        return out
     log = load_stream(cfg)
     far = far_bound_m(cfg, log.info.range_max_m)
     view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
@@ -134,8 +117,7 @@ def run_in_map(cfg) -> Path:
               grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)
     plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt_in_map)
     animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, inputs, device, started)
+    out = run.finish(metrics, device)
     print(f"{log.source}: {len(idx)} scans localized in {map_file} ({metrics['start']} start); particle spread "
           f"{metrics['final_spread_m']:.2f} m at the end -> {out}")
     return out

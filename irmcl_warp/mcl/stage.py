@@ -11,9 +11,9 @@ particles ``localize.reduce_after_s`` into the run.
 ``localize.kidnap_at_s`` > 0 teleports the robot: that far into each run the stream jumps to the next start
 time (another place; the odometry does not see the jump), and metrics.json scores the recovery.
 
-Writes outputs/<exp>/localize-<tag>/ (tag: weighting, mode, particles, resolution, kidnap; see
-``run_tag``): trajectories (TUM: stamp x y z qx qy qz qw), metrics.json (per start and summary),
-start0.png. The stream is cached in outputs/<exp>/stream/ (a GPU box can run without the raw log).
+Writes outputs/<exp>/localize/<weighting>-<mode>-<particles>-<resolution>m-<id>/ (irmcl_warp.runs):
+trajectories (TUM: stamp x y z qx qy qz qw), metrics.json (per start and summary), start0.png. A NOF
+weighting reads the field of the finished training run of the same settings (never an unfinished one).
 """
 
 from __future__ import annotations
@@ -24,28 +24,25 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.config import MCLConfig
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
-from irmcl_warp.mcl.folders import particles_tag, resolution_tag
 from irmcl_warp.mcl.own_map import run_in_map
 from irmcl_warp.mcl.track import follow
 from irmcl_warp.nof.checkpoint import load_nof
-from irmcl_warp.nof.folders import train_folder
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
-from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams, recorded_inputs
+from irmcl_warp import runs
+from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
-from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.services.plots import plot_run
 from kernels import pick_device
 
 
-def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
+def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.ndarray]:
     """(free-space view for initialisation as a NOG, what the weighting reads, occupancy image for plots:
-    p_occ, 0.5 where unknown) from the training split."""
+    p_occ, 0.5 where unknown) from the training split; ``nof``: the trained field (nof.pt) a NOF weighting reads."""
     train = prepare_beams(cfg)["train"]
     m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg)
     grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
@@ -54,50 +51,11 @@ def build_maps(cfg, device) -> tuple[NOG, WeightingMaps, np.ndarray]:
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     if m.weighting not in NOF_WEIGHTINGS:
         return free_view, grid_maps(grid, m.weighting), image
-    (ckpt,) = nof_inputs(cfg)
-    if not ckpt.is_file():
-        raise FileNotFoundError(f"{ckpt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
     if m.weighting == "nof_direct":
-        return free_view, WeightingMaps(model=load_nof(ckpt, "cuda" if device.startswith("cuda") else "cpu")[0]), image
-    nog = bake_nog(ckpt, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
-                   cache_dir=stage_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
+        return free_view, WeightingMaps(model=load_nof(nof, "cuda" if device.startswith("cuda") else "cpu")[0]), image
+    nog = bake_nog(nof, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
+                   cache_dir=runs.cache_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
     return free_view, WeightingMaps(nog=nog), image
-
-
-ABLATION_TAGS = {"num_beams": "beams", "num_samples": "samples", "t_min": "tmin", "empty_below": "empty",
-                 "resample": "", "estimate": "", "sigma_m": "sigma", "motion": "", "beam_pick": "",
-                 "resample_threshold": "neff", "table_angles": "angles", "seed": "seed"}
-
-
-def cell_tag(m, loc) -> str:
-    """The part of a run's folder name that is a cell of the paper's tables (``m``: the mcl section, ``loc``:
-    the localize protocol): ``localize-nog_raymarch-global-100k-5cm``."""
-    return f"localize-{m.weighting}-{loc.mode}-{particles_tag(m.num_particles)}-{resolution_tag(m.map_resolution_m)}cm"
-
-
-def run_tag(m, loc) -> str:
-    """Output folder name of a localization run: its ``cell_tag``, then kidnapping, recovery and each
-    ablation setting that differs from its default (``-beams16``, ``-tmin0``, ``-multinomial``)."""
-    tag = cell_tag(m, loc)
-    tag += f"-kidnap{loc.kidnap_at_s:g}s" if loc.kidnap_at_s > 0 else ""
-    tag += "-recovery" if m.recovery_alpha_slow > 0 and m.recovery_alpha_fast > 0 else ""
-    defaults = MCLConfig()
-    for key, short in ABLATION_TAGS.items():
-        value = m.get(key, getattr(defaults, key))  # runs kept before a setting existed ran at its default
-        if value != getattr(defaults, key):
-            tag += f"-{short}{value:g}" if short else f"-{value}"
-    return tag
-
-
-def run_folder(cfg) -> str:
-    return run_tag(cfg.mcl, cfg.localize)
-
-
-def nof_inputs(cfg) -> list[Path]:
-    """The trained field a NOF-weighted run reads (its digest decides whether the run is up to date)."""
-    if cfg.mcl.weighting not in NOF_WEIGHTINGS:
-        return []
-    return [stage_dir(cfg, train_folder(cfg)) / "nof.pt"]
 
 
 def start_times(t: np.ndarray, loc) -> np.ndarray:
@@ -124,26 +82,29 @@ def run_localize(cfg) -> Path:
     if cfg.localize.run_s is None:
         raise ValueError("localize.run_s=null (to the end of the log) needs localize.map_path; the benchmark "
                          "protocol follows each start for localize.run_s seconds")
-    started, device = time.time(), pick_device(cfg.device)
+    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
+    with runs.start(cfg, "localize", command=command) as run:
+        return run.path if run.done else localize_starts(run)
+
+
+def localize_starts(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
+    device = pick_device(cfg.device)
     m, loc, far = cfg.mcl, cfg.localize, far_bound_m(cfg)
-    out = stage_dir(cfg, run_folder(cfg))
-    inputs = recorded_inputs(cfg) + nof_inputs(cfg)
-    if up_to_date(out, cfg, inputs, "localize"):
-        return out
     log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
-    view, maps, image = build_maps(cfg, device)
+    view, maps, image = build_maps(cfg, device, run.upstream["train"] / "nof.pt" if "train" in run.upstream else None)
     t = log.stamps - log.stamps[0]
-    starts = start_times(t, loc)
-    runs, kidnapped, all_steps = [], loc.kidnap_at_s > 0, []
+    times = start_times(t, loc)
+    starts, kidnapped, all_steps = [], loc.kidnap_at_s > 0, []
     if kidnapped and not (0 < loc.kidnap_at_s < loc.run_s and loc.num_starts >= 2):
         raise ValueError(f"localize.kidnap_at_s={loc.kidnap_at_s} must lie inside the run (localize.run_s={loc.run_s}) "
                          f"and the robot needs another start time to be teleported to (localize.num_starts={loc.num_starts})")
-    for k, t0 in enumerate(starts):
+    for k, t0 in enumerate(times):
         pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
         pf.rng = np.random.default_rng(m.seed * 1000 + k)
-        idx = start_indices(t, starts, k, loc)
+        idx = start_indices(t, times, k, loc)
         if loc.mode == "global":
             pf.init_uniform()
         else:
@@ -170,7 +131,7 @@ def run_localize(cfg) -> Path:
             metrics = {**metrics, "localized_before_kidnap": before["converged"],
                        "recovered": bool(before["converged"] and recovery["success"]),
                        "recovery_time_s": recovery["time_to_converge_s"]}
-        runs.append({"start_s": float(t0), "ms_per_scan": ms_per_scan, "steps": len(step_times),
+        starts.append({"start_s": float(t0), "ms_per_scan": ms_per_scan, "steps": len(step_times),
                      "ms_per_step_median": 1e3 * float(np.median(step_times)) if step_times else None, **metrics})
         print(f"start {k} at {t0:.0f} s: " + (f"converged after {metrics['time_to_converge_s']:.1f} s, RMSE "
               f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge")
@@ -179,36 +140,35 @@ def run_localize(cfg) -> Path:
             plot_run(out / "start0.png", view, image, stamps, gt, est, pf.particles.numpy(),
                      metrics["time_to_converge_s"], stamps[cut] - stamps[0] if kidnapped else None)
     settings = {**OmegaConf.to_container(m), **OmegaConf.to_container(loc), "far_m": far}
-    summary = summarise(runs, settings, device)
+    summary = summarise(starts, settings, device)
     # every filter step of every start: the figure to set beside the micro-benchmark (eval.bench mcl), free
     # of what a start costs once (building the filter, loading the kernels, capturing the step's graph)
     summary["ms_per_step_median"] = 1e3 * float(np.median(all_steps)) if all_steps else None
     if all_steps:
         print(f"{len(all_steps)} filter steps, median {summary['ms_per_step_median']:.3f} ms per step "
               f"({summary['ms_per_scan_median']:.3f} ms per scan, the starts' median, set up included)")
-    write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs, "settings": settings})
-    write_manifest(out, cfg, inputs, device, started)
-    print(f"{cfg.data.name}, {m.weighting} ({loc.mode}): success {summary['successes']}/{len(runs)} -> {out}")
+    out = run.finish({"dataset": cfg.data.name, "summary": summary, "runs": starts, "settings": settings}, device)
+    print(f"{cfg.data.name}, {m.weighting} ({loc.mode}): success {summary['successes']}/{len(starts)} -> {out}")
     return out
 
 
-def summarise(runs: list[dict], s: dict, device: str) -> dict:
+def summarise(starts: list[dict], s: dict, device: str) -> dict:
     """The summary of a localize run's starts (``s``: its settings, mcl and localize sections together)."""
-    ok = [r for r in runs if r["success"]]
+    ok = [r for r in starts if r["success"]]
 
     def mean(key, rows):
         vals = [r[key] for r in rows if r.get(key) is not None]
         return float(np.mean(vals)) if vals else None
 
     summary = {"weighting": s["weighting"], "mode": s["mode"], "num_particles": s["num_particles"],
-               "map_resolution_m": s["map_resolution_m"], "device": device, "starts": len(runs), "successes": len(ok),
-               "success_rate": len(ok) / len(runs), "divergences": int(sum(r["divergences"] for r in runs))}
-    summary["ms_per_scan_median"] = float(np.median([r["ms_per_scan"] for r in runs]))  # the first start also compiles
+               "map_resolution_m": s["map_resolution_m"], "device": device, "starts": len(starts), "successes": len(ok),
+               "success_rate": len(ok) / len(starts), "divergences": int(sum(r["divergences"] for r in starts))}
+    summary["ms_per_scan_median"] = float(np.median([r["ms_per_scan"] for r in starts]))  # the first start also compiles
     for key in ("location_rmse_cm", "yaw_rmse_deg", "time_to_converge_s", "within_5cm_pct", "within_10cm_pct",
                 "within_20cm_pct", "within_0.5deg_pct", "within_1deg_pct", "within_2deg_pct"):
         summary[f"{key}_mean"] = mean(key, ok)
     if s["kidnap_at_s"] > 0:
         summary["kidnap_at_s"] = s["kidnap_at_s"]
-        summary["recovered"] = int(sum(r["recovered"] for r in runs))
-        summary["recovery_time_s_mean"] = mean("recovery_time_s", [r for r in runs if r["recovered"]])
+        summary["recovered"] = int(sum(r["recovered"] for r in starts))
+        summary["recovery_time_s_mean"] = mean("recovery_time_s", [r for r in starts if r["recovered"]])
     return summary

@@ -4,20 +4,29 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import torch
 
 from irmcl_warp.config import ModelConfig
+from irmcl_warp.io.atomic import raise_disk_full
 from irmcl_warp.nof.model import NOF
 
 
 def atomic_torch_save(obj, path: Path) -> None:
+    """``torch.save`` through a temporary file of its own (named for this process) and a rename."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    except BaseException as e:
+        Path(tmp).unlink(missing_ok=True)
+        raise_disk_full(e, path)
+        raise
 
 
 def load_nof(path, device="cpu"):

@@ -1,13 +1,14 @@
 """The train stage: ``python -m irmcl_warp.train +exp=<name> [train=paper|fast|cpu|quick] [render=warp|torch_ref]``
 
-Trains the NOF on the ``train`` split (the benchmark ids) and writes ``outputs/<exp>/train-<preset>/``:
-nof.pt (best epoch on the validation split, with its model config), last.pt (to resume), metrics.json
-(history per epoch), config.yaml, manifest.json. Run it again after an interruption and it resumes.
+Trains the NOF on the ``train`` split (the benchmark ids) and writes ``outputs/<exp>/train/<preset>-<id>/``
+(irmcl_warp.runs): nof.pt (best epoch on the validation split, with its model config), last.pt (to resume),
+metrics.json (history per epoch), config.yaml, manifest.json. Run it again after an interruption and it
+resumes the interrupted run (its ``.partial`` folder); a run that did not finish is never used by another
+stage.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict
 from pathlib import Path
 
@@ -16,14 +17,12 @@ import torch
 from omegaconf import OmegaConf
 
 from irmcl_warp.config import ModelConfig
-from irmcl_warp.io import resolve
-from irmcl_warp.nof.folders import train_folder
+from irmcl_warp import runs
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_scans
 from irmcl_warp.nof.trainer import Trainer
-from irmcl_warp.services.data import far_bound_m, prepare_beams, recorded_inputs
+from irmcl_warp.services.data import far_bound_m, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
-from irmcl_warp.services.outputs import file_digest, settings_key, stage_dir, up_to_date, write_json, write_manifest
 from kernels import pick_device
 
 
@@ -32,24 +31,12 @@ def torch_device(cfg) -> torch.device:
     return torch.device(pick_device(cfg.device))
 
 
-def train_dir(cfg) -> Path:
-    """``outputs/<exp>/train-<preset>/``: one folder per recipe, so presets never overwrite each other."""
-    return stage_dir(cfg, train_folder(cfg))
-
-
-def run_settings(cfg, train_split: str, far: float) -> tuple[dict, str]:
-    """(metadata stored in nof.pt, key of the settings that decide the result). Time limits, checkpoint
-    period and validation size are not in the key: a run resumed with a longer max_time_s continues."""
+def run_settings(cfg, train_split: str, far: float) -> dict:
+    """What nof.pt stores beside the weights: the model config, the rendering bounds, the data and preset."""
     model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
-    meta = {"model_config": asdict(model_cfg), "near_m": cfg.render.near_m, "far_m": far,
+    return {"model_config": asdict(model_cfg), "near_m": cfg.render.near_m, "far_m": far,
             "render": OmegaConf.to_container(cfg.render), "data": cfg.data.name, "split": cfg.data.split,
             "train_split": train_split, "train_preset": cfg.train.name}
-    recipe = {k: v for k, v in OmegaConf.to_container(cfg.train).items()
-              if k not in ("max_time_s", "checkpoint_every_s", "val_scans")}
-    data = OmegaConf.to_container(cfg.data)
-    if data.get("train_poses_path"):  # the poses file is rewritten in place (the pipeline's SLAM): its content counts
-        data["train_poses_sha256"] = file_digest(resolve(data["train_poses_path"]))
-    return meta, settings_key(meta, recipe, data)
 
 
 def make_validator(beams, cfg, near_m, far_m, device):
@@ -65,19 +52,22 @@ def make_validator(beams, cfg, near_m, far_m, device):
 
 
 def run_train(cfg) -> Path:
-    started = time.time()
+    with runs.start(cfg, "train") as run:
+        return run.path if run.done else train(run)
+
+
+def train(run: runs.Run) -> Path:
+    """Train (or go on training, after an interruption of the same run) in ``run.dir``."""
+    cfg, out = run.cfg, run.dir
     device = torch_device(cfg)
     if cfg.train.tf32:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
-    out = train_dir(cfg)
-    if up_to_date(out, cfg, recorded_inputs(cfg), "train"):
-        return out
     sets = prepare_beams(cfg)
     near, far = cfg.render.near_m, far_bound_m(cfg)
-    meta, key = run_settings(cfg, sets["train"].name, far)
+    meta = run_settings(cfg, sets["train"].name, far)
     model_cfg = ModelConfig(**meta["model_config"])
-    trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, key,
+    trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, run.ident.id,
                       make_validator(sets["val"], cfg, near, far, device), meta)
     trainer.try_resume()
     print(f"{cfg.data.name}: training on {len(sets['train'])} scans ({sets['train'].num_rays:,} rays, split "
@@ -91,8 +81,7 @@ def run_train(cfg) -> Path:
                "epochs_done": len(history), "best_epoch": best["epoch"], "val": best["val"],
                "train_time_s": trainer.train_time_s, "train_rays": sets["train"].num_rays,
                "rays_per_s": float(np.mean([h["rays_per_s"] for h in history])), "history": history}
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, recorded_inputs(cfg), str(device), started)
-    print(f"best epoch {best['epoch']}: val MAE {best['val']['mae_m']:.3f} m -> {out / 'nof.pt'} "
+    path = run.finish(metrics, str(device))
+    print(f"best epoch {best['epoch']}: val MAE {best['val']['mae_m']:.3f} m -> {path / 'nof.pt'} "
           f"({trainer.train_time_s:.0f} s of training)")
-    return out
+    return path

@@ -1,11 +1,12 @@
-"""The synthesis stage, ``python -m eval.synthesis +exp=<name>``: scan synthesis on the test split (IR-MCL Table I protocol).
+"""The synthesis stage, ``python -m irmcl_warp.synthesis +exp=<name>``: scan synthesis on the test split (IR-MCL Table I protocol).
 
 Every method renders the same test beams from the ground-truth laser poses:
-* the NOF trained with preset ``train.name`` (outputs/<exp>/train-<preset>/nof.pt), ``render.num_samples`` fixed depths over [near, far];
+* the NOF of the finished training run of these settings (``train=<preset>``: its nof.pt), ``render.num_samples``
+  fixed depths over [near, far];
 * occupancy grid maps built from the training split's scans and poses at 5 and 10 cm (log-odds mapping),
   rendered by ray casting (RAYCAST["dda"]); a cell never observed stops the beam, as in AMCL's
   map_calc_range, and a beam leaving the map returns ``far``.
-Writes outputs/<exp>/synthesis-<preset>/metrics.json (one entry per method) and scan.png (one test scan).
+Writes outputs/<exp>/synthesis/<preset>-<id>/metrics.json (one entry per method) and scan.png (one test scan).
 """
 
 from __future__ import annotations
@@ -18,11 +19,11 @@ import numpy as np
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.checkpoint import load_nof
-from irmcl_warp.nof.folders import synthesis_folder, train_folder
 from irmcl_warp.nof.render import make_renderer, render_scans
-from irmcl_warp.services.data import far_bound_m, prepare_beams, recorded_inputs
+from irmcl_warp import runs
+from irmcl_warp.services.data import far_bound_m, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
-from irmcl_warp.services.outputs import save_figure, stage_dir, up_to_date, write_json, write_manifest
+from irmcl_warp.services.outputs import save_figure
 from kernels import RAYCAST, pick_device
 
 GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 and 10 cm
@@ -70,25 +71,24 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
 
 
 def run_synthesis(cfg) -> Path:
-    started = time.time()
+    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
+    with runs.start(cfg, "synthesis", command=command) as run:
+        return run.path if run.done else score_scans(run)
+
+
+def score_scans(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
-    out = stage_dir(cfg, synthesis_folder(cfg))
-    inputs = recorded_inputs(cfg) + [stage_dir(cfg, train_folder(cfg)) / "nof.pt"]
-    if up_to_date(out, cfg, inputs, "synthesis"):
-        return out
     sets = prepare_beams(cfg)
     train, test, far = sets["train"], sets["test"], far_bound_m(cfg)
     preds, methods = {}, {}
-    nof_path = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
-    if nof_path.is_file():
-        t0 = time.time()
-        pred, meta = nof_ranges(nof_path, test, cfg)
-        name = f"NOF ({meta.get('train_preset', '?')})"
-        preds[name] = pred
-        methods[name] = {"kind": "nof", "render_s": time.time() - t0, "checkpoint": str(nof_path),
-                         "best_epoch": meta.get("epoch")}
-    else:
-        print(f"{nof_path} not found: scoring the grid baselines only (train first: python -m irmcl_warp.train)")
+    nof_path = run.upstream["train"] / "nof.pt"
+    t0 = time.time()
+    pred, meta = nof_ranges(nof_path, test, cfg)
+    name = f"NOF ({meta.get('train_preset', '?')})"
+    preds[name] = pred
+    methods[name] = {"kind": "nof", "render_s": time.time() - t0, "checkpoint": str(nof_path),
+                     "best_epoch": meta.get("epoch")}
     for res in GRID_RESOLUTIONS_M:
         name = f"OGM {res * 100:.0f} cm"
         t0 = time.time()
@@ -98,9 +98,8 @@ def run_synthesis(cfg) -> Path:
         methods[name].update(scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad))
     result = {"dataset": cfg.data.name, "split": test.name, "train_split": train.name, "test_scans": len(test),
               "far_m": far, "device": device, "methods": methods}
-    write_json(out / "metrics.json", result)
     plot_scan(out / "scan.png", test, preds, k=len(test) // 2)
-    write_manifest(out, cfg, inputs, device, started)
+    path = run.finish(result, device)
     print(f"{cfg.data.name}, {test.name} ({len(test)} scans): " + "; ".join(
         f"{n}: MAE {m['mae_m']:.3f} m, acc {m['accuracy_pct']:.1f} %" for n, m in methods.items()))
-    return out
+    return path

@@ -117,6 +117,7 @@ class Trainer:
         self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay,
                                     fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None)
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
+        self.epoch_loss = (0.0, 0)  # (sum, steps) of the epoch's losses before an interruption: a resumed epoch's mean is the whole epoch's
         # an epoch is one pass over the rays, or ``steps_per_epoch`` batches (fewer or more than a pass)
         self.steps_per_epoch = tc.steps_per_epoch or -(-len(self.ranges) // tc.batch_rays)
         self.sched, self.sched_per_step = make_scheduler(self.opt, tc, tc.epochs * self.steps_per_epoch)
@@ -135,6 +136,7 @@ class Trainer:
         return {"key": self.key, "model": self.model.state_dict(), "opt": self.opt.state_dict(),
                 "sched": self.sched.state_dict(), "epoch": self.epoch, "step_in_epoch": self.step_in_epoch,
                 "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng,
+                "epoch_loss": self.epoch_loss,
                 "grid": None if self.grid is None else self.grid.state_dict(),
                 "ema": None if self.ema is None else self.ema.state_dict()}
 
@@ -142,7 +144,11 @@ class Trainer:
         path = self.out / "last.pt"
         if not path.is_file():
             return False
-        s = torch.load(path, map_location=self.device, weights_only=False)
+        try:
+            s = torch.load(path, map_location=self.device, weights_only=False)
+        except Exception as e:  # truncated by a full disk or a copy cut short: say what to do, no traceback
+            raise ValueError(f"{path}: damaged checkpoint ({type(e).__name__}: {e}); delete it to train this run "
+                             f"afresh (rm {path})") from e
         if s.get("key") != self.key:
             print(f"{path}: made with other settings; starting afresh")
             return False
@@ -154,6 +160,7 @@ class Trainer:
         self.sched.load_state_dict(s["sched"])
         self.epoch, self.step_in_epoch, self.history = s["epoch"], s["step_in_epoch"], s["history"]
         self.best, self.train_time_s = s["best"], s["train_time_s"]
+        self.epoch_loss = tuple(s.get("epoch_loss", (0.0, 0)))
         if self.grid is not None and s.get("grid") is not None:
             self.grid.load_state_dict(s["grid"])
         if self.ema is not None:
@@ -242,13 +249,15 @@ class Trainer:
         for b in bar:
             losses.append(self.step(perm[b * B:(b + 1) * B]))
             self.step_in_epoch = b + 1
-            if b % 20 == 0 or b + 1 == self.steps_per_epoch:
+            if (b % 20 == 0 or b + 1 == self.steps_per_epoch) and losses:
                 elapsed = time.time() - t_epoch
                 bar.set_postfix(loss=f"{float(losses[-1]):.3f}",
                                 rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}", refresh=False)
             if time.time() - t_ckpt > tc.checkpoint_every_s:
                 self.train_time_s += time.time() - t_ckpt
                 t_ckpt = time.time()
+                self.epoch_loss = (self.epoch_loss[0] + float(torch.stack(losses).sum()), self.epoch_loss[1] + len(losses))
+                losses = []
                 atomic_torch_save(self.state(), self.out / "last.pt")
             if tc.max_time_s is not None and self.train_time_s + time.time() - t_ckpt >= tc.max_time_s:
                 break
@@ -260,7 +269,10 @@ class Trainer:
         epoch_s = time.time() - t_epoch
         if not self.sched_per_step:
             self.sched.step()
-        record = {"epoch": self.epoch + 1, "steps": steps, "loss": float(torch.stack(losses).mean()) if losses else None,
+        loss_sum = self.epoch_loss[0] + (float(torch.stack(losses).sum()) if losses else 0.0)
+        loss_steps = self.epoch_loss[1] + len(losses)
+        self.epoch_loss = (0.0, 0)
+        record = {"epoch": self.epoch + 1, "steps": steps, "loss": loss_sum / loss_steps if loss_steps else None,
                   "epoch_s": epoch_s, "rays_per_s": steps * B / max(epoch_s, 1e-9), "train_time_s": self.train_time_s,
                   "lr": self.opt.param_groups[0]["lr"],
                   "samples_per_beam": float(torch.stack(self.kept).float().mean()) if self.kept else self.tc.num_samples}

@@ -8,23 +8,30 @@ Every ``python -m ...`` entry calls its stage through ``run_entry`` (Hydra entri
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 
 from irmcl_warp.config import ConfigError, validate
+from irmcl_warp.io.atomic import DiskFullError
 from irmcl_warp.io.errors import LogFormatError
 
 # what a user's input or settings cause; a bug surfaces as another type and keeps its traceback
-EXPECTED = (LogFormatError, ConfigError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
+EXPECTED = (LogFormatError, ConfigError, DiskFullError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
             ValueError)
 
 
 def _fail(e: BaseException) -> None:
     if os.environ.get("IRMCL_TRACEBACK") == "1":
         raise e
-    message = " ".join(str(e).split("\n")[:1]) or type(e).__name__
+    text = e.strerror if isinstance(e, DiskFullError) else str(e)
+    message = " ".join(str(text).split("\n")[:1]) or type(e).__name__
     print(f"error: {message}", file=sys.stderr)
     sys.exit(2)
+
+
+def _full_disk(e: OSError) -> bool:
+    return e.errno in (errno.ENOSPC, errno.EDQUOT)
 
 
 def run_entry(run, cfg):
@@ -34,6 +41,10 @@ def run_entry(run, cfg):
         return run(cfg)
     except EXPECTED as e:
         _fail(e)
+    except OSError as e:
+        if not _full_disk(e):
+            raise
+        _fail(DiskFullError(e.errno, f"no space left on the device ({e.filename or 'while writing'})"))
 
 
 def guard(main, argv=None):
@@ -42,3 +53,7 @@ def guard(main, argv=None):
         return main(argv)
     except EXPECTED as e:
         _fail(e)
+    except OSError as e:
+        if not _full_disk(e):
+            raise
+        _fail(DiskFullError(e.errno, f"no space left on the device ({e.filename or 'while writing'})"))

@@ -1,47 +1,33 @@
 """The configured log, read once: ``load_stream(cfg)`` (one cache), ``prepare_beams(cfg)`` (the benchmark
 splits cut from it) and the sensor's far bound, ``far_bound_m``.
 
-The one cache is ``outputs/<exp>/stream/stream.npz``: the log as its files say (``io.read_log``), keyed by
-the settings the readers use and the size and mtime of the files they read. Without the raw files (a GPU
-machine sent only the caches) the key stops after the settings part and a cache is accepted by that
-prefix. The split ids read from ``data.splits_path`` are kept beside it (``splits.json``) for the same reason.
+The cache is ``outputs/<exp>/stream/stream-<key>.npz``: the log as its files say (``io.read_log``), the key a
+digest of the settings the readers use and of the *content* of the files they read (a log replaced by
+another of the same size and time is read again), one file per key (two bags of one experiment never evict
+each other). The defects the readers warned about are kept in it and warned about again on every load, so
+every run that uses a log says what is odd about it, not only the first.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import math
-from pathlib import Path
+import warnings
 
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.io import (GEOMETRY_FIELDS, apply_laser_geometry, attach_ground_truth, check_ground_truth, read_ground_truth, read_log,
-                           read_splits, resolve)
+from irmcl_warp.io import (GEOMETRY_FIELDS, LogDefectWarning, apply_laser_geometry, attach_ground_truth, check_ground_truth,
+                           read_ground_truth, read_log, read_splits, resolve)
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.nof.beams import SPLITS, BeamSet, beams_from_log, interleaved_splits, split_beams
-from irmcl_warp.services.outputs import settings_key, stage_dir, write_json
-from irmcl_warp.types import LaserInfo, LaserLog
+from irmcl_warp.runs import cache_dir, content_digest, digest
+from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
 
-# data fields added after caches existed, left out of the cache key at these defaults so those caches stay valid
-LATER_FIELDS = {"repair_reversing": False, "path_seed": None, "ground_truth_tolerance_s": 1e-4}
 # data fields the readers never look at: they do not change what the stream cache holds
-NOT_READ = ("relations_path", "relation_stamps_path", "splits_path", "train_poses_path", "split", "far_m")
-
-
-def input_files(cfg) -> list[Path]:
-    """The files a data config reads (the simulator's: only the pipeline's training poses, when set)."""
-    d = cfg.data
-    return [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path, d.splits_path,
-                                 d.get("train_poses_path")) if p]
-
-
-def recorded_inputs(cfg) -> list[Path]:
-    """Input files to hash into a manifest: none where only the cache was sent."""
-    try:
-        return input_files(cfg)
-    except FileNotFoundError:
-        return []
+NOT_READ = ("relations_path", "relation_stamps_path", "splits_path", "train_poses_path", "split", "far_m", "name")
+READ_FILES = ("path", "ground_truth_path", "laser_frame_path")  # the files the readers open
 
 
 def far_bound_m(cfg, range_max_m: float | None = None) -> float:
@@ -54,73 +40,67 @@ def far_bound_m(cfg, range_max_m: float | None = None) -> float:
     return float(math.floor(range_max_m))
 
 
-def cache_key(cfg) -> tuple[str, FileNotFoundError | None]:
-    """(key, missing-input error): the reader settings, then "-" and the read files' size and mtime. Without
-    the raw files the key stops after the settings part and the error says which file is missing."""
-    def stable(node, drop_none: bool, drop=()) -> dict:
-        return {k: v for k, v in OmegaConf.to_container(node).items()
-                if not (drop_none and v is None) and not (k in LATER_FIELDS and v == LATER_FIELDS[k]) and k not in drop}
+def cache_key(cfg) -> str:
+    """The digest of what the readers read: the data settings they use (the simulator's, for a simulated
+    log) and the content of the files they open. The beam geometry is applied after reading, so it is not
+    part of it."""
+    d = OmegaConf.to_container(cfg.data, resolve=True)
+    settings = {k: v for k, v in d.items() if k not in NOT_READ + GEOMETRY_FIELDS and k not in READ_FILES}
+    files = {k: content_digest(resolve(d[k])) for k in READ_FILES if d.get(k)}
+    sim = OmegaConf.to_container(cfg.sim, resolve=True) if d["format"] == "sim" else None
+    return digest({"data": settings, "files": files, "sim": sim})[:20]
 
-    # the beam geometry is applied after reading: a cache holds the log as its files say (io.read_log)
-    key = settings_key(stable(cfg.data, drop_none=True, drop=GEOMETRY_FIELDS + NOT_READ), stable(cfg.sim, drop_none=False))
-    d = cfg.data
-    try:
-        files = [resolve(p) for p in (d.path, d.ground_truth_path, d.laser_frame_path) if p]
-        return key + "-" + settings_key([(str(p), p.stat().st_size, p.stat().st_mtime) for p in files]), None
-    except FileNotFoundError as e:
-        return key, e
+
+def _warn_again(notes: list[str]) -> None:
+    for note in notes:
+        warnings.warn(note, LogDefectWarning, stacklevel=3)
 
 
 def load_stream(cfg) -> LaserLog:
     """The log that ``cfg.data`` names, with its beam geometry applied: from the cache when the settings and
-    files are unchanged (or when the raw files are absent and the settings match), else read and cached."""
-    key, no_raw = cache_key(cfg)
-    path = stage_dir(cfg, "stream") / "stream.npz"
+    the files' content are unchanged, else read and cached. Its defects are warned about every time."""
+    key = cache_key(cfg)
+    path = cache_dir(cfg, "stream") / f"stream-{key}.npz"
     try:
         with np.load(path) as z:
-            stored = str(z["key"])
-            if stored == key or (no_raw is not None and stored.split("-")[0] == key):
-                v = z["info"].tolist()
-                info = LaserInfo(int(v[0]), *map(float, v[1:]))
-                gt = z["ground_truth"] if z["ground_truth"].size else None
-                return apply_laser_geometry(LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
-                                                     source=f"{path} (cache of {cfg.data.path or cfg.data.name})"),
-                                            cfg.data)
+            v = z["info"].tolist()
+            info = LaserInfo(int(v[0]), *map(float, v[1:]))
+            gt = z["ground_truth"] if z["ground_truth"].size else None
+            defects = json.loads(str(z["defects"]))
+            log = LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
+                           source=str(z["source"]), defects=DefectReport(defects["counts"], defects["notes"]))
+        _warn_again(defects["warnings"])
+        return apply_laser_geometry(log, cfg.data)
     except (OSError, KeyError, ValueError):
-        pass
-    if no_raw is not None:
-        raise no_raw
-    log = read_log(cfg)
+        pass  # no cache of this content yet (or an unreadable one): read the files
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogDefectWarning)
+        log = read_log(cfg)
+    notes = [str(w.message) for w in caught if issubclass(w.category, LogDefectWarning)]
+    for w in caught:  # the other warnings pass on as they came
+        if not issubclass(w.category, LogDefectWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     i = log.info
     buf = io.BytesIO()
     np.savez_compressed(buf, key=np.array(key), stamps=log.stamps, ranges_m=log.ranges_m, odom=log.odom,
-                        T_base_laser=log.T_base_laser,
+                        T_base_laser=log.T_base_laser, source=np.array(str(log.source)),
+                        defects=np.array(json.dumps({"warnings": notes, "counts": log.defects.counts,
+                                                          "notes": log.defects.notes})),
                         ground_truth=log.ground_truth if log.ground_truth is not None else np.zeros(0),
                         info=np.array([i.num_beams, i.angle_min_rad, i.angle_increment_rad, i.range_min_m,
                                        i.range_max_m, i.no_return_m], np.float64))
     atomic_write_bytes(path, buf.getvalue())
+    _warn_again(notes)
     return apply_laser_geometry(log, cfg.data)
 
 
 def split_ids(cfg, stamps: np.ndarray) -> tuple[dict[str, np.ndarray], str]:
-    """({split name: scan stamps}, where they came from): ``data.splits_path`` (kept beside the stream cache
-    for a machine without it), else the interleaved rule over ``stamps``."""
+    """({split name: scan stamps}, where they came from): ``data.splits_path``, else the interleaved rule
+    over ``stamps``."""
     if not cfg.data.splits_path:
         return interleaved_splits(stamps), f"{cfg.data.name} (interleaved rule)"
-    kept = stage_dir(cfg, "stream") / "splits.json"
-    try:
-        path = resolve(cfg.data.splits_path)
-    except FileNotFoundError:
-        if not kept.is_file():
-            raise
-        import json
-
-        stored = json.loads(kept.read_text())
-        print(f"{cfg.data.splits_path} not found; using the split ids kept in {kept}")
-        return {k: np.asarray(v, np.float64) for k, v in stored["splits"].items()}, stored["source"]
-    splits = read_splits(path)
-    write_json(kept, {"source": str(path), "splits": {k: [float(t) for t in v] for k, v in splits.items()}})
-    return splits, str(path)
+    path = resolve(cfg.data.splits_path)
+    return read_splits(path), str(path)
 
 
 def prepare_beams(cfg) -> dict[str, BeamSet]:

@@ -9,7 +9,16 @@ from irmcl_warp.geometry import align_rigid, compose, interpolate_se2, relative,
 from irmcl_warp.types import match_stamps
 
 
+# --- the protocols' constants: each changes published numbers, so each is named here with its origin ------
 FULL_COVERAGE = 0.9  # a relations score on a smaller share of the relations is shouted, never printed bare
+SYNTHESIS_THRESHOLD_M = 0.5  # IR-MCL Table I (the authors' nof/criteria code): accuracy and F-score count errors below this
+EVALUATE_AFTER_S = 20.0  # IR-MCL Sec. IV-C: localization errors are scored on the poses after 20 s
+CONVERGED_M, CONVERGED_FOR_S = 0.5, 5.0  # ours: converged once the position error stays below 0.5 m for 5 s
+SUCCESS_WITHIN_S = 60.0  # ours: a success converges within the 60 s of a start (IR-MCL's run length) ...
+SUCCESS_RMSE_M = 0.30  # ... with a location RMSE below 0.30 m afterwards ...
+SUCCESS_YAW_DEG = 30.0  # ... and a heading RMSE below 30 deg (the right corridor facing the wrong way is no success)
+DIVERGED_M = 1.0  # ours: a converged filter whose error rises above 1 m has diverged
+SLAM_CONVERGED_M = 0.15  # a SLAM run converged below this mean relations error (the threshold of issue 6's reference)
 
 
 def coverage_warning(rel: dict, what: str) -> str | None:
@@ -59,7 +68,7 @@ def relations_error(stamps, poses, relations, tol_s: float = 1e-4, max_gap_s: fl
     }
 
 
-def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float = 0.5) -> dict:
+def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float = SYNTHESIS_THRESHOLD_M) -> dict:
     """IR-MCL's scan-synthesis metrics (Kuang et al. 2023, Table I; the authors' nof/criteria code),
     each computed per scan over its valid beams and then averaged over scans:
 
@@ -101,13 +110,14 @@ def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float
             "scans": len(per_scan), "beams": int(sum(len(e) for e in errors))}
 
 
-def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float = 20.0, success_within_s: float = 60.0,
-                         success_rmse_m: float = 0.30, converged_m: float = 0.5, diverged_m: float = 1.0,
-                         success_yaw_deg: float = 30.0,
+def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float = EVALUATE_AFTER_S,
+                         success_within_s: float = SUCCESS_WITHIN_S, success_rmse_m: float = SUCCESS_RMSE_M,
+                         converged_m: float = CONVERGED_M, diverged_m: float = DIVERGED_M,
+                         success_yaw_deg: float = SUCCESS_YAW_DEG,
                          pos_thresholds_m=(0.05, 0.10, 0.20), yaw_thresholds_deg=(0.5, 1.0, 2.0)) -> dict:
     """IR-MCL's protocol (Kuang et al. 2023, Sec. IV-C) plus success, time to converge and divergence.
 
-    * converged: the first time from which the position error stays below ``converged_m`` for 5 s
+    * converged: the first time from which the position error stays below ``converged_m`` for CONVERGED_FOR_S
       (``time_to_converge_s``, from the first stamp); success = converged within ``success_within_s``,
       location RMSE afterwards < ``success_rmse_m`` and heading RMSE < ``success_yaw_deg`` (a filter near the
       true place facing the other way, as in a symmetric corridor, has not localized the robot);
@@ -125,8 +135,8 @@ def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float
     below = e_xy < converged_m
     t_conv = None
     for i in np.flatnonzero(below):  # first index from which the error stays low for 5 s
-        window = (t >= t[i]) & (t <= t[i] + 5.0)
-        if below[window].all() and t[-1] >= t[i] + 5.0 or (below[i:].all()):
+        window = (t >= t[i]) & (t <= t[i] + CONVERGED_FOR_S)
+        if below[window].all() and t[-1] >= t[i] + CONVERGED_FOR_S or (below[i:].all()):
             t_conv = float(t[i])
             break
     out = {"poses": int(ok.sum()), "time_to_converge_s": t_conv, "converged": t_conv is not None}

@@ -7,13 +7,13 @@ from pathlib import Path
 
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.nog import NOG, evaluate_grid
-from irmcl_warp.services.outputs import file_digest, settings_key
+from irmcl_warp.runs import digest, file_digest
 
 
 def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None,
              device="cpu") -> NOG:
     """Bake (or read from the cache) the NOG of a nof.pt checkpoint."""
-    key = settings_key(file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m))
+    key = digest([file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m)])[:16]
     path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None
     if path is not None and path.is_file():
         try:

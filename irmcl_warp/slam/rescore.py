@@ -1,6 +1,7 @@
 """``python -m irmcl_warp.slam.rescore <run folder>...``: score finished SLAM runs against the relations
 again, from their trajectory.tum and config.yaml (e.g. where the relations file was missing on the
-machine that ran them, or to score older runs in the laser's frame); updates metrics.json in place.
+machine that ran them, or to score older runs in the laser's frame); amends metrics.json (runs.amend: the
+manifest records the new digest and why).
 The laser's mounting comes from metrics.json, else from the config's data.laser_frame_path."""
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.services.metrics import relations_error
 from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_relations, read_tum, resolve
-from irmcl_warp.services.outputs import write_json
+from irmcl_warp.runs import amend
 from irmcl_warp.io.rosbag import read_bag_extrinsic
 from irmcl_warp.services.cli import guard
 
@@ -42,7 +43,7 @@ def rescore(run: Path) -> dict:
     T = mounting(cfg, metrics)
     metrics["relations_frame"] = {"frame": "laser", "T_base_laser": [float(v) for v in T]}
     metrics["relations"] = relations_error(stamps, compose(poses, T), read_relations(resolve(cfg.data.relations_path)))
-    write_json(run / "metrics.json", metrics)
+    amend(run, metrics, "slam.rescore: the relations scored again on the laser's path")
     return metrics["relations"]
 
 

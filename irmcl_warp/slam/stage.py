@@ -1,7 +1,7 @@
 """The slam stage: ``python -m irmcl_warp.slam +exp=gmapping_intel [slam.num_particles=30 slam.proposal=paper slam.seed=0]``
 
 Runs GMapping's RBPF over the whole log (file order; scans + odometry of the data config) and writes
-outputs/<exp>/slam-<proposal>-<resample>-<N>p-seed<k>/: the best particle's map (map.pgm/.yaml/.png), its
+outputs/<exp>/slam/<proposal>-<resample>-<N>p-seed<k>-<id>/ (irmcl_warp.runs): the best particle's map (map.pgm/.yaml/.png), its
 trajectory at every scan (trajectory.tum: the last processed scan's corrected pose + the raw odometry
 since then), the N_eff trace (neff.csv) and metrics.json: the relations metric of Kümmerle et al. 2009
 where the log has relations, and the trajectory error against the ground truth after a rigid alignment
@@ -22,55 +22,20 @@ import numpy as np
 import warp as wp
 from omegaconf import OmegaConf
 
-from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, inverse
-from irmcl_warp.io import GEOMETRY_FIELDS, read_relations, resolve, write_tum
+from irmcl_warp.io import read_relations, resolve, write_tum
 from irmcl_warp.io.carmen import gfs_flaser_angles
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
 from irmcl_warp.mapping.grid import OccupancyGrid
 from irmcl_warp.mapping.mapio import save_map
-from irmcl_warp.services.data import far_bound_m, load_stream, recorded_inputs
+from irmcl_warp import runs
+from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.metrics import aligned_error, coverage_warning, relations_error
-from irmcl_warp.services.outputs import stage_dir, up_to_date, write_json, write_manifest
 from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
 from kernels import SLAM, pick_device
 from kernels.slam import ParticleMaps
-
-
-# settings that name a run when they differ from their default: key -> short name in the folder name
-ABLATION_TAGS = {"free_check": "freecheck", "generate_map": "genmap", "line": "", "srr": "srr", "srt": "srt",
-                 "str": "str", "stt": "stt", "proposal_grid": "grid", "proposal_lstep": "plstep", "proposal_astep": "pastep",
-                 "frame": "", "temporal_update": "temporal", "beam_angles": "beams"}
-
-
-def run_tag(s, data=None) -> str:
-    """Output folder name of a SLAM run (``slam-paper-selective-30p-seed0``), then its ``variant_suffix``."""
-    return f"slam-{s.proposal}-{s.resample}-{s.num_particles}p-seed{s.seed}" + variant_suffix(s, data)
-
-
-def variant_suffix(s, data=None) -> str:
-    """Each ablation setting that differs from its default (``-nofreecheck``, ``-bresenham``,
-    ``-plstep0.01``) and each beam geometry override of ``data`` (``-fov3.13287``, ``-amin-1.56643``,
-    ``-offset0_0_0``); "" for a run at the defaults."""
-    tag = ""
-    defaults = SlamConfig()
-    for key, short in ABLATION_TAGS.items():
-        v = s.get(key, getattr(defaults, key)) if hasattr(s, "get") else getattr(s, key, getattr(defaults, key))
-        if v != getattr(defaults, key):
-            if isinstance(v, bool):
-                tag += f"-{short}" if v else f"-no{short}"
-            elif key == "frame":
-                tag += f"-{v}frame"
-            else:
-                tag += f"-{short}{v:g}" if isinstance(v, float) else f"-{short}{v}"
-    short = {"fov_rad": "fov", "angle_min_rad": "amin", "laser_offset": "offset"}
-    for key in GEOMETRY_FIELDS if data is not None else ():
-        v = data.get(key)
-        if v is not None:
-            tag += f"-{short[key]}" + ("_".join(f"{float(x):g}" for x in v) if key == "laser_offset" else f"{float(v):g}")
-    return tag
 
 
 def initial_frame(pose, margin_m: float, res: float):
@@ -148,11 +113,14 @@ def relation_stamps(cfg, log) -> np.ndarray:
 
 
 def run_slam(cfg) -> Path:
-    started, device = time.time(), pick_device(cfg.device)
+    with runs.start(cfg, "slam") as run:
+        return run.path if run.done else map_log(run)
+
+
+def map_log(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
+    device = pick_device(cfg.device)
     s = cfg.slam
-    out = stage_dir(cfg, run_tag(s, cfg.data))
-    if up_to_date(out, cfg, recorded_inputs(cfg), "slam"):
-        return out
     log = load_stream(cfg)
     jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
     if jumps:  # documented handling: kept as the motion model's input, counted in metrics.json
@@ -208,8 +176,7 @@ def run_slam(cfg) -> Path:
         # the odometry frame differs from the ground truth's: both are aligned rigidly before scoring
         metrics["trajectory"] = aligned_error(every, log.ground_truth)
         metrics["trajectory_odometry"] = aligned_error(log.odom, log.ground_truth)
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, recorded_inputs(cfg), device, started)
+    out = run.finish(metrics, device)
     rel = metrics.get("relations")
     print(f"{cfg.data.name}: {len(scans)} of {len(log)} scans processed in {wall:.1f} s, "
           f"{metrics['resamplings']} resamplings"

@@ -1,4 +1,4 @@
-"""``python -m eval.synthesis +exp=<name>``: see irmcl_warp/nof/synthesis.py."""
+"""``python -m irmcl_warp.synthesis +exp=<name> train=<preset>``: see irmcl_warp/nof/synthesis.py."""
 
 import hydra
 

@@ -1,34 +1,37 @@
-"""``python -m eval.relations +exp=fr079``: score the ground-truth poses and the raw odometry of a log
-against its Kümmerle et al. 2009 relations; prints a table, writes outputs/<exp>/relations/metrics.json."""
+"""``python -m irmcl_warp.relations +exp=fr079``: score the ground-truth poses and the raw odometry of a log
+against its Kümmerle et al. 2009 relations; prints a table, writes outputs/<exp>/relations/<log>-<id>/metrics.json."""
 
 from __future__ import annotations
 
+import json
 import sys
-import time
 
 import hydra
 import numpy as np
 
 from irmcl_warp.services.metrics import coverage_warning, relations_error
 from irmcl_warp.config import register
-from irmcl_warp.io import load_log, read_relations, resolve
-from irmcl_warp.services.outputs import stage_dir, write_json, write_manifest
+from irmcl_warp import runs
+from irmcl_warp.io import read_relations, resolve
+from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.cli import run_entry
 
 
 def run_relations(cfg):
-    started = time.time()
     if not cfg.data.relations_path:
         raise ValueError(f"data={cfg.data.name} has no relations file (data.relations_path)")
-    log = load_log(cfg)
-    rel = read_relations(resolve(cfg.data.relations_path))
-    out = stage_dir(cfg, "relations")
-    metrics = {"odometry": relations_error(log.stamps, log.odom, rel)}
-    if log.num_ground_truth:
-        known = np.isfinite(log.ground_truth[:, 0])
-        metrics["ground_truth"] = relations_error(log.stamps[known], log.ground_truth[known], rel)
-    write_json(out / "metrics.json", metrics)
-    write_manifest(out, cfg, [resolve(cfg.data.path), resolve(cfg.data.relations_path)], "cpu", started)
+    with runs.start(cfg, "relations") as run:
+        if not run.done:
+            cfg = run.cfg
+            log = load_stream(cfg)
+            rel = read_relations(resolve(cfg.data.relations_path))
+            metrics = {"odometry": relations_error(log.stamps, log.odom, rel)}
+            if log.num_ground_truth:
+                known = np.isfinite(log.ground_truth[:, 0])
+                metrics["ground_truth"] = relations_error(log.stamps[known], log.ground_truth[known], rel)
+            run.finish(metrics, "cpu")
+    out = run.path
+    metrics = json.loads((out / "metrics.json").read_text())
     print(f"{cfg.data.name}: relations metric (Kümmerle et al. 2009)")
     for name, m in metrics.items():
         if shout := coverage_warning(m, f"{cfg.data.name} {name} ({cfg.data.relations_path})"):

@@ -1,0 +1,581 @@
+"""Runs: what a run is, where it lives and how it is found. The one home of run identity.
+
+A run of a stage is identified by what it reads, and nothing else:
+
+* **the settings it reads**: the config sections (or single keys) that ``STAGES[stage].reads(cfg)`` names.
+  The stage body runs on a copy of the config holding only those (``Run.cfg``, struct mode), so a stage
+  that reads any other setting fails at once (``ConfigAttributeError``): the list cannot drift from what
+  the code reads, and a setting outside it cannot change a result;
+* **the content of the files those settings name** (``FILE_KEYS``): a moved or renamed log is the same
+  input, a log replaced under the same name (same size, same time) is not;
+* **the runs it consumes** (``STAGES[stage].upstream``): their ids. A stage consumes finished runs only.
+
+The id is the sha256 of those three. The folder is ``outputs/<exp>/<stage>/<label>-<id[:10]>``; the label
+is made of a few settings (``STAGES[stage].label``) so a person can tell runs apart. Nothing else in the
+package or in eval builds a run folder's name.
+
+``start(cfg, stage)`` opens a run: it takes a lock per id (a second run of the same id waits for the
+first, then finds it finished), returns at once when the folder holds an intact finished run, and
+otherwise hands the stage a fresh temporary folder ``.<label>-<id>.partial`` (a resumable stage, the
+training, continues the one an interrupted run of the same id left). ``Run.finish`` writes config.yaml
+(the settings read), metrics.json and manifest.json (id, package version, git sha, device, the inputs'
+digests, the upstream runs, every output's digest) into it and swaps it in, so a run folder holds exactly
+what one completed run wrote. A finished run is never replaced; a changed setting or input is a new run.
+
+``find`` reads run records back by their settings (``find("localize", exp="fr079",
+mcl__weighting="nog_raymarch")``), never by a folder's name.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterator
+
+from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.io.atomic import atomic_write_json as write_json
+
+REPO = Path(__file__).resolve().parents[1]
+OUTPUTS = Path("outputs")  # relative to the working directory, as Hydra's run dir
+ID_CHARS = 10  # of the id in folder names (40 bits: no collision among a project's runs)
+NOF_WEIGHTINGS = ("nog_raymarch", "nog_table", "nof_direct")  # observation models that read a trained field
+
+
+# --- what each stage reads ------------------------------------------------------------------------------
+
+def _sim(cfg) -> tuple[str, ...]:
+    """The simulator's settings matter to a run only when the log is simulated."""
+    return ("sim",) if cfg.data.format == "sim" else ()
+
+
+def _localize_reads(cfg) -> tuple[str, ...]:
+    keys = ("data", *_sim(cfg), "mcl", "localize", "device")
+    if cfg.localize.map_path:  # your own log in your own map: the map and the NOF are files
+        return keys
+    return keys + ("render.near_m",)  # the benchmark's maps come from the training split's beams
+
+
+def _localize_upstream(cfg) -> tuple[str, ...]:
+    return ("train",) if cfg.mcl.weighting in NOF_WEIGHTINGS and not cfg.localize.map_path else ()
+
+
+def _localize_label(cfg) -> str:
+    if cfg.localize.map_path:
+        start = "pose" if cfg.localize.initial_pose is not None else "global"
+        return f"{{mcl.weighting}}-{start}-{{mcl.num_particles}}-in-{{localize.map_path}}"
+    return "{mcl.weighting}-{localize.mode}-{mcl.num_particles}-{mcl.map_resolution_m}m"
+
+
+def _pipeline_label(cfg) -> str:
+    second = cfg.data.format == "sim" and cfg.pipeline.path is None
+    return "{data.name}" + ("-path{pipeline.sim_path_seed}" if second else "-{pipeline.path}" if cfg.pipeline.path else "")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """What a stage reads (config sections or ``section.key``), the label its folders carry (a format over
+    settings, or a function of the config giving one), the stages whose finished runs it consumes, and
+    whether an interrupted run of the same id is continued rather than started again."""
+    reads: Callable[..., tuple[str, ...]]
+    label: str | Callable[..., str]
+    upstream: Callable[..., tuple[str, ...]] = lambda cfg: ()
+    resumable: bool = False
+
+
+STAGES: dict[str, Stage] = {
+    "inspect": Stage(lambda c: ("data", *_sim(c), "mapping", "device"), "{data.name}"),
+    "relations": Stage(lambda c: ("data", *_sim(c)), "{data.name}"),
+    "slam": Stage(lambda c: ("data", *_sim(c), "slam", "device"),
+                  "{slam.proposal}-{slam.resample}-{slam.num_particles}p-seed{slam.seed}"),
+    "train": Stage(lambda c: ("data", *_sim(c), "model", "render", "train", "device"), "{train.name}",
+                   resumable=True),
+    # the NOF of the finished training run with these settings beside grids (mapping, raycast)
+    "synthesis": Stage(lambda c: ("data", *_sim(c), "render", "mapping", "raycast", "device", "train.name"),
+                       "{train.name}", lambda c: ("train",)),
+    "localize": Stage(_localize_reads, _localize_label, _localize_upstream),
+    "globloc": Stage(lambda c: ("sim", "globloc", "mcl", "device"), "{globloc.scenario}"),
+    # the pipeline runs slam and train itself; its own run reads what those and its localization read
+    "pipeline": Stage(lambda c: ("data", *_sim(c), "slam", "model", "render", "train", "mcl", "localize.reduce_after_s",
+                                 "pipeline", "device"), _pipeline_label),
+}
+
+# settings that name files: a run depends on their content, not on where they lie
+FILE_KEYS = ("data.path", "data.laser_frame_path", "data.ground_truth_path", "data.relations_path",
+             "data.relation_stamps_path", "data.splits_path", "data.train_poses_path", "localize.map_path",
+             "localize.nof_path", "pipeline.path", "pipeline.ground_truth_path")
+
+
+def locate_file(key: str, value: str) -> Path:
+    """The file a setting names (``key`` only says which, for messages): as given (absolute, or from the
+    working directory) when it exists there, else under IRMCL_DATA (io.resolve)."""
+    from irmcl_warp.io import resolve
+
+    return resolve(value)
+
+
+# --- digests --------------------------------------------------------------------------------------------
+
+def file_digest(path, chunk=1 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def content_digest(path: Path) -> str:
+    """sha256 of a file, or of a folder's files (a ROS 2 bag) by relative path and content."""
+    path = Path(path)
+    if path.is_file():
+        return file_digest(path)
+    h = hashlib.sha256()
+    for p in sorted(q for q in path.rglob("*") if q.is_file()):
+        h.update(f"{p.relative_to(path)}\0{file_digest(p)}\0".encode())
+    return h.hexdigest()
+
+
+def digest(obj) -> str:
+    """sha256 of a JSON-able object (sorted keys): settings keys and cache keys."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def map_files(map_file: Path) -> list[Path]:
+    """A map_server YAML and its image (both decide a run in that map), or the one .npz."""
+    if map_file.suffix in (".yaml", ".yml"):
+        from omegaconf import OmegaConf
+
+        try:
+            image = OmegaConf.load(map_file).get("image")
+        except Exception:  # a malformed YAML: the map reader names it when the run reads it
+            image = None
+        return [map_file] + ([map_file.parent / image] if image and (map_file.parent / image).is_file() else [])
+    return [map_file]
+
+
+# --- the settings a stage reads -------------------------------------------------------------------------
+
+def _get(container: dict, dotted: str):
+    node = container
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise KeyError(dotted)
+        node = node[part]
+    return node
+
+
+def _set(container: dict, dotted: str, value) -> None:
+    *head, last = dotted.split(".")
+    for part in head:
+        container = container.setdefault(part, {})
+    container[last] = value
+
+
+def read_settings(cfg, stage: str, strict: bool = True) -> dict:
+    """The resolved settings ``stage`` reads from ``cfg`` (nested like the config), ``exp`` included. With
+    ``strict`` off, what the config lacks is left out (a record kept before the stage read it)."""
+    from omegaconf import OmegaConf
+
+    full = OmegaConf.to_container(cfg, resolve=True) if not isinstance(cfg, dict) else cfg
+    view = restricted(cfg) if isinstance(cfg, dict) else cfg
+    out = {"exp": full.get("exp")}
+    for key in STAGES[stage].reads(view):
+        try:
+            _set(out, key, _get(full, key))
+        except KeyError:
+            if strict:
+                raise KeyError(f"the {stage} stage reads {key}, which the config does not have") from None
+    return out
+
+
+def restricted(settings: dict):
+    """The settings as a config in struct mode: reading a key it does not hold is an error."""
+    from omegaconf import OmegaConf
+
+    c = OmegaConf.create(settings)
+    OmegaConf.set_struct(c, True)
+    return c
+
+
+def input_files(settings: dict) -> dict[str, list[Path]]:
+    """{setting: the files it names} for every file setting among ``settings`` that is set."""
+    out = {}
+    for key in FILE_KEYS:
+        try:
+            value = _get(settings, key)
+        except KeyError:
+            continue
+        if value:
+            path = locate_file(key, value)
+            out[key] = map_files(path) if key == "localize.map_path" else [path]
+    return out
+
+
+def _by_name(key: str, value):
+    """A file setting as records compare it: a path under the data root as given, else the file's name."""
+    return value if not value or not Path(value).is_absolute() else Path(value).name
+
+
+def settings_id(config: dict, stage: str) -> str:
+    """The digest of the settings a run of ``stage`` and the runs it consumes read, files by name: what
+    records are compared by (kept records carry no input digests; a run of yours replaces a kept one of the
+    same settings id)."""
+    cfg = restricted(config)
+    parts = {}
+    for s in (stage, *STAGES[stage].upstream(cfg)):
+        settings = read_settings(config, s, strict=False)
+        settings.pop("exp", None)
+        for key in FILE_KEYS:
+            try:
+                _set(settings, key, _by_name(key, _get(settings, key)))
+            except KeyError:
+                pass
+        parts[s] = settings
+    return digest(parts)
+
+
+# --- identity -------------------------------------------------------------------------------------------
+
+@dataclass
+class Identity:
+    stage: str
+    exp: str
+    settings: dict  # what the stage reads, resolved
+    inputs: dict  # setting -> [{"path", "sha256"}]
+    upstream: dict  # stage -> Identity of the run consumed
+    id: str
+    label: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.label}-{self.id[:ID_CHARS]}"
+
+    def folder(self, root=OUTPUTS) -> Path:
+        return Path(root) / self.exp / self.stage / self.name
+
+
+def _short(key: str, value) -> str:
+    if key in FILE_KEYS and isinstance(value, str):
+        return Path(value).stem
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, int) and value >= 1000 and value % 1000 == 0:
+        return f"{value // 1000}k"
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, (list, tuple)):
+        return "_".join(_short("", v) for v in value)
+    return str(value)
+
+
+def label_of(stage: str, config) -> str:
+    """The readable part of a run folder's name, from ``config`` (a config or its container)."""
+    from omegaconf import OmegaConf
+
+    full = OmegaConf.to_container(config, resolve=True) if not isinstance(config, dict) else config
+    spec = STAGES[stage].label
+    template = spec(restricted(full)) if callable(spec) else spec
+    text = re.sub(r"\{([a-z_.]+)\}", lambda m: _short(m.group(1), _get(full, m.group(1))), template)
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text)
+
+
+def identify(cfg, stage: str) -> Identity:
+    """The identity of the run of ``stage`` that ``cfg`` describes (nothing is run or written)."""
+    if stage not in STAGES:
+        raise ValueError(f"no stage {stage!r}; stages: {', '.join(STAGES)}")
+    settings = read_settings(cfg, stage)
+    inputs = {k: [{"path": str(p), "sha256": content_digest(p)} for p in paths]
+              for k, paths in input_files(settings).items()}
+    upstream = {s: identify(cfg, s) for s in STAGES[stage].upstream(cfg)}
+    # the id: the settings without the file names (their content stands for them), the inputs' content, the
+    # upstream ids; exp only places the folder
+    named = json.loads(json.dumps({k: v for k, v in settings.items() if k != "exp"}))  # a copy: settings stay whole
+    for key in inputs:
+        _set(named, key, None)
+    run_id = digest({"stage": stage, "settings": named, "inputs": {k: [f["sha256"] for f in v] for k, v in inputs.items()},
+                     "upstream": {s: u.id for s, u in upstream.items()}})
+    return Identity(stage, str(settings["exp"]), settings, inputs, upstream, run_id, label_of(stage, cfg))
+
+
+# --- finished runs ---------------------------------------------------------------------------------------
+
+def output_digests(out: Path) -> dict[str, str]:
+    """sha256 of every file under ``out`` except manifest.json, by relative path."""
+    return {str(p.relative_to(out)): file_digest(p) for p in sorted(Path(out).rglob("*"))
+            if p.is_file() and p.name != "manifest.json"}
+
+
+def intact(folder: Path, run_id: str | None = None) -> tuple[bool, str]:
+    """(finished and unchanged, why not): ``folder`` holds a manifest (of ``run_id`` when given) whose
+    output digests match the files, and every JSON file parses."""
+    path = Path(folder) / "manifest.json"
+    if not path.is_file():
+        return False, f"{path} missing: no run finished there"
+    try:
+        manifest = json.loads(path.read_text())
+        outputs = manifest["outputs"]
+    except (ValueError, KeyError, TypeError):
+        return False, f"{path} is malformed"
+    if run_id is not None and manifest.get("id") != run_id:
+        return False, f"{path} is the manifest of another run ({manifest.get('id')})"
+    for rel, d in outputs.items():
+        f = Path(folder) / rel
+        if not f.is_file():
+            return False, f"{f} listed in the manifest but missing"
+        if file_digest(f) != d:
+            return False, f"{f} differs from what the run wrote (edited, truncated or half-rewritten)"
+        if f.suffix == ".json":
+            try:
+                json.loads(f.read_text())
+            except ValueError as e:
+                return False, f"{f} is not valid JSON ({e})"
+    return True, ""
+
+
+def finished(ident: Identity, root=OUTPUTS) -> Path | None:
+    """The folder of the finished, intact run of ``ident``, or None."""
+    folder = ident.folder(root)
+    return folder if intact(folder, ident.id)[0] else None
+
+
+def require(ident: Identity, command: str, root=OUTPUTS) -> Path:
+    """The folder of a finished run that another stage consumes; an error saying what to run when there is
+    none (an interrupted run of these settings is never used)."""
+    folder = ident.folder(root)
+    ok, why = intact(folder, ident.id)
+    if ok:
+        return folder
+    partial = folder.with_name(f".{folder.name}.partial")
+    state = (f"a {ident.stage} run of these settings was interrupted ({partial}); finish it" if partial.exists()
+             else f"no finished {ident.stage} run of these settings ({why})")
+    raise FileNotFoundError(f"{folder}: {state}: {command}")
+
+
+# --- running ---------------------------------------------------------------------------------------------
+
+def _git_sha() -> str:
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
+                               text=True, check=True).stdout.strip()
+        return sha + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def package_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("irmcl-warp")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@dataclass
+class Run:
+    """An open run: ``cfg`` (the settings it may read), ``dir`` (where it writes; swapped into ``path`` by
+    ``finish``), ``upstream`` ({stage: folder of the finished run it consumes})."""
+    ident: Identity
+    cfg: object
+    path: Path  # the finished run's folder
+    dir: Path  # the folder being written
+    done: bool  # ``path`` already held this run: nothing to do
+    upstream: dict = field(default_factory=dict)
+    started: float = field(default_factory=time.time)
+
+    def finish(self, metrics: dict | None, device: str, extra: dict | None = None) -> Path:
+        """Write metrics.json (when given), config.yaml and manifest.json, then swap the folder in."""
+        from omegaconf import OmegaConf
+
+        if metrics is not None:
+            write_json(self.dir / "metrics.json", metrics)
+        atomic_write_bytes(self.dir / "config.yaml", OmegaConf.to_yaml(restricted(self.ident.settings)).encode())
+        manifest = {
+            "id": self.ident.id, "stage": self.ident.stage, "exp": self.ident.exp, "label": self.ident.label,
+            "package": {"name": "irmcl-warp", "version": package_version()}, "git_sha": _git_sha(),
+            "python": platform.python_version(), "versions": _versions(), "device": device,
+            "wall_time_s": time.time() - self.started, "inputs": self.ident.inputs,
+            "upstream": {s: {"id": u.id, "run": f"{u.exp}/{u.stage}/{u.name}"} for s, u in self.ident.upstream.items()},
+            **(extra or {}), "outputs": output_digests(self.dir)}
+        write_json(self.dir / "manifest.json", manifest)
+        _swap(self.dir, self.path)
+        self.dir, self.done = self.path, True
+        return self.path
+
+
+def amend(folder: Path, metrics: dict, why: str) -> None:
+    """Rewrite a finished run's metrics.json (a rescoring with today's rules) and record it in its manifest: the
+    new digest, so the run stays intact, and what was amended and why, so the record says it was."""
+    folder = Path(folder)
+    ok, reason = intact(folder)
+    if not ok:
+        raise ValueError(f"{folder}: not a finished run to amend ({reason})")
+    write_json(folder / "metrics.json", metrics)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["outputs"]["metrics.json"] = file_digest(folder / "metrics.json")
+    manifest.setdefault("amended", []).append({"file": "metrics.json", "why": why, "when": time.time(),
+                                               "git_sha": _git_sha()})
+    write_json(folder / "manifest.json", manifest)
+
+
+def _versions() -> dict:
+    out = {}
+    for name in ("numpy", "warp", "torch"):
+        mod = sys.modules.get(name)
+        if mod is not None:
+            out[name] = getattr(getattr(mod, "config", None), "version", None) or getattr(mod, "__version__", "?")
+    return out
+
+
+def _swap(partial: Path, final: Path) -> None:
+    """Put the finished ``partial`` folder at ``final``; a damaged run there is removed, never mixed in."""
+    old = None
+    if final.exists():
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        os.replace(final, old)
+    os.replace(partial, final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _lock(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a+") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"{path.parent}: another run of these settings is running; waiting for it", flush=True)
+            fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@contextlib.contextmanager
+def start(cfg, stage: str, root=OUTPUTS, command: str | None = None) -> Iterator[Run]:
+    """Open the run of ``stage`` that ``cfg`` describes (see the module's docstring). Inside the block,
+    ``run.done`` says the finished run is already there (``run.path``); otherwise the stage writes into
+    ``run.dir`` and calls ``run.finish``. Leaving the block without finishing leaves no finished run."""
+    ident = identify(cfg, stage)
+    final = ident.folder(root)
+    upstream = {s: require(u, command or f"run the {s} stage with these settings first", root)
+                for s, u in ident.upstream.items()}
+    with _lock(final.with_name(f".{final.name}.lock")):
+        ok, why = intact(final, ident.id)
+        if ok:
+            print(f"{final}: up to date (a finished run of these settings and inputs)")
+            yield Run(ident, restricted(ident.settings), final, final, True, upstream)
+            return
+        if final.exists():
+            print(f"{final}: redoing ({why})")
+        partial = final.with_name(f".{final.name}.partial")
+        if partial.exists() and not STAGES[stage].resumable:
+            shutil.rmtree(partial)  # what an interrupted run left: never mixed into this one
+        partial.mkdir(parents=True, exist_ok=True)
+        run = Run(ident, restricted(ident.settings), final, partial, False, upstream)
+        yield run
+
+
+def cache_dir(cfg, name: str, root=OUTPUTS) -> Path:
+    """``outputs/<exp>/<name>/``: caches shared by an experiment's runs (the stream, NOGs); their files are
+    named by the digest of what they hold."""
+    return Path(root) / str(cfg.exp) / name
+
+
+def tool_dir(exp: str, tool: str, label: str, settings=None, root=OUTPUTS) -> Path:
+    """``outputs/<exp>/<tool>/<label>[-<digest of settings>]/``: a run of a tool outside the stages (the
+    released GMapping, the authors' IR-MCL), named by its readable ``label`` and the digest of the
+    ``settings`` the tool ran with (any JSON-able value), so two settings never share a folder."""
+    name = re.sub(r"[^A-Za-z0-9._-]+", "_", label)
+    if settings is not None:
+        name += f"-{digest(settings)[:ID_CHARS]}"
+    return Path(root) / exp / tool / name
+
+
+def tool_runs(tool: str, exp: str = "*", root=OUTPUTS) -> list[Path]:
+    """The run folders of ``tool`` (of ``exp``) that hold a metrics.json, in order."""
+    return sorted(p.parent for p in Path(root).glob(f"{exp}/{tool}/*/metrics.json"))
+
+
+# --- records ---------------------------------------------------------------------------------------------
+
+class Record(dict):
+    """A run's metrics.json, with ``stage``, ``exp``, ``id``, ``config`` (the settings it read), ``path``
+    (its folder, None for a kept record) and ``source`` ("outputs" or "results")."""
+
+    def __init__(self, metrics: dict, stage: str, exp: str, run_id: str, config: dict, path: Path | None = None,
+                 source: str = "outputs", label: str = ""):
+        super().__init__(metrics)
+        self.stage, self.exp, self.id, self.config, self.path, self.source = stage, exp, run_id, config, path, source
+        self.label = label
+
+    def setting(self, dotted: str, default=None):
+        try:
+            return _get(self.config, dotted)
+        except KeyError:
+            return default
+
+    @property
+    def settings_id(self) -> str:
+        return settings_id(self.config, self.stage)
+
+    @property
+    def name(self) -> str:
+        """The run's folder name, as ``Identity.name`` (its results-file key and kept files carry it too)."""
+        return f"{self.label}-{self.id[:ID_CHARS]}"
+
+
+def read_record(folder: Path) -> Record:
+    """The record of a finished run folder (manifest.json, config.yaml, metrics.json)."""
+    from omegaconf import OmegaConf
+
+    folder = Path(folder)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    config = OmegaConf.to_container(OmegaConf.load(folder / "config.yaml"))
+    metrics = json.loads((folder / "metrics.json").read_text()) if (folder / "metrics.json").is_file() else {}
+    return Record(metrics, manifest["stage"], manifest["exp"], manifest["id"], config, folder, "outputs",
+                  manifest.get("label", ""))
+
+
+def records(stage: str | None = None, exp: str | None = None, root=OUTPUTS) -> list[Record]:
+    """Every finished run under ``root`` (of ``stage``, of ``exp``), in folder order."""
+    pattern = f"{exp or '*'}/{stage or '*'}/*/manifest.json"
+    out = []
+    for m in sorted(Path(root).glob(pattern)):
+        if m.parent.name.startswith("."):
+            continue
+        try:
+            out.append(read_record(m.parent))
+        except Exception as e:  # a file cut short or edited by hand (JSON, YAML): say which run, not a parser's trace
+            raise ValueError(f"{m.parent}: unreadable run record ({e}); remove the folder or run its stage again") from e
+    return out
+
+
+def matches(record: Record, **where) -> bool:
+    """``where``: settings as keyword arguments, ``section__key=value`` (``mcl__weighting="nog_raymarch"``)."""
+    for key, value in where.items():
+        missing = object()
+        got = record.setting(key.replace("__", "."), missing)
+        if got is missing or got != value:
+            return False
+    return True
+
+
+def find(stage: str, exp: str | None = None, root=OUTPUTS, among: list[Record] | None = None, **where) -> list[Record]:
+    """The records of ``stage`` (of ``exp``) whose settings have the values ``where`` names."""
+    pool = records(stage, exp, root) if among is None else [r for r in among if r.stage == stage
+                                                            and (exp is None or r.exp == exp)]
+    return [r for r in pool if matches(r, **where)]
