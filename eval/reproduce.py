@@ -2,7 +2,7 @@
 table and figure (``eval.tables --write``, ``eval.plots``).
 
 Each experiment below is a Hydra sweep of one stage. A job counts as done when its output folder is a
-finished stage of the same settings (``outputs.stage_complete``: manifest digests, config, inputs) or when
+finished run of its identity (irmcl_warp.runs: the settings it reads, its inputs' content) or when
 a GPU run of it is kept in ``results/`` (pass ``--rerun-kept`` to run those too). A half-written or edited
 folder is not done: it is run again. The remaining jobs of a sweep go to Hydra in one multirun through
 the launcher you pick:
@@ -31,21 +31,14 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from eval.keep import load_kept
+from eval.results.records import kept as kept_records
+from irmcl_warp import runs
 from irmcl_warp.config import register
-from irmcl_warp.globloc.run import scenario_folder
-from irmcl_warp.mcl.stage import run_folder as localize_folder
-from irmcl_warp.nof.folders import synthesis_folder, train_folder
-from irmcl_warp.pipeline import run_folder as pipeline_folder
 from irmcl_warp.services.cli import guard
-from irmcl_warp.services.outputs import SECTIONS, stage_complete
-from irmcl_warp.slam.stage import run_tag as slam_tag
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-KEPT = {"irmcl_warp.train": "nof", "eval.synthesis": "nof", "irmcl_warp.localize": "mcl", "irmcl_warp.slam": "slam",
-        "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # results/<this>/<exp>.json (eval.keep)
+STAGE = {"irmcl_warp.train": "train", "irmcl_warp.synthesis": "synthesis", "irmcl_warp.localize": "localize",
+         "irmcl_warp.slam": "slam", "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # module -> stage
 
 
 @dataclass
@@ -62,16 +55,6 @@ class Sweep:
                 for values in itertools.product(*(self.axes[k] for k in keys))]
 
 
-def folder(module: str, cfg) -> str:
-    """The output folder of a job, relative to outputs/ (and to results/<group>/): the stage's own name for it."""
-    names = {"irmcl_warp.train": train_folder, "eval.synthesis": synthesis_folder,
-             "irmcl_warp.localize": localize_folder, "irmcl_warp.slam": lambda c: slam_tag(c.slam, c.data),
-             "irmcl_warp.globloc": scenario_folder, "irmcl_warp.pipeline": pipeline_folder}
-    if module not in names:
-        raise ValueError(f"no output folder rule for {module}")
-    return f"{cfg.exp}/{names[module](cfg)}"
-
-
 SEEDS = list(range(10))
 NOF = [("fr079", "paper"), ("intel", "paper"), ("mit_csail", "fast"), ("fr079", "fast"), ("fr079", "fast128"),
        ("fr079", "cpu"), ("fr079_block", "fast")]
@@ -85,7 +68,7 @@ GLOBLOC = ["globloc_corridor", "globloc_corridor_kidnap", "globloc_corridor_8m",
 SWEEPS = (
     # IR-MCL Table I: scan synthesis of the NOF against occupancy grids
     [Sweep("nof", "irmcl_warp.train", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
-    + [Sweep("nof", "eval.synthesis", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
+    + [Sweep("nof", "irmcl_warp.synthesis", [f"+exp={e}", f"train={p}"], gpu=p != "cpu") for e, p in NOF]
     # IR-MCL Tables II-III: global localization (100k particles) and pose tracking (10k), 5 and 10 cm maps
     + [Sweep("mcl", "irmcl_warp.localize", [f"+exp={e}", f"train={p}", f"localize.mode={mode}", f"mcl.num_particles={n}"],
              {"mcl.weighting": WEIGHTINGS, "mcl.map_resolution_m": [0.05, 0.1]}, gpu=True)
@@ -115,7 +98,7 @@ SWEEPS = (
                                                  "mcl.num_particles=100000"], {key: values}, gpu=True)
        for e, p in MCL_EXPS[1:] for key, values in ABLATIONS.items()]
     + [Sweep("ablation", module, ["+exp=fr079", "train=fast"], {"render": ["warp", "torch_ref"]}, gpu=True)
-       for module in ("irmcl_warp.train", "eval.synthesis")]
+       for module in ("irmcl_warp.train", "irmcl_warp.synthesis")]
     # the end-to-end pipeline on the simulator and on the fr079 bag
     + [Sweep("pipeline", "irmcl_warp.pipeline", [], {"pipeline.sim_path_seed": list(range(1, 11))}),
        Sweep("pipeline", "irmcl_warp.pipeline", ["+exp=pipeline_fr079", "train=fast", "slam.num_particles=30", "mcl.num_particles=100000",
@@ -129,17 +112,35 @@ def compose_job(module: str, overrides: list[str]):
 
 
 def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, rerun_kept: bool) -> tuple[str, str]:
-    """("done" | "kept" | "missing", folder or reason)."""
+    """("done" | "kept" | "missing", where or why): done when a finished run of the job's identity is under
+    ``outputs`` (irmcl_warp.runs: its settings and its inputs' content), kept when a record of the same
+    settings is kept in ``results``."""
     cfg = compose_job(sweep.module, overrides)
-    rel = folder(sweep.module, cfg)
-    done, why = stage_complete(outputs / rel, cfg, sections=SECTIONS.get(sweep.module.rsplit(".", 1)[-1]))
-    if done:
-        return "done", str(outputs / rel)
-    exp, name = rel.split("/", 1)
-    doc = load_kept(results / KEPT[sweep.module], exp)
-    if not rerun_kept and doc is not None and name in doc["runs"]:
-        return "kept", f"{results / KEPT[sweep.module] / exp}.json [{name}]"
-    return "missing", why
+    stage = STAGE[sweep.module]
+    try:
+        ident = runs.identify(cfg, stage)
+    except FileNotFoundError as e:  # an upstream run this job consumes is not there yet
+        return "missing", str(e)
+    folder = runs.finished(ident, outputs)
+    if folder is not None:
+        return "done", str(folder)
+    if not rerun_kept:
+        from omegaconf import OmegaConf
+
+        same = runs.settings_id(OmegaConf.to_container(cfg, resolve=True), stage)
+        for rec in _kept(results):
+            if rec.stage == stage and rec.exp == ident.exp and rec.settings_id == same:
+                return "kept", f"{results}/{rec.exp} [{rec.stage}/{rec.label}]"
+    return "missing", f"no finished run at {ident.folder(outputs)}"
+
+
+_KEPT: dict = {}
+
+
+def _kept(results: Path) -> list:
+    if results not in _KEPT:
+        _KEPT[results] = kept_records(results=results)
+    return _KEPT[results]
 
 
 def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, jobs: int, extra: list[str]) -> list[list[str]]:

@@ -3,6 +3,7 @@ a forbidden import breaks them, and no module imports itself through others (no 
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -32,7 +33,7 @@ def test_import_contracts_hold():
 @pytest.mark.parametrize("importer, forbidden, contract", [
     ("kernels/grid.py", "from irmcl_warp.nof.model import NOF", "kernels is a leaf"),
     ("irmcl_warp/slam/stage.py", "from irmcl_warp.mcl.stage import run_localize", "no stage imports another stage"),
-    ("irmcl_warp/services/data.py", "from eval.tables import main", "stage services import no stage"),
+    ("irmcl_warp/services/data.py", "from eval.tables import main", "(and the runs module) import no stage"),
 ])
 def test_a_forbidden_import_breaks_a_contract(tmp_path, importer, forbidden, contract):
     for name in PACKAGES:
@@ -49,3 +50,21 @@ def test_no_module_imports_itself_through_others():
     cycles = sorted({tuple(sorted((a, b))) for a in graph.modules for b in graph.find_modules_directly_imported_by(a)
                      if graph.chain_exists(importer=b, imported=a)})
     assert cycles == [], cycles
+
+
+FOLDER_LITERAL = re.compile(r"""["'](?:localize|slam|train|synthesis|globloc|pipeline|inspect|relations)-|"""
+                            r"reference-(?:gmapping|irmcl)|stage_dir|run_tag|train_folder")
+FOLDER_BUILT = re.compile(r"\s/\s*(?:cfg\.)?exp\s*/|\{(?:cfg\.)?exp\}/")
+
+
+def test_run_folders_are_named_in_one_place():
+    """No run-folder string literal in eval or the package, and no module but irmcl_warp/runs.py joins an
+    experiment and a stage into a run's path: runs are found by their settings (irmcl_warp.runs.find)."""
+    found = []
+    for path in sorted(p for pkg in ("irmcl_warp", "eval") for p in (REPO / pkg).rglob("*.py")):
+        if path == REPO / "irmcl_warp" / "runs.py":
+            continue
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if FOLDER_LITERAL.search(line) or FOLDER_BUILT.search(line):
+                found.append(f"{path.relative_to(REPO)}:{n}: {line.strip()}")
+    assert found == []

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from eval.bench_slam import run_slam_bench
+from eval.bench.slam import run_slam_bench
 
 
 def _args(tmp_path, match_at):

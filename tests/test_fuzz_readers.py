@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from eval.fuzz import BY_NAME, READERS, carmen_text, classes_of, encode, g2o_text, intact_read, relations_text, same, verdict
+from eval.analyses.fuzz import BY_NAME, READERS, carmen_text, classes_of, encode, g2o_text, intact_read, relations_text, same, verdict
 from irmcl_warp.io import LogDefectWarning, LogFormatError, read_carmen, read_g2o, read_relations, read_splits
 
 FUZZ = settings(max_examples=int(os.environ.get("IRMCL_FUZZ_EXAMPLES", 40)), deadline=None, derandomize=True,

@@ -2,6 +2,7 @@
 format, the driver's best path comes back at the processed scans, and it is scored like our own runs (a pose at
 every scan from the last processed pose plus odometry; the relations on the laser's path)."""
 
+import json
 import stat
 import sys
 
@@ -10,7 +11,8 @@ import pytest
 from omegaconf import OmegaConf
 
 import eval.reference.gmapping as ref
-from eval.collect import released_errors
+from eval.results.queries import TOOL, reference_variant, released_errors
+from irmcl_warp import runs
 from irmcl_warp.config import SimConfig
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.sim import simulate
@@ -45,7 +47,7 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
     fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
     (tmp_path / "COMMIT").write_text("fake 0\n")
     monkeypatch.setattr(ref, "BINARY", fake)
-    cfg = OmegaConf.create({"data": {"name": "sim", "relations_path": str(rel_file), "relation_stamps_path": None}})
+    cfg = OmegaConf.create({"exp": "sim", "data": {"name": "sim", "relations_path": str(rel_file), "relation_stamps_path": None}})
     scans = tmp_path / "scans.txt"
     ref.export_scans(log, scans)
     np.savetxt(str(scans) + ".truth", laser_truth, fmt="%.9f")
@@ -71,18 +73,27 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
 
 def test_neff_check_reads_the_released_resamplings_from_its_post_resampling_trace(tmp_path):
     """The released driver logs N_eff after resampling (a resampled scan reads N); ours logs it before, with a
-    resampled flag. Two released runs (3 and 1 resamplings) against two of ours (2 and 2)."""
-    exp = tmp_path / "gmapping_x"
+    resampled flag. Two released runs (3 and 1 resamplings) against two of ours (2 and 2), found by their
+    settings: a run of ours with another beam layout and a released run with other settings are left out."""
+    from runfakes import composed, fake_run
+
     traces = {0: [30, 22.5, 30, 18.0, 30, 30], 1: [30, 25.0, 30, 21.0, 19.5, 17.0]}
+    neff = "scan,neff,resampled,match_rounds\n" + "".join(f"{k},{v},{int(v < 15)},3\n"
+                                                         for k, v in enumerate([29.0, 12.0, 24.0, 11.0, 20.0]))
     for seed, values in traces.items():
-        d = exp / f"reference-gmapping-30p-seed{seed}"
+        d = runs.tool_dir("gmapping_intel", TOOL, f"30p-seed{seed}", seed, tmp_path)
         d.mkdir(parents=True)
         np.savetxt(d / "neff.txt", np.column_stack([np.arange(len(values)), values]), fmt="%.6f")
-        ours = exp / f"slam-gmapping_code-selective-30p-seed{seed}"
-        ours.mkdir()
-        (ours / "neff.csv").write_text("scan,neff,resampled,match_rounds\n" + "".join(
-            f"{k},{v},{int(v < 15)},3\n" for k, v in enumerate([29.0, 12.0, 24.0, 11.0, 20.0])))
-    r = ref.neff_check("gmapping_x", outputs=tmp_path)
+        (d / "metrics.json").write_text(json.dumps({"particles": 30, "settings": {}, "data_overrides": [], "run": d.name}))
+        cfg = composed("+exp=gmapping_intel", "slam.proposal=gmapping_code", f"slam.seed={seed}")
+        fake_run(tmp_path, "slam", cfg, {}, {"neff.csv": neff})
+    other = composed("+exp=gmapping_intel", "slam.proposal=gmapping_code", "data.laser_offset=[0,0,0]")
+    fake_run(tmp_path, "slam", other, {}, {"neff.csv": neff.replace("24.0", "2.0")})
+    d = runs.tool_dir("gmapping_intel", TOOL, "30p-delta0.1-seed0", "delta", tmp_path)
+    d.mkdir(parents=True)
+    np.savetxt(d / "neff.txt", np.column_stack([np.arange(3), [30, 30, 30]]), fmt="%.6f")
+    (d / "metrics.json").write_text(json.dumps({"particles": 30, "settings": {"delta": 0.1}, "run": d.name}))
+    r = ref.neff_check("gmapping_intel", outputs=tmp_path)
     assert sorted(r["resamplings_released"]) == [1, 3] and r["resamplings_ours"] == [2, 2]
     assert r["scans_released"] == 6 and r["scans_ours"] == 6  # 2 + 4 not resampled; 3 + 3 of ours
     assert r["neff_quartiles_ours"][1] == 24.0 and 0 <= r["neff_ks_p"] <= 1
@@ -92,8 +103,6 @@ def test_gfs_path_is_read_from_gfs2logs_odom_lines(tmp_path):
     """gfs2log's CARMEN log: one ODOM line per reading (the start, stamped 0, dropped; a stamp given twice
     keeps its last pose); a broken line is an error naming the file and the line; its runs form their own
     variant, apart from the wrapper replay's runs."""
-    from eval.collect import reference_variant
-
     f = tmp_path / "best.log"
     f.write_text("ODOM 0 0 0 0 0 0 0.000000 pippo 0\nNEFF 29.5 0 pippo 0\n"
                  "ODOM 1.0 2.0 0.5 0 0 0 10.250000 pippo 10.25\nROBOTLASER1 0 0\n"
@@ -154,7 +163,7 @@ def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_
     monkeypatch.setattr(ref, "GFS", tmp_path / "gfs_nogui")
     monkeypatch.setattr(ref, "GFS2LOG", tmp_path / "gfs2log")
     monkeypatch.setattr(ref, "BINARY", tmp_path / "gmapping_replay")
-    cfg = OmegaConf.create({"data": {"name": "sim", "format": "carmen", "path": str(clf),
+    cfg = OmegaConf.create({"exp": "sim", "data": {"name": "sim", "format": "carmen", "path": str(clf),
                                      "relations_path": str(rel_file), "relation_stamps_path": None}})
     out = tmp_path / "runs"
     out.mkdir()
@@ -163,12 +172,13 @@ def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_
     m = ref.run_gfs_seed(cfg, log, plain, 4, out)
     assert m["run"] == "gfs-30p-seed4" and m["randseed"] == 5 and m["tool"] == "gfs_nogui"
     assert m["processed_scans"] == len(log) and m["relations"]["trans_abs_mean_m"] < 1e-4  # the true path back
-    assert not list((out / "reference-gmapping-gfs-30p-seed4").glob("*.dat"))  # scratch removed
+    folder = runs.tool_dir("sim", TOOL, "gfs-30p-seed4", {"tool": "gfs_nogui", "seed": 4}, out)
+    assert folder.is_dir() and not list(folder.glob("*.dat"))  # its own folder, scratch removed
     # a path that misses the last scans: an error naming gfs2log's file (a finished run is kept, not run again)
     (tmp_path / "gfs2log").write_text(FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
                                                          stamps=str(tmp_path / "stamps.txt"), cut="[:-3]"))
     assert ref.run_gfs_seed(cfg, log, plain, 4, out) == m
-    (out / "reference-gmapping-gfs-30p-seed4" / "metrics.json").unlink()
+    (folder / "metrics.json").unlink()
     with pytest.raises(RuntimeError, match="best.log: poses at"):
         ref.run_gfs_seed(cfg, log, plain, 4, out)
     with pytest.raises(ValueError, match="gfs_nogui reads CARMEN logs"):

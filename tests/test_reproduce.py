@@ -8,10 +8,11 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from eval.keep import keep
-from eval.reproduce import SWEEPS, Sweep, folder, job_state, multirun_commands
+from eval.results.records import keep
+from eval.reproduce import SWEEPS, Sweep, job_state, multirun_commands
+from irmcl_warp import runs
 from irmcl_warp.config import register
-from irmcl_warp.services.outputs import stage_complete, write_json, write_manifest
+from runfakes import fake_run
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 SMALL_SIM = ["sim.duration_s=20", "sim.width_m=14", "sim.height_m=10", "device=cpu"]
@@ -31,33 +32,29 @@ def test_a_finished_stage_is_skipped_and_a_damaged_one_redone(tmp_path, monkeypa
     out = run_slam(cfg)
     traj = out / "trajectory.tum"
     first, stamp = traj.read_text(), traj.stat().st_mtime_ns
-    assert stage_complete(out, cfg)[0]
+    assert runs.intact(out)[0]
     assert run_slam(cfg) == out and "up to date" in capsys.readouterr().out
     assert traj.stat().st_mtime_ns == stamp  # not rewritten
     traj.write_text(first[: len(first) // 2])  # as an interrupted copy or a crash mid-write would leave it
     run_slam(cfg)
     assert "redoing" in capsys.readouterr().out
-    assert traj.read_text() == first and stage_complete(out, cfg)[0]  # the same run, whole again
+    assert traj.read_text() == first and runs.intact(out)[0]  # the same run, whole again
 
 
 def test_runner_tells_done_kept_and_missing_apart(tmp_path):
+    """done: a finished run of the job's identity; kept: a record of its settings in results/; a damaged run
+    of it is missing (run again)."""
     sweep = Sweep("slam", "irmcl_warp.slam", ["+exp=gmapping_sim"], {"slam.seed": [0, 1, 2, 3]})
     outputs, results = tmp_path / "outputs", tmp_path / "results"
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfgs = [compose("config", overrides=ov) for ov in sweep.jobs()]
-        rel = [folder(sweep.module, c) for c in cfgs]
-        assert rel[2] == "gmapping_sim/slam-paper-selective-30p-seed2"
         for k in (0, 3):  # finished runs; seed 3's is then damaged
-            (outputs / rel[k]).mkdir(parents=True)
-            write_json(outputs / rel[k] / "metrics.json", {"seed": k})
-            write_manifest(outputs / rel[k], cfgs[k], [], "cpu", 0.0)
-        (outputs / rel[3] / "metrics.json").write_text('{"seed": ')
-        gpu = tmp_path / "gpu" / rel[1]  # a GPU run kept in the repository (eval.keep)
-        gpu.mkdir(parents=True)
-        (gpu / "metrics.json").write_text(json.dumps({"seed": 1}))
-        (gpu / "config.yaml").write_text(OmegaConf.to_yaml(cfgs[1]))
-        keep([gpu], results)
+            with runs.start(cfgs[k], "slam", outputs) as run:
+                run.finish({"seed": k}, "cpu")
+        (runs.identify(cfgs[3], "slam").folder(outputs) / "metrics.json").write_text('{"seed": ')
+        gpu = fake_run(tmp_path / "gpu", "slam", OmegaConf.to_container(cfgs[1], resolve=True), {"seed": 1})
+        keep([gpu], results)  # a GPU run kept in the repository (eval.keep)
         states = [job_state(sweep, ov, outputs, results, rerun_kept=False)[0] for ov in sweep.jobs()]
         assert states == ["done", "kept", "missing", "missing"]
         assert job_state(sweep, sweep.jobs()[1], outputs, results, rerun_kept=True)[0] == "missing"
@@ -73,11 +70,12 @@ def test_launcher_configs_compose(launcher, target):
     assert cfg.hydra.launcher._target_.endswith(target)
 
 
-def test_every_sweep_composes_and_names_a_distinct_folder(rng):
-    """Two jobs may share a folder only when they are the same run (the ablations' base run is also a cell
-    of the localization table); different settings in one folder would overwrite each other. Every
-    ablation job (their folder names encode the settings) and a fresh random sample of the others."""
-    from irmcl_warp.services.outputs import config_digest
+@pytest.mark.data  # the jobs' identities hold the digests of the real logs they read
+def test_every_sweep_composes_and_its_jobs_are_runs_of_their_own(rng, data_dir):
+    """Two jobs share a run only when they read the same settings (the ablations' base run is also a cell of the
+    localization table). Every ablation job and a fresh random sample of the others: jobs with the same
+    identity read the same settings, and jobs of different settings have different identities."""
+    import json
 
     jobs = [(s, ov) for s in SWEEPS for ov in s.jobs()]
     others = [j for j in jobs if j[0].group != "ablation"]
@@ -87,6 +85,9 @@ def test_every_sweep_composes_and_names_a_distinct_folder(rng):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         for sweep, ov in pick:
             cfg = compose("pipeline" if sweep.module == "irmcl_warp.pipeline" else "config", overrides=ov)
-            where = (sweep.module, folder(sweep.module, cfg))
-            digest, first = seen.setdefault(where, (config_digest(cfg), ov))
-            assert digest == config_digest(cfg), f"seed {rng.seed}: {ov} and {first} would share {where}"
+            stage = sweep.module.rsplit(".", 1)[1]
+            settings = json.dumps(runs.read_settings(cfg, stage), sort_keys=True)
+            ident = runs.identify(cfg, stage).id
+            first = seen.setdefault(ident, (settings, ov))
+            assert first[0] == settings, f"seed {rng.seed}: {ov} and {first[1]} would share a run"
+        assert len(seen) > 30

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from irmcl_warp.config import SlamConfig, register
 from irmcl_warp.reference import slam as twin
@@ -221,7 +222,7 @@ def test_the_laser_frame_carries_laser_poses_and_writes_the_base_path(tmp_path, 
     odom, T = filter_frame(cfg, log)
     assert np.allclose(odom, compose_poses(log.odom, log.T_base_laser)) and not T.any()
     out = run_slam(cfg)
-    assert out.name.endswith("-laserframe")
+    assert OmegaConf.load(out / "config.yaml").slam.frame == "laser"  # the run records the frame it ran in
     m = json.loads((out / "metrics.json").read_text())
     # the base's path against the base's ground truth: carrying the laser's poses through would be 0.3 m off
     assert m["trajectory"]["ate_rmse_m"] < 0.1, m["trajectory"]
@@ -496,16 +497,15 @@ def test_relations_are_scored_in_the_laser_frame(rng):
     assert relations_error(stamps, base, rel)["trans_abs_mean_m"] > 0.05
 
 
-def test_run_folders_name_their_ablations_and_tables_read_them_back():
-    """A run with non-default settings gets its own folder (runs of different settings never share one),
-    and the tables group it apart from the default runs; the rot2x preset changes only the noise."""
-    from omegaconf import OmegaConf
+def test_runs_of_other_settings_are_runs_of_their_own_and_tables_read_their_settings():
+    """A run with non-default settings has its own identity (runs of different settings never share a folder),
+    and the tables group it apart from the default runs by its settings; the rot2x preset changes only the noise."""
+    from eval.results.queries import slam_variant
+    from irmcl_warp import runs
+    from irmcl_warp.runs import Record
 
-    from eval.collect import Run, slam_variant
-    from irmcl_warp.slam.stage import run_tag
-
-    def variant(cfg):  # what the tables print, from a run's config (as eval.collect reads it)
-        return slam_variant(Run({}, OmegaConf.to_container(cfg, resolve=True)))
+    def variant(cfg):  # what the tables group by, from a run's settings
+        return slam_variant(Record({}, "slam", "gmapping_fr079", "", OmegaConf.to_container(cfg, resolve=True)))
 
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
@@ -513,12 +513,13 @@ def test_run_folders_name_their_ablations_and_tables_read_them_back():
         rot = compose("config", overrides=["+exp=gmapping_fr079", "slam=gmapping_rot2x"])
         odd = compose("config", overrides=["+exp=gmapping_fr079", "slam.free_check=true", "slam.line=dda",
                                            "data.laser_offset=[0,0,0]"])
-    assert run_tag(base.slam, base.data) == "slam-paper-selective-30p-seed0" and variant(base) == ""
+    assert variant(base) == {} and runs.label_of("slam", base) == "paper-selective-30p-seed0"
     changed = {k for k in base.slam if base.slam[k] != rot.slam[k]}
     assert changed == {"stt", "srt"} and rot.slam.stt == 2 * base.slam.stt
-    assert variant(rot) == "srt0.4, stt0.4" and run_tag(rot.slam, rot.data).endswith("-srt0.4-stt0.4")
-    assert variant(odd) == "freecheck, dda, offset0_0_0"
+    assert variant(rot) == {"slam.srt": 0.4, "slam.stt": 0.4}
+    assert variant(odd) == {"slam.free_check": True, "slam.line": "dda", "data.laser_offset": [0, 0, 0]}
     assert OmegaConf.to_container(odd.data)["laser_offset"] == [0, 0, 0]
+    assert len({runs.settings_id(OmegaConf.to_container(c, resolve=True), "slam") for c in (base, rot, odd)}) == 3
 
 
 def test_the_trace_check_led_by_our_own_path_agrees_at_every_step():
@@ -544,13 +545,11 @@ def test_the_trace_check_led_by_our_own_path_agrees_at_every_step():
     assert r["parted"] == 0 and r["d_m_quantiles"][-1] < 1e-4, r["d_m_quantiles"]
 
 
-def test_kept_runs_are_made_again_under_their_own_folder_names():
-    """eval.rerun: the overrides rebuilt from a kept run's config compose to the same settings and folder."""
-    from omegaconf import OmegaConf
-
-    from eval.rerun import overrides
+def test_kept_runs_are_made_again_with_their_own_settings():
+    """eval.rerun: the overrides rebuilt from a kept record's settings compose to the same settings."""
+    from eval.analyses.rerun import overrides
+    from irmcl_warp import runs
     from irmcl_warp.config import compose_config
-    from irmcl_warp.slam.stage import run_tag
 
     line = ["+exp=gmapping_fr079", "slam.proposal=gmapping_code", "slam.seed=3", "slam.frame=laser",
             "slam.srt=0.4", "data.laser_offset=[0.0,0.0,0.0]"]
@@ -558,32 +557,27 @@ def test_kept_runs_are_made_again_under_their_own_folder_names():
     kept = {"slam": OmegaConf.to_container(cfg.slam), "data": OmegaConf.to_container(cfg.data)}
     again = compose_config(overrides("gmapping_fr079", kept))
     assert OmegaConf.to_container(again.slam) == kept["slam"] and OmegaConf.to_container(again.data) == kept["data"]
-    assert run_tag(again.slam, again.data) == run_tag(cfg.slam, cfg.data) == \
-        "slam-gmapping_code-selective-30p-seed3-srt0.4-laserframe-offset0_0_0"
+    same = [runs.settings_id(OmegaConf.to_container(c, resolve=True), "slam") for c in (again, cfg)]
+    assert same[0] == same[1]
 
 
 def test_rerun_compare_says_which_runs_made_again_give_their_kept_errors(tmp_path):
-    """``python -m eval.rerun --compare``: a run made again is the same when its relations and trajectory errors are
-    the kept ones to the last digit; one that differs (even in the 17th digit) fails the check, and runs that were
-    never kept are named, not counted."""
-    import json
-
-    from eval.keep import write_kept
-    from eval.rerun import compare
+    """``python -m eval.analyses.rerun --compare``: a run made again is the same when its relations and trajectory errors are
+    the kept ones to the last digit; one that differs (even in the 17th digit) fails the check, and runs whose
+    settings were never kept are named, not counted."""
+    from eval.analyses.rerun import compare
+    from eval.results.records import keep
+    from runfakes import composed, fake_run
 
     results, outputs = tmp_path / "results", tmp_path / "outputs"
     metrics = {"relations": {"trans_abs_mean_m": 0.06745453373839877}, "trajectory": {"ate_rmse_m": 0.113}}
-    runs = {f"slam-paper-selective-30p-seed{k}": {"config": {}, "metrics": metrics} for k in range(3)}
-    results.mkdir()
-    write_kept(results / "gmapping_fr079.json", {"exp": "gmapping_fr079", "group": "slam", "runs": runs})
+    cfg = lambda k: composed("+exp=gmapping_fr079", f"slam.seed={k}")  # noqa: E731
+    keep([fake_run(tmp_path / "gpu", "slam", cfg(k), metrics) for k in range(3)], results)
     again = {0: metrics, 1: {**metrics, "relations": {"trans_abs_mean_m": 0.06745453373839878}}, 7: metrics}
-    for k, m in again.items():
-        d = outputs / "gmapping_fr079" / f"slam-paper-selective-30p-seed{k}"
-        d.mkdir(parents=True)
-        (d / "metrics.json").write_text(json.dumps({**m, "wall_s": 1.0 + k}))  # other fields may differ
+    made = {k: fake_run(outputs, "slam", cfg(k), {**m, "wall_s": 1.0 + k}) for k, m in again.items()}  # others may differ
     same, differ, not_kept = compare(outputs, results)
-    assert same == ["gmapping_fr079/slam-paper-selective-30p-seed0"]
-    assert differ == ["gmapping_fr079/slam-paper-selective-30p-seed1"]
-    assert not_kept == ["gmapping_fr079/slam-paper-selective-30p-seed7"]
-    (outputs / "gmapping_fr079" / "slam-paper-selective-30p-seed1").rename(tmp_path / "gone")
+    assert same == ["gmapping_fr079/paper-selective-30p-seed0"]
+    assert differ == ["gmapping_fr079/paper-selective-30p-seed1"]
+    assert not_kept == ["gmapping_fr079/paper-selective-30p-seed7"]
+    made[1].rename(tmp_path / "gone")
     assert compare(outputs, results)[1] == []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eval.yaw_lag import heading_errors, summarise
+from eval.analyses.yaw_lag import heading_errors, summarise
 
 
 def test_a_heading_that_trails_the_truth_gives_its_lag(rng):
@@ -28,7 +28,7 @@ def test_a_heading_that_trails_the_truth_gives_its_lag(rng):
 def test_yaw_profile_of_the_likelihood_field_peaks_at_the_truth_and_narrows_with_beams(tmp_path, monkeypatch):
     """--profile on a simulator run: unbiased, and the likelihood field (a sum over beams) gets narrower in
     heading with more beams."""
-    from eval.yaw_lag import yaw_profile
+    from eval.analyses.yaw_lag import yaw_profile
     from tests.test_mcl import sim_tracking_run
 
     monkeypatch.chdir(tmp_path)

@@ -22,8 +22,8 @@ for part in "$@"; do
   esac
   echo "part $part: $(( $(date +%s) - start )) s"
 done
-find outputs \( -path "*/localize-*" -o -path "*/train-fast*" -o -path "*/synthesis-fast*" -o -path "*/pipeline[-_]*/pipeline/*" \
-  -o -path "*/pipeline[-_]*/slam-*" \) -type f \( -name "*.json" -o -name "*.yaml" -o -name "*.md" -o -name "*.png" \
+find outputs \( -path "*/localize/*" -o -path "*/train/fast-*" -o -path "*/synthesis/fast-*" -o -path "*/pipeline[-_]*/pipeline/*" \
+  -o -path "*/pipeline[-_]*/slam/*" \) -not -path "*/.*" -type f \( -name "*.json" -o -name "*.yaml" -o -name "*.md" -o -name "*.png" \
   -o -name "*.tum" -o -name "*.csv" \) > "$OUT/files.txt"
 tar czf "$OUT/gpu-results-$(echo "$@" | tr ' :' '-_').tgz" -T "$OUT/files.txt"
 ls -la "$OUT"

@@ -15,7 +15,7 @@
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
 #   table    issue 18: mcl.weighting=nog_table beside nog_raymarch: the step benchmark on the fr079 NOG (10k / 100k /
 #            1M, the torch reference) and global (100k) and tracking (10k) runs on fr079 and intel, train=fast
-#            (their NOFs and NOGs carried in outputs/<exp>/{train-fast,nog})
+#            (their training runs and NOGs carried in outputs/<exp>/{train,nog})
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
 set -uo pipefail
@@ -42,20 +42,22 @@ for part in "$@"; do
           python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --particles 100000 \
             --variants warp+et warp+et+beam warp+et+skip+beam --step-graph both --torch-max 0 --out "$OUT/bench-fr079" \
             2>&1 | tail -10
-          tar czf "$OUT/fr079-nof-nog.tgz" outputs/fr079/train-fast/nof.pt outputs/fr079/nog ;;
+          tar czf "$OUT/fr079-nof-nog.tgz" outputs/fr079/train/fast-* outputs/fr079/nog ;;
     motion) for exp in fr079 intel; do
-              [ -f "outputs/$exp/train-fast/nof.pt" ] || python -m irmcl_warp.train +exp="$exp" train=fast 2>&1 | grep -E "best|Error"
+              python -m irmcl_warp.train +exp="$exp" train=fast 2>&1 | grep -E "best|up to date|Error"  # found when finished
               python -m irmcl_warp.localize -m +exp="$exp" train=fast localize.mode=global mcl.num_particles=100000 \
                 mcl.weighting=nog_raymarch,likelihood_field mcl.motion=odometry,irmcl 2>&1 | grep -E "success|Error"
             done
-            find outputs -path "*localize-*-global-100k-*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
+            find outputs -path "*/localize/*-global-100k-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json \
+              -o -name "*.tum" \) \
               > "$OUT/motion-files.txt"
-            tar czf "$OUT/motion-results.tgz" -T "$OUT/motion-files.txt" outputs/intel/train-fast/nof.pt ;;
+            tar czf "$OUT/motion-results.tgz" -T "$OUT/motion-files.txt" outputs/intel/train/fast-* ;;
     width) for exp in fr079 intel; do
              python -m irmcl_warp.localize +exp="$exp" train=fast localize.mode=global mcl.num_particles=100000 \
                mcl.weighting=nog_raymarch mcl.motion=irmcl mcl.sigma_m=0.25 2>&1 | grep -E "success|Error"
            done
-           find outputs -path "*localize-*-global-100k-*sigma*" \( -name metrics.json -o -name config.yaml -o -name "*.tum" \) \
+           find outputs -path "*/localize/*-global-100k-*" -newer "$OUT" \( -name metrics.json -o -name config.yaml \
+             -o -name manifest.json -o -name "*.tum" \) \
              > "$OUT/width-files.txt"
            tar czf "$OUT/width-results.tgz" -T "$OUT/width-files.txt" ;;
     table) python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" \
@@ -73,7 +75,7 @@ for part in "$@"; do
   esac
 done
 # keep what the tables need: metrics, settings, the first start's plot and the trajectories
-find outputs -path "*/localize-*-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name start0.png \
+find outputs -path "*/localize/*" -not -path "*/.*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name start0.png \
   -o -name "*.tum" \) > "$OUT/files.txt"
 tar czf "$OUT/mcl-results.tgz" -T "$OUT/files.txt" 2>/dev/null
 ls -la "$OUT"

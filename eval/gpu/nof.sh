@@ -13,11 +13,9 @@ for job in $1; do
   preset=${job%%:*}; exp=${job#*:}
   echo "=== $exp train=$preset"
   python -m irmcl_warp.train +exp="$exp" train="$preset" ${EXTRA:-} 2>&1 | grep -v "it/s\|step/s\|s/step" | tail -8
-  python -m eval.synthesis +exp="$exp" train="$preset" ${EXTRA:-} 2>&1 | tail -1
-  dest="$OUT/$exp-$preset"; mkdir -p "$dest"
-  cp outputs/"$exp"/train-"$preset"/{metrics.json,config.yaml,manifest.json} "$dest/" 2>/dev/null
-  cp outputs/"$exp"/synthesis-"$preset"/metrics.json "$dest/synthesis.json" 2>/dev/null
-  cp outputs/"$exp"/synthesis-"$preset"/scan.png "$dest/scan.png" 2>/dev/null
+  python -m irmcl_warp.synthesis +exp="$exp" train="$preset" ${EXTRA:-} 2>&1 | tail -1
 done
-# the machine may send back only a few files: pack them into one
-tar czf "$OUT/nof-results.tgz" -C "$OUT" $(cd "$OUT" && ls -d *-*/ 2>/dev/null) && rm -rf "$OUT"/*-*/
+# the machine may send back only a few files: pack the finished runs' records (python -m eval.keep reads them)
+find outputs \( -path "*/train/*" -o -path "*/synthesis/*" \) -not -path "*/.*" \( -name metrics.json -o -name config.yaml \
+  -o -name manifest.json -o -name scan.png \) > "$OUT/files.txt"
+tar czf "$OUT/nof-results.tgz" -T "$OUT/files.txt"

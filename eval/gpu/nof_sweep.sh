@@ -22,12 +22,12 @@ export OUT
 timeout "${SWEEP_TIMEOUT:-540}" xargs -P "${JOBS:-4}" -I{} sh -c '
   name=$(echo "{}" | sed -n "s/.*train\.name=\([^ ]*\).*/\1/p")
   { python -m irmcl_warp.train {} 2>&1 | grep -E "^epoch|best epoch|Error|error"
-    python -m eval.synthesis {} 2>&1 | tail -1; } > "$OUT/logs/$name.log"
+    python -m irmcl_warp.synthesis {} 2>&1 | tail -1; } > "$OUT/logs/$name.log"
   echo "$name: $(grep -c "^epoch" "$OUT/logs/$name.log") epochs; $(tail -1 "$OUT/logs/$name.log")"' < "$jobs"
 pkill -f "python -m irmcl_warp.train" 2>/dev/null
 echo "sweep: $(( $(date +%s) - start )) s"
 # what eval.keep reads back: each finished run's metrics, resolved config and manifest
-find outputs \( -path "*/train-*" -o -path "*/synthesis-*" \) -name metrics.json -newer "$OUT/.sweep-start" \
+find outputs \( -path "*/train/*" -o -path "*/synthesis/*" \) -not -path "*/.*" -name manifest.json -newer "$OUT/.sweep-start" \
   | xargs -r -n1 dirname | while read -r d; do
     for f in metrics.json config.yaml manifest.json; do [ -f "$d/$f" ] && echo "$d/$f"; done
   done > "$OUT/files.txt"

@@ -15,7 +15,7 @@ for exp in $EXPS; do
     slam.proposal="${PROPOSALS:-paper,gmapping_code}" slam.num_particles="${PARTICLES:-30}" ${EXTRA:-} 2>&1 \
     | grep -E "scans processed|Error|error" | grep -v "^\["
 done
-find outputs -path "*/slam-*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name neff.csv \
+find outputs -path "*/slam/*" -not -path "*/.*" \( -name metrics.json -o -name config.yaml -o -name manifest.json -o -name neff.csv \
   -o -name map.png -o -name trajectory.tum \) > "$OUT/files.txt"
 tar czf "$OUT/slam-results.tgz" -T "$OUT/files.txt"
 ls -la "$OUT"

@@ -8,12 +8,12 @@
 #   bash eval/gpu/slam_sweep.sh killian   # mit_killian (10 cm grid): paper+selective, 30 and 60 particles
 #   bash eval/gpu/slam_sweep.sh replay    # intel and fr079 seed 0, each run twice: are the trajectories identical?
 #   LIST=jobs.txt bash eval/gpu/slam_sweep.sh list  # one line of overrides per run from a file: e.g. every kept
-#                                         # run again after the code changed (python -m eval.rerun > jobs.txt)
+#                                         # run again after the code changed (python -m eval.analyses.rerun > jobs.txt)
 # Env: JOBS (parallel processes, default 8; killian 2; list 12), SWEEP_TIMEOUT (s: stop starting runs then and
 # pack the finished ones; a later call with the same list runs only what is not finished), SEEDS (default 0..9), EXTRA (more overrides for every
-# run of the sweep, e.g. "slam.free_check=false"; the run folders name them), main only: LOGS, PROPOSALS; TAG
-# (appended to the archive's name). Data: the stream caches and the
-# relations (+ the killian g2o) staged beside the code, IRMCL_DATA pointing at them. Results: $OUT/slam-<what>.tgz.
+# run of the sweep, e.g. "slam.free_check=false"; each is a run of its own), main only: LOGS, PROPOSALS; TAG
+# (appended to the archive's name). Data: the logs staged beside the code (eval/gpu/stage_data.sh), IRMCL_DATA
+# pointing at them. Results: $OUT/slam-<what>.tgz.
 set -uo pipefail
 what=${1:?main, particles or killian}
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
@@ -27,7 +27,7 @@ case "$what" in
     for exp in gmapping_intel gmapping_fr079; do
       for k in 1 2; do
         python -m irmcl_warp.slam device=cuda:0 +exp=$exp slam.seed=0 ${EXTRA:-} 2>&1 | grep -E "scans processed|Error" | tail -1
-        run=$(ls -d outputs/$exp/slam-paper-selective-30p-seed0* | head -1)
+        run=$(ls -d outputs/$exp/slam/paper-selective-30p-seed0-* | head -1)
         md5sum "$run/trajectory.tum" | sed "s|^|$exp run $k: |"; rm -rf "$run"
       done
     done
@@ -56,9 +56,9 @@ tail -n +2 "$jobs" | timeout "${SWEEP_TIMEOUT:-0}" xargs -P "$P" -I{} sh -c \
 pkill -f "python -m irmcl_warp.slam" 2>/dev/null  # runs the timeout stopped: unfinished, not packed
 echo "sweep $what: $(( $(date +%s) - start )) s for $(( $(wc -l < "$jobs") - 1 )) runs with $P processes"
 # the runs finished by this call (a stopped run leaves no metrics.json, and its folder is not packed)
-find outputs -path "*/slam-*" -name metrics.json -newer "$OUT/.sweep-start" | xargs -r -n1 dirname | while read -r d; do
+find outputs -path "*/slam/*" -not -path "*/.*" -name manifest.json -newer "$OUT/.sweep-start" | xargs -r -n1 dirname | while read -r d; do
   for f in metrics.json config.yaml manifest.json neff.csv map.png; do [ -f "$d/$f" ] && echo "$d/$f"; done
 done > "$OUT/files-$what.txt"
-[ -n "${TRAJECTORIES:-}" ] && find outputs -path "*/slam-*" -name trajectory.tum >> "$OUT/files-$what.txt"  # large: only when asked
+[ -n "${TRAJECTORIES:-}" ] && find outputs -path "*/slam/*" -not -path "*/.*" -name trajectory.tum >> "$OUT/files-$what.txt"  # large: only when asked
 tar czf "$OUT/slam-$what${TAG:-}.tgz" -T "$OUT/files-$what.txt"
 ls -la "$OUT"

@@ -1,9 +1,14 @@
 #!/usr/bin/env bash
-# Pack what the MCL runs need without the raw logs into .gpu/c/data.tgz: per experiment the stream
-# caches, the NOF checkpoints and the baked NOGs (run the localize stage once here first to make them).
+# Pack the real logs the GPU runs read into .gpu/c/data.tgz (the GPU machine cannot see ../shared): a run's
+# identity is the content of its input files (irmcl_warp/runs.py), so the logs go along, not caches made here.
+# On the GPU machine: tar xzf .gpu/c/data.tgz -C /tmp && export IRMCL_DATA=/tmp/data. Add finished training runs
+# the MCL runs consume with EXTRA="outputs/fr079/train outputs/intel/train ...".
 set -euo pipefail
 mkdir -p .gpu/c
-tar czf .gpu/c/data.tgz outputs/{sim_office,fr079,intel,mit_csail}/stream outputs/fr079/nog \
-  outputs/sim_office/train-quick/nof.pt outputs/fr079/train-paper/nof.pt outputs/intel/train-paper/nof.pt \
-  outputs/mit_csail/train-fast/nof.pt
+DATA=${IRMCL_DATA:-../shared/data}
+tar czf .gpu/c/data.tgz -C "$(dirname "$DATA")" \
+  "$(basename "$DATA")"/kuemmerle2009/derived "$(basename "$DATA")"/kuemmerle2009/relations \
+  "$(basename "$DATA")"/kuemmerle2009/bags/fr079.bag "$(basename "$DATA")"/kuemmerle2009/bags/intel.bag \
+  "$(basename "$DATA")"/kuemmerle2009/bags/mit-csail.bag "$(basename "$DATA")"/kuemmerle2009/killian.g2o.zip \
+  "$(basename "$DATA")"/corrected/matched "$(basename "$DATA")"/splits ${EXTRA:-}
 ls -la .gpu/c

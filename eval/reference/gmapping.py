@@ -8,7 +8,8 @@ odometry and the base->laser extrinsic, ``maxRange`` = the scan's ``range_max`` 
 the log as the driver reads it (no-return beams as the no-return value, as the bag holds them), runs the
 seeds (``seed`` k seeds drand48 with k + 1: 0 would leave it unseeded), and scores each path like our own
 runs: a pose at every scan (the best particle's pose at the last processed scan plus the odometry since),
-the relations on the laser's path. Runs go to ``outputs/<exp>/reference-gmapping-<N>p[-<settings>]-seed<k>/`` (metrics.json,
+the relations on the laser's path. Runs go to ``outputs/<exp>/reference_gmapping/<N>p[-<settings>]-seed<k>-<digest>/``
+(``irmcl_warp.runs.tool_dir``; metrics.json,
 trajectory.tum, neff.txt); ``--keep`` merges them into ``results/slam/reference/<exp>.json``.
 ``--matcher``, ``--motion`` and ``--neff`` compare one part of ours with the released code's instead.
 
@@ -29,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from eval.collect import DERIVED_SETTINGS
+from eval.results.queries import DERIVED_SETTINGS, TOOL, reference_variant, slam_variant
+from irmcl_warp import runs
 from irmcl_warp.config import compose_config
 from irmcl_warp.geometry import compose
 from irmcl_warp.io import read_bag, read_relations, resolve, write_tum
@@ -96,7 +98,8 @@ def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path
     n = int(params.get("particles", 30))
     chosen = "-".join([*(f"{k}{v}" for k, v in sorted(params.items()) if k not in DERIVED_SETTINGS + ("particles",)),
                        *([data_tag(data_overrides)] if data_overrides else [])])
-    out = out_root / f"reference-gmapping-{n}p{'-' + chosen if chosen else ''}-seed{seed}"
+    name = f"{n}p{'-' + chosen if chosen else ''}-seed{seed}"
+    out = runs.tool_dir(cfg.exp, TOOL, name, {"settings": params, "data": list(data_overrides), "seed": seed}, out_root)
     out.mkdir(parents=True, exist_ok=True)
     done = out / "metrics.json"
     if done.is_file():  # a finished run of the same settings: kept, not run again (an interrupted sweep resumes)
@@ -124,7 +127,7 @@ def run_seed(cfg, log, scans_file: Path, seed: int, params: dict, out_root: Path
                "data_overrides": list(data_overrides),
                "relations_frame": {"frame": "laser", "T_base_laser": [float(v) for v in log.T_base_laser]},
                "relations": relations_error(stamps, every, rel)}
-    metrics["run"] = out.name.removeprefix("reference-gmapping-")
+    metrics["run"] = name
     write_json(out / "metrics.json", metrics)
     return metrics
 
@@ -159,7 +162,7 @@ def gfs_log(cfg, out_root: Path) -> Path:
     """The data config's CARMEN log as plain text (gfs_nogui reads no gzip), written once for all seeds."""
     if cfg.data.format != "carmen":
         raise ValueError(f"data={cfg.data.name}: gfs_nogui reads CARMEN logs; this one is {cfg.data.format}")
-    src, plain = resolve(cfg.data.path), out_root / "reference-gmapping-gfs-log.clf"
+    src, plain = resolve(cfg.data.path), runs.cache_dir(cfg, f"{TOOL}-inputs", out_root) / "gfs-log.clf"
     if str(src).endswith(".gz"):
         with gzip.open(src) as f:
             atomic_write_bytes(plain, f.read())
@@ -180,7 +183,8 @@ def run_gfs_seed(cfg, log, clf: Path, seed: int, out_root: Path) -> dict:
     for exe in (GFS, GFS2LOG):
         if not exe.is_file():
             raise FileNotFoundError(f"{exe}: build it first: bash eval/reference/build_gmapping.sh <openslam_gmapping clone>")
-    out = out_root / f"reference-gmapping-gfs-{GFS_PARTICLES}p-seed{seed}"
+    name = f"gfs-{GFS_PARTICLES}p-seed{seed}"
+    out = runs.tool_dir(cfg.exp, TOOL, name, {"tool": "gfs_nogui", "seed": seed}, out_root)
     out.mkdir(parents=True, exist_ok=True)  # gfs_nogui writes rawpath.dat and w-*.dat into its working folder
     done = out / "metrics.json"
     if done.is_file():
@@ -214,7 +218,7 @@ def run_gfs_seed(cfg, log, clf: Path, seed: int, out_root: Path) -> dict:
                "settings": {}, "data_overrides": [],
                "relations_frame": {"frame": "laser", "T_base_laser": [0.0, 0.0, 0.0]},
                "relations": relations_error(relation_stamps(cfg, log), every, rel)}
-    metrics["run"] = out.name.removeprefix("reference-gmapping-")
+    metrics["run"] = name
     for junk in [out / "run.gfs", out / "rawpath.dat", *out.glob("w-*.dat")]:
         junk.unlink(missing_ok=True)  # 10-20 MB a run; best.log keeps the path
     write_json(done, metrics)
@@ -328,22 +332,30 @@ def matcher_check(log, registered: int = 20, queries: int = 10, usable_m: float 
                                                   for c in climbs))}
 
 
-def neff_check(exp: str, ours: str = "slam-gmapping_code-selective-30p-seed*", released: str = "reference-gmapping-30p-seed*",
-               outputs: Path = REPO / "outputs") -> dict:
-    """The resampling decisions and N_eff along whole runs, ours (``neff.csv`` of the slam runs matching
-    ``ours``) against the released code's (``neff.txt`` of the runs matching ``released``), both in
-    ``outputs/<exp>/``. The released driver logs N_eff after ``processScan``, which normalises again after
+def neff_check(exp: str, data_overrides=(), outputs: Path = REPO / "outputs") -> dict:
+    """The resampling decisions and N_eff along whole runs, ours (``neff.csv`` of our finished ``gmapping_code``
+    runs with 30 particles of ``exp``, at its settings but for the beam geometry ``data_overrides`` set) against
+    the released code's (``neff.txt`` of its wrapper replays with 30 particles and the same overrides), both
+    under ``outputs``. The released driver logs N_eff after ``processScan``, which normalises again after
     resampling: a scan it resampled reads exactly N (30), so those are its resamplings (the first scan, which
     registers, also reads N). The runs are stochastic and drift apart, so the comparison is of distributions:
     resamplings per run (Mann-Whitney) and N_eff on the scans that were not resampled (quartiles, KS; the
     scans of a run are correlated, so its p-value is an upper bound on the evidence)."""
     from scipy.stats import ks_2samp, mannwhitneyu
 
-    root = Path(outputs) / exp
-    rel_runs, our_runs = sorted(root.glob(f"{released}/neff.txt")), sorted(root.glob(f"{ours}/neff.csv"))
+    base = compose_config([f"+exp={exp}"]).data
+    chosen = compose_config([f"+exp={exp}", *data_overrides]).data
+    variant = {f"data.{k}": chosen[k] for k in ("fov_rad", "angle_min_rad", "laser_offset") if chosen[k] != base[k]}
+    variant = {k: list(v) if hasattr(v, "__len__") else v for k, v in variant.items()}
+    ours = [r for r in runs.find("slam", exp, outputs, slam__proposal="gmapping_code", slam__resample="selective",
+                                 slam__num_particles=30) if slam_variant(r) == variant]
+    released = [f for f in runs.tool_runs(TOOL, exp, outputs) if (m := json.loads((f / "metrics.json").read_text()))
+                .get("particles") == 30 and m.get("tool") != "gfs_nogui" and list(m.get("data_overrides", [])) ==
+                list(data_overrides) and reference_variant({**m, "data_overrides": []}) == ""]
+    rel_runs, our_runs = [f / "neff.txt" for f in released], [r.path / "neff.csv" for r in ours]
     if not rel_runs or not our_runs:
-        raise FileNotFoundError(f"{root}: need runs of both ({released}/neff.txt: {len(rel_runs)}, "
-                                f"{ours}/neff.csv: {len(our_runs)})")
+        raise FileNotFoundError(f"{outputs}/{exp}: need runs of both (the released code's: {len(rel_runs)}, ours "
+                                f"with slam.proposal=gmapping_code and 30 particles: {len(our_runs)})")
     rel_counts, rel_neff, our_counts, our_neff = [], [], [], []
     for f in rel_runs:
         a = np.loadtxt(f, ndmin=2)[:, 1]
@@ -356,7 +368,8 @@ def neff_check(exp: str, ours: str = "slam-gmapping_code-selective-30p-seed*", r
         our_counts.append(int(o["resampled"].sum()))
         our_neff.append(o["neff"][o["resampled"] == 0])
     r, o = np.concatenate(rel_neff), np.concatenate(our_neff)
-    return {"exp": exp, "released_runs": [f.parent.name for f in rel_runs], "our_runs": [f.parent.name for f in our_runs],
+    return {"exp": exp, "released_runs": [f.parent.name for f in rel_runs], "our_runs": [r.label for r in ours],
+            "data_overrides": list(data_overrides),
             "resamplings_released": rel_counts, "resamplings_ours": our_counts,
             "resamplings_median": [float(np.median(rel_counts)), float(np.median(our_counts))],
             "resamplings_mannwhitney_p": float(mannwhitneyu(rel_counts, our_counts).pvalue),
@@ -394,7 +407,8 @@ def trace_check(exp: str, delta: float | None = None, margin_m: float = 10.0, sc
         log = log.subset(np.arange(min(scans, len(log))))
     delta = float(cfg.slam.resolution_m)
     params = wrapper_params(cfg, log, [*TRACE_NOISE_FREE, f"delta={delta}"])
-    out = REPO / "outputs" / exp / f"trace-gmapping-{delta:g}m{'-' + data_tag(data_overrides) if data_overrides else ''}"
+    out = runs.tool_dir(exp, "trace_gmapping", f"{delta:g}m", {"data": list(data_overrides), "frame": frame,
+                                                                 "scans": scans}, REPO / "outputs")
     out.mkdir(parents=True, exist_ok=True)
     export_scans(log, out / "scans.txt")
     wall_released = run_binary(out / "scans.txt", out, 0, params)
@@ -485,7 +499,7 @@ def main(argv=None):
     ap.add_argument("--seeds", default="0-9")
     ap.add_argument("--set", action="append", default=[], help="driver parameter key=value (e.g. particles=60)")
     ap.add_argument("--data", action="append", default=[], help="Hydra override of the log's data config, e.g. "
-                    "data.laser_offset=[0,0,0] (the laser at the base: the CARMEN log's FLASER pose); named in the folder")
+                    "data.laser_offset=[0,0,0] (the laser at the base: the CARMEN log's FLASER pose); in the run's name")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--keep", action="store_true", help="merge the runs into results/slam/reference/<exp>.json")
     ap.add_argument("--keep-only", action="store_true", help="run nothing: merge the finished runs in outputs/")
@@ -493,9 +507,9 @@ def main(argv=None):
                     "and hill climbing against the released one's on the log's scans (results/checks/gmapping_matcher_<exp>.json)")
     ap.add_argument("--motion", action="store_true", help="run nothing else: our motion model against the "
                     "released one's samples (results/checks/gmapping_motion.json)")
-    ap.add_argument("--neff", metavar="GLOB", nargs="?", const="slam-gmapping_code-selective-30p-seed*",
-                    help="run nothing else: resamplings and N_eff of our runs outputs/<exp>/GLOB against the released "
-                    "code's (results/checks/gmapping_neff_<exp>.json)")
+    ap.add_argument("--neff", action="store_true",
+                    help="run nothing else: resamplings and N_eff of our finished gmapping_code runs (30 particles; the "
+                    "beam geometry of --data) against the released code's (results/checks/gmapping_neff_<exp>.json)")
     ap.add_argument("--trace", action="store_true", help="run nothing else: one particle without motion noise on "
                     "both sides, the poses at every processed scan compared (results/checks/gmapping_trace_<exp>.json)")
     ap.add_argument("--scans", type=int, help="--trace: only the first SCANS scans of the log")
@@ -522,7 +536,7 @@ def main(argv=None):
         return 0
     if a.neff:
         exp = a.exp.removeprefix("+exp=")
-        r = neff_check(exp, a.neff)
+        r = neff_check(exp, a.data)
         print(f"{exp}: resamplings per run, released {sorted(r['resamplings_released'])} (median "
               f"{r['resamplings_median'][0]:g}), ours {sorted(r['resamplings_ours'])} (median {r['resamplings_median'][1]:g}); "
               f"Mann-Whitney p {r['resamplings_mannwhitney_p']:.2g}")
@@ -562,8 +576,7 @@ def main(argv=None):
         raise ValueError(f"--data {a.data}: only overrides of the data config (data.<key>=<value>)")
     cfg = compose_config([f"+exp={exp}", *a.data])
     log = load_stream(cfg)
-    out_root = REPO / "outputs" / exp
-    out_root.mkdir(parents=True, exist_ok=True)
+    out_root = REPO / "outputs"
     if a.gfs:
         if a.data or a.set:
             raise ValueError("--gfs runs the released tool at its own defaults on the log as it is: no --data or --set")
@@ -573,7 +586,7 @@ def main(argv=None):
         print(f"released GMapping's gfs_nogui on {exp} ({len(log)} scans, 30 particles, its defaults)")
     else:
         params = wrapper_params(cfg, log, a.set)
-        scans_file = out_root / f"reference-gmapping-scans{'-' + data_tag(a.data) if a.data else ''}.txt"
+        scans_file = runs.cache_dir(cfg, f"{TOOL}-inputs", out_root) / f"scans{'-' + data_tag(a.data) if a.data else ''}.txt"
         export_scans(log, scans_file)
         with ThreadPoolExecutor(a.jobs) as pool:
             runs = list(pool.map(lambda s: run_seed(cfg, log, scans_file, s, params, out_root, a.data),
@@ -594,9 +607,9 @@ def keep_runs(exp: str) -> Path:
     """Merge every finished run of ``exp`` in outputs/ into results/slam/reference/<exp>.json."""
     keep = REPO / "results" / "slam" / "reference" / f"{exp}.json"
     kept = json.loads(keep.read_text()) if keep.is_file() else {}
-    for f in sorted((REPO / "outputs" / exp).glob("reference-gmapping-*/metrics.json")):
-        m = json.loads(f.read_text())
-        kept[m.get("run", f.parent.name.removeprefix("reference-gmapping-"))] = m
+    for folder in runs.tool_runs(TOOL, exp, REPO / "outputs"):
+        m = json.loads((folder / "metrics.json").read_text())
+        kept[m["run"]] = m
     atomic_write_bytes(keep, (json.dumps(kept, sort_keys=True, default=float) + "\n").encode())
     print(f"{len(kept)} runs -> {keep}")
     return keep

@@ -16,7 +16,7 @@ outputs/reference/irmcl/, git-ignored). This command writes, per start time of o
 
 runs ``main.py`` in their source folder, and reads their estimate back (``IRMCL.txt``, which their
 ``summary_loc`` writes: the mean of the top 80 % of the particles after resampling). Its folder is
-``outputs/<exp>/reference-irmcl-<mode>-<particles>/`` with ``start<k>.tum`` (stamps of the log),
+``outputs/<exp>/reference_irmcl/<mode>-<particles>-<digest>/`` with ``start<k>.tum`` (stamps of the log),
 ``config.yaml`` and ``metrics.json`` as a localize run has them, so ``eval.yaw_lag`` and ``eval.rescore``
 read it like ours; their own evo summary (what their script prints, after 20 s) is kept per start
 (``their_summary``), and their log of each start is ``start<k>.log``.
@@ -48,12 +48,12 @@ from irmcl_warp.config import compose_config
 from irmcl_warp.io import write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mcl.stage import start_indices, start_times
-from irmcl_warp.mcl.folders import particles_tag
-from irmcl_warp.nof.folders import synthesis_folder, train_folder
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import localization_metrics
-from irmcl_warp.services.outputs import file_digest, stage_dir, write_json
+from irmcl_warp import runs
+from irmcl_warp.runs import file_digest
+from irmcl_warp.services.outputs import write_json
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD = REPO / "outputs" / "reference" / "irmcl"
@@ -174,19 +174,25 @@ def parse_their_log(text: str) -> dict:
     return out
 
 
+def trained(cfg) -> Path:
+    """The finished training run of ``cfg``'s settings (``train=<preset>``): its nof.pt is the field they use."""
+    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
+    return runs.require(runs.identify(cfg, "train"), command)
+
+
 def out_folder(cfg, repeat: int = 0) -> Path:
-    """outputs/<exp>/reference-irmcl-<mode>-<N>k[-run<repeat>]: their filter seeds itself from the machine
-    (std::random_device), so a repeat is another draw of the same run."""
-    name = f"reference-irmcl-{cfg.localize.mode}-{particles_tag(cfg.mcl.num_particles)}"
-    return stage_dir(cfg, name + (f"-run{repeat}" if repeat else "")).resolve()
+    """outputs/<exp>/reference_irmcl/<mode>-<N>[-run<repeat>]-<digest>/ (irmcl_warp.runs.tool_dir): their filter
+    seeds itself from the machine (std::random_device), so a repeat is another draw of the same run."""
+    label = f"{cfg.localize.mode}-{cfg.mcl.num_particles}" + (f"-run{repeat}" if repeat else "")
+    settings = {"localize": OmegaConf.to_container(cfg.localize), "particles": int(cfg.mcl.num_particles),
+                "reduce_to": int(cfg.mcl.reduce_to), "field": runs.identify(cfg, "train").id, "repeat": repeat}
+    return runs.tool_dir(cfg.exp, "reference_irmcl", label, settings).resolve()
 
 
 def their_field(cfg, out: Path) -> Path:
-    """``train=<preset>``'s nof.pt (which must exist), written as their checkpoint out/nof.ckpt when that is
+    """The nof.pt of ``train=<preset>``'s finished run, written as their checkpoint out/nof.ckpt when that is
     missing or older; returns the nof.pt."""
-    nof_pt = stage_dir(cfg, train_folder(cfg)) / "nof.pt"
-    if not nof_pt.is_file():
-        raise FileNotFoundError(f"{nof_pt}: train the NOF first (python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name})")
+    nof_pt = trained(cfg) / "nof.pt"
     out.mkdir(parents=True, exist_ok=True)
     if not (out / "nof.ckpt").is_file() or (out / "nof.ckpt").stat().st_mtime < nof_pt.stat().st_mtime:
         torch.save(their_checkpoint(nof_pt), out / "nof.ckpt")
@@ -275,19 +281,24 @@ def score(cfg, repeat: int = 0) -> Path:
 
 
 def our_synthesis(cfg, nof_pt: Path) -> tuple[dict | None, str | None]:
-    """Our eval.synthesis figures of this very field: from its run folder, else from the kept results
-    (results/nof/<exp>.json) when the kept training run's validation figures are the checkpoint's own."""
-    folder = stage_dir(cfg, synthesis_folder(cfg)) / "metrics.json"
-    if folder.is_file():
-        doc, where = json.loads(folder.read_text()), str(folder)
+    """Our synthesis figures of this very field: from its finished run, else from the kept record of the same
+    settings (results/nof/<exp>.json) when the kept training record's validation figures are the checkpoint's own."""
+    ident = runs.identify(cfg, "synthesis")
+    folder = runs.finished(ident)
+    if folder is not None:
+        doc, where = json.loads((folder / "metrics.json").read_text()), str(folder)
     else:
-        kept = REPO / "results" / "nof" / f"{cfg.exp}.json"
-        runs = json.loads(kept.read_text())["runs"] if kept.is_file() else {}
-        train, synth = runs.get(train_folder(cfg)), runs.get(synthesis_folder(cfg))
+        from eval.results.records import kept
+
+        recs = kept(("train", "synthesis"))
+        same = runs.settings_id(OmegaConf.to_container(cfg, resolve=True), "synthesis")
+        synth = next((r for r in recs if r.stage == "synthesis" and r.exp == cfg.exp and r.settings_id == same), None)
+        train_id = runs.settings_id(OmegaConf.to_container(cfg, resolve=True), "train")
+        train = next((r for r in recs if r.stage == "train" and r.exp == cfg.exp and r.settings_id == train_id), None)
         val = torch.load(nof_pt, map_location="cpu", weights_only=False).get("val")
-        if not (train and synth and val and train["metrics"].get("val") == val):
+        if not (train and synth and val and train.get("val") == val):
             return None, None
-        doc, where = synth["metrics"], f"{kept.relative_to(REPO)} ({synthesis_folder(cfg)}; same validation figures as {nof_pt})"
+        doc, where = synth, f"results/nof/{cfg.exp}.json ({synth.label}; same validation figures as {nof_pt})"
     nof = next((m for m in doc["methods"].values() if m.get("kind") == "nof"), None)
     return ({k: nof[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")} if nof else None), where
 
@@ -315,14 +326,15 @@ def their_evaluation(cfg, ckpt: Path, out: Path) -> dict:
 
 def their_synthesis(cfg) -> Path:
     """Their evaluation (eval.py's metrics, the paper's Table I) on our test split with our field, on the CPU:
-    outputs/<exp>/reference-irmcl-synthesis-<preset>/metrics.json holds their four figures beside our
-    eval.synthesis's figures of the same field and split (from its metrics.json, when it was run)."""
-    out = stage_dir(cfg, f"reference-irmcl-synthesis-{cfg.train.name}").resolve()
+    outputs/<exp>/reference_irmcl_synthesis/<preset>-<digest>/metrics.json holds their four figures beside our
+    synthesis stage's figures of the same field and split (from its run, when it was made)."""
+    out = runs.tool_dir(cfg.exp, "reference_irmcl_synthesis", cfg.train.name, runs.identify(cfg, "train").id).resolve()
     nof_pt = their_field(cfg, out)
     theirs = their_evaluation(cfg, out / "nof.ckpt", out)
     ours, ours_from = our_synthesis(cfg, nof_pt)
     doc = {"dataset": cfg.data.name, "nof": str(nof_pt), "far_m": far_bound_m(cfg), "their_eval": theirs, "ours": ours,
            "ours_from": ours_from}
+    OmegaConf.save(cfg, out / "config.yaml")
     write_json(out / "metrics.json", doc)
     print(f"{cfg.data.name}, {cfg.train.name}: their eval.py MAE {theirs['mae_m']:.3f} m, Chamfer {theirs['chamfer_m']:.3f} m, "
           f"F {theirs['fscore_pct']:.1f} %" + (f"; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m, "
@@ -331,7 +343,9 @@ def their_synthesis(cfg) -> Path:
 
 
 def nof_folder(cfg) -> Path:
-    return stage_dir(cfg, "reference-irmcl-nof").resolve()
+    """Their training recipe on our split (eval/reference/train_irmcl.sh): one per experiment and split."""
+    return runs.tool_dir(cfg.exp, "reference_irmcl_nof", "their-recipe", {"split": cfg.data.split,
+                                                                           "val_scans": cfg.train.val_scans}).resolve()
 
 
 def nof_data(cfg) -> Path:
@@ -378,40 +392,34 @@ def nof_score(cfg) -> Path:
     log = out / "train.log"  # what train_irmcl.sh printed (brought back with the checkpoints)
     doc = {"dataset": cfg.data.name, "checkpoint": str(ckpt), "best_epoch": int(meta.get("epoch", -1)) + 1,
            "their_val_per_epoch": their_val_curve(log.read_text()) if log.is_file() else None, "their_eval": theirs, "our_eval": {k: ours[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")}}
+    OmegaConf.save(cfg, out / "config.yaml")
     write_json(out / "metrics.json", doc)
     print(f"{cfg.data.name}, their recipe (best epoch {doc['best_epoch']}): their evaluation MAE {theirs['mae_m']:.3f} m, "
           f"Chamfer {theirs['chamfer_m']:.3f} m; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m -> {out}")
     return out
 
 
-KEPT = REPO / "results" / "checks" / "irmcl_reference"
-KEEP_FILES = ("metrics.json", "config.yaml", "yaw_lag.json")
+KEEP_ARTIFACTS = ("yaw_lag.json",)  # the analyses docs/fidelity.md reads beside a run's metrics
 
 
-def keep(cfg, also: list[Path], repeat: int = 0) -> list[Path]:
-    """Copy their scored run and the runs of ours it is set beside (``also``: localize folders) into
-    results/checks/irmcl_reference/<exp>/<folder>/: metrics.json, config.yaml and yaw_lag.json (run
-    ``python -m eval.yaw_lag`` on them first), which is what docs/fidelity.md reads; and the metrics.json of
-    the log's field checks (``--stage synthesis``, ``nof-score``) when they were made."""
-    def copy(run: Path, names) -> None:
-        dest = KEPT / cfg.exp / run.name
-        dest.mkdir(parents=True, exist_ok=True)
-        for name in names:
-            atomic_write_bytes(dest / name, (run / name).read_bytes())
-        kept.append(dest)
-        print(f"kept {run} ({', '.join(names)}) -> {dest.relative_to(REPO)}")
+def keep(cfg, also: list[Path], repeat: int = 0) -> Path:
+    """Keep their scored run and the runs of ours it is set beside (``also``: localize run folders) as records
+    of the check study results/checks/irmcl_reference.json, with yaw_lag.json as an artifact (run
+    ``python -m eval.analyses.yaw_lag`` on them first), which is what docs/fidelity.md reads; and the log's field checks
+    (``--stage synthesis``, ``nof-score``) when they were made."""
+    from eval.results.records import keep_check
 
-    kept = []
-    for run in [out_folder(cfg, repeat), *also]:
-        missing = [n for n in KEEP_FILES if not (run / n).is_file()]
+    entries = []
+    for run, stage in [(out_folder(cfg, repeat), "reference_irmcl"), *((p, "localize") for p in also)]:
+        missing = [n for n in ("metrics.json", "config.yaml", *KEEP_ARTIFACTS) if not (run / n).is_file()]
         if missing:
-            raise FileNotFoundError(f"{run}: no {', '.join(missing)} (score the run, then python -m eval.yaw_lag {run})")
-        copy(run, KEEP_FILES)
-    # the field checks of this log, when made: their evaluation of our field, their recipe's field
-    for run in [*nof_folder(cfg).parent.glob("reference-irmcl-synthesis-*"), nof_folder(cfg)]:
-        if (run / "metrics.json").is_file():
-            copy(run, ("metrics.json",))
-    return kept
+            raise FileNotFoundError(f"{run}: no {', '.join(missing)} (score the run, then python -m eval.analyses.yaw_lag {run})")
+        entries.append((run, stage, KEEP_ARTIFACTS, repeat if stage == "reference_irmcl" else 0))
+    for run in runs.tool_runs("reference_irmcl_synthesis", cfg.exp):
+        entries.append((run, "reference_irmcl_synthesis", (), 0))
+    if (nof_folder(cfg) / "metrics.json").is_file():
+        entries.append((nof_folder(cfg), "reference_irmcl_nof", (), 0))
+    return keep_check("irmcl_reference", cfg.exp, entries)
 
 
 def main(argv=None) -> None:
@@ -421,7 +429,7 @@ def main(argv=None) -> None:
                     default="all",
                     help="prepare: write their inputs; run: their main.py here (eval/reference/run_irmcl.sh, which a GPU "
                          "machine runs instead); score: read their estimates back; all: the three in turn; keep: copy the "
-                         "scored run and the --also runs into results/checks/irmcl_reference/<exp>/; synthesis: their evaluation "
+                         "scored run and the --also runs as records of results/checks/irmcl_reference.json; synthesis: their evaluation "
                          "(eval.py's metrics, Table I) on our test split with our field (CPU; needs open3d in their venv); nof-data: "
                          "our split as their training data (for train_irmcl.sh); nof-score: their trained field on our "
                          "test split, by their evaluation and ours")

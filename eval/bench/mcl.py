@@ -34,7 +34,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from eval.timing import repeated, time_per_call
+from eval.bench.timing import record_path, repeated, time_per_call
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
@@ -247,7 +247,7 @@ def run_mcl_bench(a) -> list[dict]:
                   f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays")
     print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
         f"{k} {v:.3f}" for k, v in r["parts_ms"].items()) for r in rows if "parts_ms" in r))
-    out = Path(a.out) / f"mcl-{device.split(':')[0]}.json"
+    out = record_path(a.out, "mcl", device)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "nog": src, "nog_shape": list(nog.shape), "far_m": far,
                      "particles_start": "uniform over the free cells" if around is None else

@@ -1,4 +1,4 @@
-"""``python -m eval.determinism [--seeds 5] [--device cuda:0]``: do MCL runs on one device repeat bit for bit?
+"""``python -m eval.analyses.determinism [--seeds 5] [--device cuda:0]``: do MCL runs on one device repeat bit for bit?
 
 For each weighting (``nog_raymarch``, ``likelihood_field``) and seed, the simulator's log is filtered three
 times: eager, as one captured graph per step, and eager again (600 particles, reduced to 300 halfway, as in
@@ -13,7 +13,7 @@ import argparse
 
 import numpy as np
 
-from eval.bench_mcl import simulator_nog
+from eval.bench.mcl import simulator_nog
 from irmcl_warp.config import compose_config
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.services.cli import guard
@@ -39,7 +39,7 @@ def run(log, nog, maps, weighting: str, seed: int, graph: str, device: str, **se
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(prog="python -m eval.determinism")
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.determinism")
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--device", default="auto")
     a = ap.parse_args(argv)

@@ -1,4 +1,4 @@
-"""``python -m eval.yaw_lag outputs/<exp>/localize-<run> [...]``: does a localization run's heading trail the
+"""``python -m eval.analyses.yaw_lag outputs/<exp>/localize-<run> [...]``: does a localization run's heading trail the
 truth while the robot turns? (Issue 17: the NOG's yaw error grew with the turn rate.)
 
 For every run folder, from its trajectories (start*.tum) and the ground truth of its log (config.yaml names
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from eval.rescore import run_trajectories
+from eval.analyses.rescore import run_trajectories
 from irmcl_warp.geometry import wrap_angle
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
@@ -76,7 +76,9 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
     cfg = OmegaConf.merge(OmegaConf.load(run / "config.yaml"), OmegaConf.from_dotlist(list(overrides)))
     device = "cpu"
     log = load_stream(cfg)
-    view, maps, _ = build_maps(cfg, device)
+    up = json.loads((run / "manifest.json").read_text()).get("upstream", {}).get("train") \
+        if (run / "manifest.json").is_file() else None  # the field the run read (a NOF weighting)
+    view, maps, _ = build_maps(cfg, device, run.parents[2] / up["run"] / "nof.pt" if up else None)
     far = far_bound_m(cfg)
     m = OmegaConf.merge(cfg.mcl, {"num_particles": steps, "step_graph": "off"})
     pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
@@ -104,7 +106,7 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m eval.yaw_lag", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.yaw_lag", description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path, help="localize run folders (outputs/<exp>/localize-...)")
     ap.add_argument("--after-s", type=float, default=20.0, help="skip this much of each start (IR-MCL scores after 20 s)")
     ap.add_argument("--straight", type=float, default=0.1, help="|turn rate| below this (rad/s) counts as straight")

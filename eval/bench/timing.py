@@ -1,8 +1,16 @@
-"""Timing shared by the benchmarks: seconds per call after warm-up, the device synchronised around."""
+"""Timing shared by the benchmarks: seconds per call after warm-up, the device synchronised around; and where a
+benchmark's record goes (``record_path``: ``<kind>[-<detail>]-<device>.json``, the name results/bench/ keeps
+one current record of per kind and device)."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
+
+
+def record_path(out, kind: str, device: str, *detail: str) -> Path:
+    """``out/<kind>[-<detail>...]-<device kind>.json`` (``cuda:0`` -> ``cuda``)."""
+    return Path(out) / ("-".join([kind, *detail, str(device).split(":")[0]]) + ".json")
 
 
 def time_per_call(fn, sync, steps: int, warmup: int = 2) -> float:

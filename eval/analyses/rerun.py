@@ -1,12 +1,13 @@
-"""``python -m eval.rerun [--exp gmapping_fr079 ...] > jobs.txt``: the Hydra overrides that make every kept SLAM
+"""``python -m eval.analyses.rerun [--exp gmapping_fr079 ...] > jobs.txt``: the Hydra overrides that make every kept SLAM
 run again, one line per run, for a sweep after the code changed (``bash eval/gpu/slam_sweep.sh kept``).
-``python -m eval.rerun --compare <outputs>``: whether the runs made again (``<outputs>/<exp>/<run>/metrics.json``,
-e.g. a sweep's unpacked archive) give their kept runs' errors to the last digit; exits 1 where one does not.
+``python -m eval.analyses.rerun --compare <outputs>``: whether the runs made again (the finished SLAM runs under
+``<outputs>``, e.g. a sweep's unpacked archive) give their kept records' errors to the last digit; exits 1 where
+one does not.
 
-A kept run records the config sections it ran with (``results/slam/<exp>.json``, eval.keep). Its line is
+A kept record holds the settings its run read (``results/slam/<exp>.json``, eval.keep). Its line is
 ``+exp=<exp>`` and every slam setting and data field that differs from what that experiment composes to, so
-the new run lands in a folder of the same name (checked here: a line whose folder name differs is an error,
-not a silent new variant).
+the new run has the same settings (checked here: a line that composes to other settings is an error, not a
+silent new variant); a run made again is matched to its kept record by those settings.
 """
 
 from __future__ import annotations
@@ -17,12 +18,12 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from eval.keep import load_kept
+from eval.results.records import kept, yours
+from irmcl_warp import runs
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.cli import guard
-from irmcl_warp.slam.stage import run_tag
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def hydra_value(v) -> str:
@@ -48,45 +49,43 @@ def overrides(exp: str, config: dict, base=None) -> list[str]:
     return out
 
 
-def kept_jobs(exps=None, results: Path = REPO / "results" / "slam") -> list[list[str]]:
-    """One override list per kept run of ``exps`` (every experiment kept when None), in a stable order."""
-    jobs = []
-    for exp in sorted({f.name.split(".")[0] for f in results.glob("gmapping_*.json")}):  # <exp>[.<k>].json
-        if exps and exp not in exps:
+def kept_jobs(exps=None, results: Path = REPO / "results") -> list[list[str]]:
+    """One override list per kept SLAM record of ``exps`` (every experiment kept when None), in a stable order."""
+    jobs, bases = [], {}
+    for rec in sorted(kept(("slam",), results), key=lambda r: (r.exp, r.label)):
+        if exps and rec.exp not in exps:
             continue
-        base = compose_config([f"+exp={exp}"])
-        for folder, run in sorted(load_kept(results, exp)["runs"].items()):
-            line = overrides(exp, run["config"], base)
-            cfg = compose_config(line)
-            if run_tag(cfg.slam, cfg.data) != folder:
-                raise ValueError(f"{results / exp}.json: kept run {folder} would run again as {run_tag(cfg.slam, cfg.data)} with {line}")
-            jobs.append(line)
+        if rec.exp not in bases:
+            bases[rec.exp] = compose_config([f"+exp={rec.exp}"])
+        line = overrides(rec.exp, rec.config, bases[rec.exp])
+        cfg = OmegaConf.to_container(compose_config(line), resolve=True)
+        if runs.settings_id(cfg, "slam") != rec.settings_id:
+            raise ValueError(f"{results}/slam/{rec.exp}.json: kept record {rec.label} would run again with other "
+                             f"settings with {line}")
+        jobs.append(line)
     return jobs
 
 
 POSE_METRICS = ("relations", "trajectory")  # the parts of metrics.json that follow from the poses alone
 
 
-def compare(outputs: Path, results: Path = REPO / "results" / "slam") -> tuple[list[str], list[str], list[str]]:
-    """The runs under ``outputs`` (<exp>/<run>/metrics.json) against their kept metrics: the names of those whose
-    relations and trajectory errors are the kept ones to the last digit, of those that differ, and of those not
-    kept."""
-    same, differ, not_kept, kept = [], [], [], {}
-    for path in sorted(Path(outputs).glob("*/*/metrics.json")):
-        exp, run = path.parent.parent.name, path.parent.name
-        if exp not in kept:
-            kept[exp] = (load_kept(results, exp) or {"runs": {}})["runs"]
-        name, old = f"{exp}/{run}", kept[exp].get(run)
+def compare(outputs: Path, results: Path = REPO / "results") -> tuple[list[str], list[str], list[str]]:
+    """The finished SLAM runs under ``outputs`` against the kept records of the same settings: the names of those
+    whose relations and trajectory errors are the kept ones to the last digit, of those that differ, and of those
+    not kept."""
+    same, differ, not_kept = [], [], []
+    by_settings = {(r.exp, r.settings_id): r for r in kept(("slam",), results)}
+    for rec in yours(("slam",), Path(outputs)):
+        name, old = f"{rec.exp}/{rec.label}", by_settings.get((rec.exp, rec.settings_id))
         if old is None:
             not_kept.append(name)
             continue
-        new = json.loads(path.read_text())
-        (same if all(new.get(k) == old["metrics"].get(k) for k in POSE_METRICS) else differ).append(name)
+        (same if all(rec.get(k) == old.get(k) for k in POSE_METRICS) else differ).append(name)
     return same, differ, not_kept
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m eval.rerun")
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.rerun")
     ap.add_argument("--exp", nargs="+", help="only these experiments (e.g. gmapping_fr079)")
     ap.add_argument("--compare", metavar="OUTPUTS", help="check runs made again under OUTPUTS against the kept ones")
     a = ap.parse_args(argv)

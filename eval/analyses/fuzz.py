@@ -1,4 +1,4 @@
-"""``python -m eval.fuzz [--cases N] [--seed S] [--write]``: every reader against corrupted input, counted.
+"""``python -m eval.analyses.fuzz [--cases N] [--seed S] [--write]``: every reader against corrupted input, counted.
 
 The corruption classes (issue 16) and what a reader must do with each: fail with a ``LogFormatError`` (or
 ``ValueError`` / ``FileNotFoundError``) naming the file, or warn (``LogDefectWarning``) naming the file, or
@@ -41,7 +41,7 @@ from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.services.cli import guard
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 # ---------------------------------------------------------------- intact files, one per reader
 
@@ -318,7 +318,7 @@ def markdown(result: dict) -> str:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m eval.fuzz")
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.fuzz")
     ap.add_argument("--cases", type=int, default=100, help="cases per reader and corruption class")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--write", action="store_true", help="write docs/reader-fuzz.md and results/readers/fuzz.json")
@@ -331,7 +331,7 @@ def main(argv=None):
     if args.write:
         atomic_write_bytes(REPO / "results" / "readers" / "fuzz.json",
                            (json.dumps(result, indent=1, sort_keys=True) + "\n").encode())
-        doc = (DOC_HEAD + f"\nMade by `python -m eval.fuzz --cases {args.cases} --seed {args.seed} --write` "
+        doc = (DOC_HEAD + f"\nMade by `python -m eval.analyses.fuzz --cases {args.cases} --seed {args.seed} --write` "
                f"(2-core CPU).\n\n" + table + "\n")
         atomic_write_bytes(REPO / "docs" / "reader-fuzz.md", doc.encode())
     return 1 if result["failures"] else 0

@@ -1,9 +1,9 @@
-"""``python -m eval.rescore RUN_DIR...``: score finished localize runs again with today's metrics.
+"""``python -m eval.analyses.rescore RUN_DIR...``: score finished localize runs again with today's metrics.
 
 The trajectories (start<k>.tum) are kept; the metrics are not fixed. When the scoring rule changes (for example,
 success now also needs the heading), this recomputes each start's metrics and the run's summary from its
-trajectories and its log's ground truth. It keeps the timings and the settings, rewrites metrics.json
-atomically, and prints what changed. Kidnapped runs are refused: their clock is rebuilt across the jump.
+trajectories and its log's ground truth. It keeps the timings and the settings, amends metrics.json (the
+run's manifest records it: runs.amend), and prints what changed. Kidnapped runs are refused: their clock is rebuilt across the jump.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from irmcl_warp.io import read_tum
 from irmcl_warp.mcl.stage import summarise
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.metrics import localization_metrics
-from irmcl_warp.services.outputs import write_json
+from irmcl_warp.runs import amend
 from irmcl_warp.types import match_stamps
 
 
@@ -57,12 +57,12 @@ def rescore(run: Path) -> dict:
     summary = {**doc["summary"], **summarise(runs, doc["settings"], doc["summary"].get("device", "?"))}
     changed = {key: (doc["summary"].get(key), value) for key, value in summary.items()
                if doc["summary"].get(key) != value}
-    write_json(run / "metrics.json", {**doc, "summary": summary, "runs": runs})
+    amend(run, {**doc, "summary": summary, "runs": runs}, "eval.analyses.rescore: today's localization metrics")
     return changed
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m eval.rescore", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.rescore", description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path, help="localize run folders with start*.tum and metrics.json")
     for run in ap.parse_args(argv).runs:
         changed = rescore(run)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.bench.timing import record_path
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.data import load_stream
@@ -117,7 +118,7 @@ def run_match_bench(a, device: str) -> dict:
     for w in ways:
         t = times[w]
         print(f"| {w} | {np.median(t):.2f} [{min(t):.2f}-{max(t):.2f}] | {rounds[w]} | {digest[w]} |")
-    out = Path(a.out) / f"slam-match-{a.exp}-{device.split(':')[0]}.json"
+    out = record_path(a.out, "slam", device, "match", a.exp)
     out.parent.mkdir(parents=True, exist_ok=True)
     res = {"device": device, "argv": vars(a), "scan": k - 1, "ms": times, "rounds": rounds, "md5": digest}
     write_json(out, res)
@@ -162,7 +163,7 @@ def run_slam_bench(a) -> list[dict]:
                   f"{r['released_wall_s']:.1f} s median [{min(r['released_wall_s_all']):.1f}-"
                   f"{max(r['released_wall_s_all']):.1f}]; released / ours {r['released_over_ours']:.2f} median "
                   f"[{min(r['released_over_ours_all']):.2f}-{max(r['released_over_ours_all']):.2f}]")
-    out = Path(a.out) / f"slam-{a.exp}-{device.split(':')[0]}.json"
+    out = record_path(a.out, "slam", device, a.exp)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "argv": vars(a), "rows": rows})
     print(f"-> {out}")

@@ -1,55 +1,59 @@
-"""``python -m eval.fidelity [--write]``: docs/fidelity.md, ours side by side with the reference code, from kept
-results (issue 17). Every figure comes from a file under results/; the prose around them says what was
-compared and how the runs were made.
+"""docs/fidelity.md (written by ``python -m eval.tables --write``), ours side by side with the reference code, from kept
+results (issue 17). Every figure comes from a record under results/, found by its settings; the prose around
+them says what was compared and how the runs were made.
 
-* IR-MCL's heading on fr079: the yaw study's runs in results/checks/fr079_yaw/<run>/ (metrics.json of the
-  localize stage, yaw_lag.json and yaw_profile.json of eval.yaw_lag).
-* Global localization with both motion models: results/checks/global_motion/<exp>/<run>/.
-* The authors' IR-MCL on our logs (eval.reference.irmcl) and the runs of ours beside it:
-  results/checks/irmcl_reference/<exp>/<run>/ (fr079's runs of ours are the yaw study's); their draws
-  (<run>-run<k>/) and our runs under their settings, one per seed (settings/<run>/seed<k>.json).
-* GMapping: our runs and the released code's, kept in results/slam/ (eval.collect).
+* The check studies (results/checks/<study>.json, eval.results.records.checks): IR-MCL's heading on fr079
+  (``fr079_yaw``: the localize runs and the analyses of eval.yaw_lag as artifacts), global localization with
+  both motion models (``global_motion``), the authors' IR-MCL on our logs and our runs beside it
+  (``irmcl_reference``: their draws, their training recipe, our runs under their settings, one per seed),
+  the range table beside the march (``nog_table``, one record per seed).
+* GMapping: our runs and the released code's, kept in results/slam/ (eval.results).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import textwrap
 from pathlib import Path
 
 import numpy as np
 
-from eval.collect import (CONVERGED_M, collect_slam, collect_slam_reference, converged, median_span, released_errors,
-                          slam_errors)
+from eval.results.queries import CONVERGED_M, converged, load_slam, median_span, released, released_errors, slam_errors
+from eval.results.records import RESULTS, checks, find, kept
 from irmcl_warp.io.atomic import atomic_write_bytes
 
-REPO = Path(__file__).resolve().parents[1]
-YAW = REPO / "results" / "checks" / "fr079_yaw"
-GLOBAL = REPO / "results" / "checks" / "global_motion"
-THEIRS = REPO / "results" / "checks" / "irmcl_reference"
-TABLE = REPO / "results" / "checks" / "nog_table"  # nog_table beside nog_raymarch: <log>/<folder>/seed<k>.json
-HALF_BEAM = "amin-1.57517"  # data.angle_min_rad=-1.5751716: the released wrapper's beam layout on fr079
+REPO = Path(__file__).resolve().parents[2]
+HALF_BEAM = {"data.angle_min_rad": -1.5751716}  # the released wrapper's beam layout on fr079
+OFFSET0 = {"data.laser_offset": [0.0, 0.0, 0.0]}  # the laser at the base, as the derived CARMEN log's FLASER pose
+LASER_FRAME = {"slam.frame": "laser"}  # the particles on the laser's poses, as the released code
 
-YAW_RUNS = [  # (folder, what it is)
-    ("localize-nog_raymarch-tracking-10k-5cm", "IR-MCL (NOG), our default motion model (Thrun, AMCL's)"),
-    ("localize-nog_raymarch-tracking-10k-5cm-irmcl", "IR-MCL (NOG), the authors' motion model"),
-    ("localize-nog_raymarch-tracking-10k-5cm-sigma0.25-irmcl", "IR-MCL (NOG), the authors' motion model, sigma 0.25 m"),
-    ("localize-likelihood_field-tracking-10k-5cm", "likelihood field, Thrun's motion model"),
-    ("localize-likelihood_field-tracking-10k-5cm-irmcl", "likelihood field, the authors' motion model"),
+
+def _one(study: str, stage: str, exp: str, draw: int = 0, **where):
+    """The record of ``study`` with these settings (its first draw), or None."""
+    found = [r for r in find(stage, exp, among=checks(study), **where) if r.draw == draw]
+    return found[0] if found else None
+
+
+THRUN, THEIRS_MOTION = {"mcl__motion": "odometry", "mcl__sigma_m": 0.5}, {"mcl__motion": "irmcl", "mcl__sigma_m": 0.5}
+YAW_RUNS = [  # (settings, what it is)
+    (dict(mcl__weighting="nog_raymarch", **THRUN), "IR-MCL (NOG), our default motion model (Thrun, AMCL's)"),
+    (dict(mcl__weighting="nog_raymarch", **THEIRS_MOTION), "IR-MCL (NOG), the authors' motion model"),
+    (dict(mcl__weighting="nog_raymarch", mcl__motion="irmcl", mcl__sigma_m=0.25), "IR-MCL (NOG), the authors' motion model, sigma 0.25 m"),
+    (dict(mcl__weighting="likelihood_field", **THRUN), "likelihood field, Thrun's motion model"),
+    (dict(mcl__weighting="likelihood_field", **THEIRS_MOTION), "likelihood field, the authors' motion model"),
 ]
 
 
-def _load(run: str, name: str) -> dict | None:
-    p = YAW / run / name
-    return json.loads(p.read_text()) if p.is_file() else None
+def _yaw(where: dict):
+    return _one("fr079_yaw", "localize", "fr079", **where)
 
 
 def yaw_table() -> str:
     rows = ["| run | success | location RMSE (cm) | yaw RMSE (deg) | yaw RMS straight / turning (deg) | fitted lag (s) "
             "| model's heading sigma per scan (deg) | its peak (deg) |", "|---|---|---|---|---|---|---|---|"]
-    for run, what in YAW_RUNS:
-        m, lag, prof = _load(run, "metrics.json"), _load(run, "yaw_lag.json"), _load(run, "yaw_profile.json")
+    for where, what in YAW_RUNS:
+        rec = _yaw(where)
+        m, lag, prof = (rec, rec.artifacts.get("yaw_lag.json"), rec.artifacts.get("yaw_profile.json")) if rec else (None,) * 3
         if not (m and lag and prof):
             rows.append(f"| {what} | not run | | | | | | |")
             continue
@@ -60,19 +64,19 @@ def yaw_table() -> str:
     return "\n".join(rows)
 
 
-WHAT_IFS = [  # (run, setting): the observation model alone under another setting (eval.yaw_lag --profile --set)
-    ("localize-nog_raymarch-tracking-10k-5cm", ""), ("localize-nog_raymarch-tracking-10k-5cm", "mcl.sigma_m=0.25"),
-    ("localize-nog_raymarch-tracking-10k-5cm", "mcl.sigma_m=0.1"), ("localize-nog_raymarch-tracking-10k-5cm", "mcl.num_beams=128"),
-    ("localize-likelihood_field-tracking-10k-5cm", ""), ("localize-likelihood_field-tracking-10k-5cm", "mcl.num_beams=128"),
+WHAT_IFS = [  # (weighting, setting): the observation model alone under another setting (eval.yaw_lag --profile --set)
+    ("nog_raymarch", ""), ("nog_raymarch", "mcl.sigma_m=0.25"), ("nog_raymarch", "mcl.sigma_m=0.1"),
+    ("nog_raymarch", "mcl.num_beams=128"), ("likelihood_field", ""), ("likelihood_field", "mcl.num_beams=128"),
 ]
 
 
 def what_if_table() -> str:
     rows = ["| model | setting | heading sigma per scan (deg) |", "|---|---|---|"]
-    for run, setting in WHAT_IFS:
-        prof = _load(run, "yaw_profile" + (f"-{setting}" if setting else "") + ".json")
+    for weighting, setting in WHAT_IFS:
+        rec = _yaw(dict(mcl__weighting=weighting, **THRUN))
+        prof = rec.artifacts.get("yaw_profile" + (f"-{setting}" if setting else "") + ".json") if rec else None
         sig = f"{prof['sigma_deg_per_scan']:.2f}" if prof and prof["sigma_deg_per_scan"] else "not run"
-        rows.append(f"| {prof['weighting'] if prof else run} | {setting or 'as run (32 beams)'} | {sig} |")
+        rows.append(f"| {prof['weighting'] if prof else weighting} | {setting or 'as run (32 beams)'} | {sig} |")
     return "\n".join(rows)
 
 
@@ -81,68 +85,80 @@ def global_table() -> str:
             "|---|---|---|---|---|---|---|"]
     for exp in ("fr079", "intel"):
         for weighting in ("nog_raymarch", "likelihood_field"):
-            for motion, suffix in (("Thrun (AMCL)", ""), ("the authors'", "-irmcl"),
-                                   ("the authors', sigma 0.25 m", "-sigma0.25-irmcl")):
-                run = GLOBAL / exp / f"localize-{weighting}-global-100k-5cm{suffix}"
-                if not (run / "metrics.json").is_file():
+            for motion, where in (("Thrun (AMCL)", THRUN), ("the authors'", THEIRS_MOTION),
+                                  ("the authors', sigma 0.25 m", {"mcl__motion": "irmcl", "mcl__sigma_m": 0.25})):
+                rec = _one("global_motion", "localize", exp, mcl__weighting=weighting, localize__mode="global", **where)
+                if rec is None:
                     continue
-                s = json.loads((run / "metrics.json").read_text())["summary"]
-                lag = json.loads((run / "yaw_lag.json").read_text())
+                s, lag = rec["summary"], rec.artifacts["yaw_lag.json"]
                 rows.append(f"| {exp} | {weighting} | {motion} | {s['successes']}/{s['starts']} | "
                             f"{s['location_rmse_cm_mean']:.2f} | {s['yaw_rmse_deg_mean']:.2f} | "
                             f"{lag['straight_rms_deg']:.2f} / {lag['turning_rms_deg']:.2f} |")
-        run = THEIRS / exp / "reference-irmcl-global-100k"  # the authors' main.py with our field (eval.reference.irmcl)
-        if (run / "metrics.json").is_file() and (run / "yaw_lag.json").is_file():
-            s, lag = json.loads((run / "metrics.json").read_text())["summary"], json.loads((run / "yaw_lag.json").read_text())
+        rec = _theirs(exp, "global")  # the authors' main.py with our field (eval.reference.irmcl)
+        if rec is not None and "yaw_lag.json" in rec.artifacts:
+            s, lag = rec["summary"], rec.artifacts["yaw_lag.json"]
             rows.append(f"| {exp} | the authors' code (their main.py, their NOG), our field | theirs | {s['successes']}/{s['starts']} | "
                         f"{s['location_rmse_cm_mean']:.2f} | {s['yaw_rmse_deg_mean']:.2f} | "
                         f"{lag['straight_rms_deg']:.2f} / {lag['turning_rms_deg']:.2f} |")
     return "\n".join(rows)
 
 
-THEIRS_RUNS = [  # (log, folder, where it is kept, what it is)
-    ("fr079", "reference-irmcl-tracking-10k", THEIRS / "fr079", "the authors' code (their main.py), our field"),
-    ("fr079", "localize-nog_raymarch-tracking-10k-5cm-irmcl", YAW, "ours, NOG, the authors' motion model"),
-    ("fr079", "localize-likelihood_field-tracking-10k-5cm-irmcl", YAW, "ours, likelihood field, the authors' motion model"),
-    ("intel", "reference-irmcl-tracking-10k", THEIRS / "intel", "the authors' code (their main.py), our field"),
-    ("intel", "localize-nog_raymarch-tracking-10k-5cm-irmcl", THEIRS / "intel", "ours, NOG, the authors' motion model"),
-    ("intel", "localize-likelihood_field-tracking-10k-5cm-irmcl", THEIRS / "intel",
-     "ours, likelihood field, the authors' motion model"),
-]
+def _theirs(log: str, mode: str, draw: int = 0):
+    """The authors' main.py with our field on ``log`` (eval.reference.irmcl), draw ``draw``."""
+    return _one("irmcl_reference", "reference_irmcl", log, draw, localize__mode=mode)
+
+
+def _ours_their_motion(log: str, weighting: str):
+    """Our run with their motion model beside theirs (fr079's is the yaw study's)."""
+    if log == "fr079":
+        return _yaw(dict(mcl__weighting=weighting, **THEIRS_MOTION))
+    found = [r for r in find("localize", log, among=checks("irmcl_reference"), mcl__weighting=weighting, **THEIRS_MOTION)
+             if r.artifacts]
+    return found[0] if found else None
+
+
+THEIRS_RUNS = [  # (log, the record, what it is)
+    (log, run, what) for log in ("fr079", "intel") for run, what in (
+        (lambda lg: _theirs(lg, "tracking"), "the authors' code (their main.py), our field"),
+        (lambda lg: _ours_their_motion(lg, "nog_raymarch"), "ours, NOG, the authors' motion model"),
+        (lambda lg: _ours_their_motion(lg, "likelihood_field"), "ours, likelihood field, the authors' motion model"))]
 
 
 def theirs_table() -> str:
     rows = ["| log | run | success | location RMSE (cm) | yaw RMSE (deg) | yaw RMS straight / turning (deg) | fitted lag (s) |",
             "|---|---|---|---|---|---|---|"]
-    for log, run, where, what in THEIRS_RUNS:
-        m, lag = (where / run / "metrics.json"), (where / run / "yaw_lag.json")
-        if not (m.is_file() and lag.is_file()):
+    for log, run, what in THEIRS_RUNS:
+        rec = run(log)
+        if rec is None or "yaw_lag.json" not in rec.artifacts:
             rows.append(f"| {log} | {what} | not run | | | | |")
             continue
-        s, lag = json.loads(m.read_text())["summary"], json.loads(lag.read_text())
+        s, lag = rec["summary"], rec.artifacts["yaw_lag.json"]
         rows.append(f"| {log} | {what} | {s['successes']}/{s['starts']} | {s['location_rmse_cm_mean']:.2f} | "
                     f"{s['yaw_rmse_deg_mean']:.2f} | {lag['straight_rms_deg']:.2f} / {lag['turning_rms_deg']:.2f} | "
                     f"{lag['lag_s']:+.3f} |")
     return "\n".join(rows)
 
 
-SETTINGS = [  # (folder suffix after localize-nog_raymarch-tracking-10k-5cm-irmcl, what it is)
-    ("", "ours (beams spread over the whole scan, resampling when N_eff < N/2)"),
-    ("-stride", "ours, their beams (`mcl.beam_pick=stride`)"),
-    ("-neff1", "ours, resampling at every step (`mcl.resample_threshold=1.0`)"),
-    ("-stride-neff1", "ours, both"),
+SETTINGS = [  # (settings beside the authors' motion model, what it is)
+    ({}, "ours (beams spread over the whole scan, resampling when N_eff < N/2)"),
+    ({"mcl__beam_pick": "stride"}, "ours, their beams (`mcl.beam_pick=stride`)"),
+    ({"mcl__resample_threshold": 1.0}, "ours, resampling at every step (`mcl.resample_threshold=1.0`)"),
+    ({"mcl__beam_pick": "stride", "mcl__resample_threshold": 1.0}, "ours, both"),
 ]
 
 
 def setting_runs(log: str) -> dict:
     """{what: [summary per draw]}: the authors' code's kept draws (their filter seeds itself) and our NOG runs
-    with their motion model under each setting of SETTINGS, one per seed (results/checks/irmcl_reference/<log>/
-    settings/<folder>/seed<k>.json)."""
-    theirs = [json.loads(p.read_text())["summary"] for p in sorted((THEIRS / log).glob("reference-irmcl-tracking-10k*/metrics.json"))]
+    with their motion model under each setting of SETTINGS, one record per seed (irmcl_reference study)."""
+    recs = checks("irmcl_reference")
+    theirs = [r["summary"] for r in sorted(find("reference_irmcl", log, among=recs, localize__mode="tracking"),
+                                           key=lambda r: r.draw)]
     out = {"the authors' code (their main.py), our field": theirs}
-    for suffix, what in SETTINGS:
-        folder = THEIRS / log / "settings" / f"localize-nog_raymarch-tracking-10k-5cm-irmcl{suffix}"
-        out[what] = [json.loads(p.read_text())["summary"] for p in sorted(folder.glob("seed*.json"))]
+    for where, what in SETTINGS:
+        base = {"mcl__beam_pick": "spread", "mcl__resample_threshold": 0.5, **where}
+        seeds = [r for r in find("localize", log, among=recs, mcl__weighting="nog_raymarch", **THEIRS_MOTION, **base)
+                 if not r.artifacts]  # the seed records (the artifact-bearing run is the table above's)
+        out[what] = [r["summary"] for r in sorted(seeds, key=lambda r: r.setting("mcl.seed"))]
     return out
 
 
@@ -189,9 +205,10 @@ def settings_findings() -> str:
 def table_runs() -> dict:
     """{(log, mode, weighting): [summary per seed]} of the kept runs of the range table and the march."""
     out = {}
-    for path in sorted(TABLE.glob("*/localize-*/seed*.json")):
-        s = json.loads(path.read_text())["summary"]
-        out.setdefault((path.parts[-3], s["mode"], s["weighting"]), []).append(s)
+    for r in sorted(checks("nog_table"), key=lambda r: (r.exp, r.setting("mcl.weighting"), r.setting("localize.mode"),
+                                                        r.setting("mcl.seed"))):
+        s = r["summary"]
+        out.setdefault((r.exp, s["mode"], s["weighting"]), []).append(s)
     return out
 
 
@@ -229,24 +246,25 @@ def theirs_speed() -> str:
     """Their filter's median time per frame, from their own printout, per kept run of theirs."""
     parts = []
     for log in ("fr079", "intel"):
-        m = THEIRS / log / "reference-irmcl-tracking-10k" / "metrics.json"
-        if m.is_file():
-            parts.append(f"{log} {json.loads(m.read_text())['summary']['their_ms_per_frame_median']:.1f} ms")
+        rec = _theirs(log, "tracking")
+        if rec is not None:
+            parts.append(f"{log} {rec['summary']['their_ms_per_frame_median']:.1f} ms")
         else:
             parts.append(f"{log} not run")
     return ", ".join(parts)
 
 
-def _kept(log: str, run: str) -> dict | None:
-    p = THEIRS / log / run / "metrics.json"
-    return json.loads(p.read_text()) if p.is_file() else None
+def _kept(log: str, stage: str, **where) -> dict | None:
+    """A record of the authors' training or evaluation (eval.reference.irmcl) on ``log``."""
+    found = find(stage, log, among=checks("irmcl_reference"), **where)
+    return found[0] if found else None
 
 
 def nof_table() -> str:
     """Their evaluation beside ours on the same fields (fr079's test split), and their recipe's field."""
     rows = ["| field | evaluated by | test MAE (m) | accuracy (%) | Chamfer (m) | F-score (%) |", "|---|---|---|---|---|---|"]
     fmt = lambda m: f"{m['mae_m']:.4f} | {m['accuracy_pct']:.2f} | {m['chamfer_m']:.4f} | {m['fscore_pct']:.2f} |"  # noqa: E731
-    fast, theirs = _kept("fr079", "reference-irmcl-synthesis-fast"), _kept("fr079", "reference-irmcl-nof")
+    fast, theirs = _kept("fr079", "reference_irmcl_synthesis", train__name="fast"), _kept("fr079", "reference_irmcl_nof")
     if fast:
         rows.append(f"| ours, `train=fast` | their code | {fmt(fast['their_eval'])}")
         rows.append(f"| ours, `train=fast` | ours (`eval.synthesis`) | {fmt(fast['ours'])}" if fast.get("ours") else
@@ -265,13 +283,12 @@ def nof_table() -> str:
 def val_curves() -> tuple[dict, dict] | None:
     """Validation MAE by epoch (1-based): their script on our split, our `paper` preset (the kept run), on the
     epochs both have; None until both are kept."""
-    theirs = _kept("fr079", "reference-irmcl-nof")
-    kept = REPO / "results" / "nof" / "fr079.json"
-    ours = json.loads(kept.read_text())["runs"].get("train-paper") if kept.is_file() else None
+    theirs = _kept("fr079", "reference_irmcl_nof")
+    ours = next(iter(find("train", "fr079", among=kept(("train",)), train__name="paper", render__name="warp")), None)
     if not (theirs and theirs.get("their_val_per_epoch") and ours):
         return None
     t = {r["epoch"]: r["val_mae_m"] for r in theirs["their_val_per_epoch"]}
-    o = {r["epoch"]: r["val"]["mae_m"] for r in ours["metrics"]["history"]}
+    o = {r["epoch"]: r["val"]["mae_m"] for r in ours["history"]}
     common = sorted(e for e in t if e in o)
     return {e: t[e] for e in common}, {e: o[e] for e in common}
 
@@ -290,7 +307,7 @@ def nof_curve() -> str:
 
 def nof_findings() -> str:
     """The two statements the field checks support, computed from them (so a new run cannot leave them stale)."""
-    fast = _kept("fr079", "reference-irmcl-synthesis-fast")
+    fast = _kept("fr079", "reference_irmcl_synthesis", train__name="fast")
     out = []
     if fast and fast.get("ours"):
         gap = max(abs(fast["their_eval"][k] - fast["ours"][k]) for k in ("mae_m", "chamfer_m"))
@@ -322,7 +339,7 @@ def check_table(check: str, header: str, row) -> str:
     columns = header.count("|") - 1
     rows = [header, "|" + "---|" * columns]
     for ds in ("fr079", "intel", "mit_csail"):
-        p = REPO / "results" / "checks" / f"gmapping_{check}_gmapping_{ds}.json"
+        p = RESULTS / "checks" / f"gmapping_{check}_gmapping_{ds}.json"
         rows.append(row(ds, json.loads(p.read_text())) if p.is_file() else f"| {ds} | not run |" + " |" * (columns - 2))
     return "\n".join(rows)
 
@@ -352,7 +369,7 @@ def neff_table() -> str:
 
 def neff_verdict() -> str:
     """One sentence from the kept N_eff checks: do the resampling counts agree on every log compared?"""
-    runs = [json.loads(p.read_text()) for p in sorted((REPO / "results" / "checks").glob("gmapping_neff_*.json"))]
+    runs = [json.loads(p.read_text()) for p in sorted((RESULTS / "checks").glob("gmapping_neff_*.json"))]
     if not runs:
         return "Not run yet."
     p_min = min(r["resamplings_mannwhitney_p"] for r in runs)
@@ -367,7 +384,7 @@ def neff_verdict() -> str:
 
 
 def slam_table() -> str:
-    slam, reference = collect_slam(outputs=None), collect_slam_reference(outputs=None)  # kept runs only
+    slam, reference = load_slam(outputs=None), released(outputs=None)  # kept runs only
     rows = ["| log | released C++ (wrapper's settings) | ours, `gmapping_code` | ours, `gmapping_code`, the wrapper's "
             "beam layout |", "|---|---|---|---|"]
     for ds in ("fr079", "intel", "mit_csail"):
@@ -385,18 +402,19 @@ RELEASED_VARIANTS = [  # (log, particles, released-code variant (collect.referen
 ]
 
 
-GFS_VARIANT = "srt0.1, stt0.1, temporal5, beamsgfs, offset0_0_0"  # slam=gmapping_gfs data.laser_offset=[0,0,0]
+GFS_VARIANT = {"slam.srt": 0.1, "slam.stt": 0.1, "slam.temporal_update": 5.0, "slam.beam_angles": "gfs",
+               **OFFSET0}  # slam=gmapping_gfs data.laser_offset=[0,0,0]
 
 
 def released_variants_table() -> str:
     """The released code under other inputs or settings, from the kept runs (``--data``, ``--set``), beside ours
     on the same log (fr079: the mounting and the particles' frame; Killian: 60 particles, 10 cm cells)."""
-    reference, slam = collect_slam_reference(outputs=None), collect_slam(outputs=None)
+    reference, slam = released(outputs=None), load_slam(outputs=None)
     rows = ["| log | run | converged (mean of those) (all runs) |", "|---|---|---|"]
     for ds, n, variant, what in RELEASED_VARIANTS:
         rows.append(f"| {ds} | {what} | {_fmt(released_errors(reference, ds, particles=n, variant=variant))} |")
-    for variant, what in (("", "the bag's extrinsic"), ("offset0_0_0", "the laser at the base (`data.laser_offset=[0,0,0]`)"),
-                          ("laserframe", "the bag's extrinsic, the particles on the laser's poses as the released code "
+    for variant, what in (({}, "the bag's extrinsic"), (OFFSET0, "the laser at the base (`data.laser_offset=[0,0,0]`)"),
+                          (LASER_FRAME, "the bag's extrinsic, the particles on the laser's poses as the released code "
                                          "(`slam.frame=laser`)")):
         for proposal in ("gmapping_code", "paper"):
             rows.append(f"| fr079 | ours, `{proposal}`, {what} (H100) | "
@@ -410,7 +428,7 @@ def released_variants_table() -> str:
     return "\n".join(rows)
 
 
-TRACES = REPO / "results" / "checks"
+TRACES = RESULTS / "checks"
 
 
 def trace_table() -> str:
@@ -429,14 +447,15 @@ def trace_table() -> str:
 
 
 def released_variants_findings() -> str:
-    reference, slam = collect_slam_reference(outputs=None), collect_slam(outputs=None)
+    reference, slam = released(outputs=None), load_slam(outputs=None)
     fr_wrapper, fr_base, fr_gfs, k5, k10 = (converged(released_errors(reference, ds, particles=n, variant=v))
                                             for ds, n, v, _ in RELEASED_VARIANTS)
     gfs_code, gfs_paper = (converged(slam_errors(slam, "fr079", p, variant=GFS_VARIANT)) for p in ("gmapping_code", "paper"))
     k_code = converged(slam_errors(slam, "mit_killian", "gmapping_code", particles=60))
     k_paper = converged(slam_errors(slam, "mit_killian", "paper", particles=60))
-    ours = {v: converged(slam_errors(slam, "fr079", "gmapping_code", variant=v)) for v in ("", "offset0_0_0", "laserframe")}
-    paper = {v: converged(slam_errors(slam, "fr079", "paper", variant=v)) for v in ("", "offset0_0_0", "laserframe")}
+    layouts = {"": {}, "offset0_0_0": OFFSET0, "laserframe": LASER_FRAME}
+    ours = {k: converged(slam_errors(slam, "fr079", "gmapping_code", variant=v)) for k, v in layouts.items()}
+    paper = {k: converged(slam_errors(slam, "fr079", "paper", variant=v)) for k, v in layouts.items()}
     if min(x[1] for x in (fr_wrapper, fr_base, fr_gfs, gfs_code, gfs_paper, k5, k10, k_code, k_paper, *ours.values(),
                           *paper.values())) == 0:
         return "- Not every run of the table is kept: no finding."
@@ -537,8 +556,8 @@ Generated by `python -m eval.fidelity --write` from results/ (issue 17). Converg
 - fr079, pose tracking, 10k particles, 10 starts of 60 s, the `fast` NOF, 2-core CPU.
 - Runs: `python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=tracking mcl.num_particles=10000
   localize.num_starts=10 mcl.weighting=nog_raymarch|likelihood_field [mcl.motion=irmcl] [mcl.sigma_m=0.25]`.
-- Then `python -m eval.yaw_lag <runs>` (heading error while driving straight and turning, fitted lag) and
-  `python -m eval.yaw_lag --profile --every 5 <runs>`. The profile weighs particles at the true pose with the
+- Then `python -m eval.analyses.yaw_lag <runs>` (heading error while driving straight and turning, fitted lag) and
+  `python -m eval.analyses.yaw_lag --profile --every 5 <runs>`. The profile weighs particles at the true pose with the
   heading turned by ±5 deg. It gives the heading spread one scan alone allows, and where the model peaks.
 
 {yaw_table()}
@@ -560,9 +579,9 @@ Findings:
 
 **Global localization** (H100, one session): 100k particles from a uniform start, reduced to 5k after 20 s as
 the authors' code does, 10 starts, the `fast` NOF. Command: `bash eval/gpu/mcl.sh motion`; the runs are in
-results/checks/global_motion/; the NOG rows with sigma 0.25 m come from `bash eval/gpu/mcl.sh width`. The
+results/checks/global_motion.json; the NOG rows with sigma 0.25 m come from `bash eval/gpu/mcl.sh width`. The
 authors' motion model helps both models on both logs. The likelihood field stays ahead in yaw. The metrics were
-rescored by `python -m eval.rescore` with today's success rule, which also needs a heading RMSE below 30 deg:
+rescored by `python -m eval.analyses.rescore` with today's success rule, which also needs a heading RMSE below 30 deg:
 one intel start of the NOG at sigma 0.25 m had converged in position but faced the other way (179 deg).
 
 {global_table()}
@@ -607,7 +626,7 @@ initial spread is their pose-tracking file's (variances 0.5 m², 0.5 m², 0.0685
 localize.mode=tracking mcl.num_particles=10000 mcl.weighting=nog_raymarch mcl.motion=irmcl mcl.seed=<0-4>
 [mcl.beam_pick=stride] [mcl.resample_threshold=1.0]`, one run per seed, each the mean over the 10 starts.
 Theirs: the kept run above and, on intel, two more draws (`python -m eval.reference.irmcl ... --repeat 1|2`,
-run on the H100). Kept in results/checks/irmcl_reference/<log>/settings/ and reference-irmcl-tracking-10k-run<k>/.
+run on the H100). Kept as records of the check study results/checks/irmcl_reference.json (one per seed, one per draw).
 
 {settings_table()}
 
@@ -624,7 +643,7 @@ step: an approximation, made for issue 18's step goals. Does it cost accuracy? B
 defaults otherwise (Thrun's motion model, sigma 0.5 m), 10 starts per run, 5 seeds, on the H100.
 Command: `python -m irmcl_warp.localize -m +exp=<log> train=fast localize.mode=global|tracking
 mcl.num_particles=100000|10000 mcl.weighting=nog_raymarch,nog_table mcl.seed=0,1,2,3,4` (`eval/gpu/mcl.sh table`
-ran seed 0 first); kept in results/checks/nog_table/<log>/<folder>/seed<k>.json. ms per step: the filter's
+ran seed 0 first); kept in results/checks/nog_table.json, a record per seed. ms per step: the filter's
 median step, global runs at 5k particles after 20 s (`mcl.reduce_to`).
 
 {table_table()}
@@ -683,7 +702,7 @@ The score, the likelihood and the hill climber agree to float rounding. The fr07
 model.
 
 **Weights, N_eff and resampling along whole runs** (`python -m eval.reference.gmapping +exp=gmapping_<log>
---neff [GLOB]`; results/checks/gmapping_neff_*.json). Our `gmapping_code` runs are set against the released
+--neff [--data ...]`; results/checks/gmapping_neff_*.json). Our `gmapping_code` runs are set against the released
 code's, 10 seeds each, on the same log.
 - The released driver logs N_eff after `processScan`. That value is normalised again after resampling, so a
   resampled scan reads exactly N; that is how its resamplings are counted.
@@ -732,19 +751,3 @@ and its match is set against the released one:
   (`log/carmenconfiguration.cpp`), and it processed 590 of the 4934 scans, with 360 beams at ±0.5° ... ±90° (no
   centre beam, a 1° gap), the beams' own 50 m unused by the matcher, whose range is the tool's maxrange (80 m).
 """
-
-
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m eval.fidelity", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--write", action="store_true", help="write docs/fidelity.md")
-    a = ap.parse_args(argv)
-    text = document()
-    if a.write:
-        atomic_write_bytes(REPO / "docs" / "fidelity.md", text.encode())
-        print(f"-> {REPO / 'docs' / 'fidelity.md'}")
-    else:
-        print(text)
-
-
-if __name__ == "__main__":
-    main()

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.bench.timing import record_path
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
 from irmcl_warp.geometry import compose as compose_se2
@@ -84,7 +85,7 @@ def run_globloc_bench(a) -> dict:
         row = {**base, "gist_ms": 1e3 * (time.perf_counter() - t) / 20}
         print(f"rendering on {device}: {row['render_fps']:.0f} frames/s ({row['image']}, batches of {a.render_batch}); "
               f"Gist of one query {row['gist_ms']:.1f} ms; database of {len(db)} built in {db_s:.1f} s")
-        return _save(a, row, f"globloc-render-{a.exp}-{device.split(':')[0]}.json")
+        return _save(a, row, record_path("", "globloc", device, "render", a.exp).name)
     hyp = Hypotheses(cfg, db, camera, Scan2Map(grid, origin, g.map_resolution_m, g.scan2map))
     st = make_stream(cfg, world, look, np.random.default_rng(1), 0, device)
     frames = min(a.frames, len(st.cam_idx))
@@ -110,7 +111,7 @@ def run_globloc_bench(a) -> dict:
           "Scan2Map per candidate (ms) | whole decision (ms) |\n|---|---|---|---|---|---|")
     print(f"| {row['render_fps']:.0f} | {row['gist_ms']:.1f} | {row['retrieval_ms']:.2f} | {row['pnp_ms_per_keyframe']:.1f} "
           f"| {row['scan2map_ms_per_candidate']:.3f} | {row['decision_ms']:.1f} |")
-    return _save(a, row, f"globloc-{a.exp}-{device.split(':')[0]}.json")
+    return _save(a, row, record_path("", "globloc", device, a.exp).name)
 
 
 def _save(a, row: dict, name: str) -> dict:

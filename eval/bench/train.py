@@ -1,10 +1,10 @@
 """``python -m eval.bench train [--device cuda] [--batch 1024] [--samples 256] [--steps 10]``
-``python -m eval.bench train --exp fr079 --init outputs/fr079/train-fast/nof.pt [--variants ...] [--profile]``:
+``python -m eval.bench train --exp fr079 --init outputs/fr079/train/<run>/nof.pt [--variants ...] [--profile]``:
 the training step itself (``Trainer.step``) on the experiment's training rays, for each variant of the
 ``train=`` settings (default: ``sampler=uniform`` against ``sampler=occupancy``) side by side, from a trained
 NOF (an untrained one is occupied everywhere, so its grid skips nothing).
-(``python -m eval.bench mcl ...``: the MCL step, eval/bench_mcl.py; ``python -m eval.bench slam ...``: the
-GMapping RBPF, eval/bench_slam.py.)
+(``python -m eval.bench mcl ...``: the MCL step, eval/bench/mcl.py; ``python -m eval.bench slam ...``: the
+GMapping RBPF, eval/bench/slam.py; ``globloc``: eval/bench/globloc.py.)
 
 Side-by-side speed of NOF training on one device, in one run: rays/s of a whole training step
 (encode + MLP forward, composite, loss, backward, Adam) with the Warp renderer and with
@@ -21,14 +21,12 @@ from pathlib import Path
 
 import torch
 
-from eval import bench_globloc, bench_mcl, bench_slam
-from eval.timing import repeated
+from eval.bench.timing import record_path, repeated
 from irmcl_warp.config import ModelConfig
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
 from irmcl_warp.nof.trainer import opacity_regulariser
 from irmcl_warp.services.outputs import write_json
-from irmcl_warp.services.cli import guard
 
 MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_after=2),
           "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8)}
@@ -156,7 +154,7 @@ def run_train_bench(a) -> list[dict]:
     if a.exp:
         rows = bench_trainer_steps(a, device)
         name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
-        out = Path(a.out) / f"train-steps-{a.exp}-{device.type}.json"
+        out = record_path(a.out, "train", device.type, "steps", a.exp)
         write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a),
                          "rows": rows})
         print(f"-> {out}")
@@ -177,16 +175,14 @@ def run_train_bench(a) -> list[dict]:
     for x in rows:
         print(f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
               f"{x['step_ms']:.2f} [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}] | {x['rays_per_s']:,.0f} |")
-    out = Path(a.out) / f"train-{device.type}.json"
+    out = record_path(a.out, "train", device.type)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows})
     print(f"-> {out}")
     return rows
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m eval.bench")
-    sub = ap.add_subparsers(dest="what", required=True)
+def add_parser(sub) -> None:
     t = sub.add_parser("train", help="rays/s of a NOF training step, Warp vs torch_ref renderer")
     t.add_argument("--device", default=None)
     t.add_argument("--model", default="paper", choices=sorted(MODELS))
@@ -203,21 +199,3 @@ def main(argv=None):
     t.add_argument("--profile", action="store_true", help="with --exp: torch profile of the last variant's steps")
     t.add_argument("--variants", nargs="+", default=["sampler=uniform", "sampler=occupancy"],
                    help="with --exp: train settings per variant, comma-separated (e.g. sampler=occupancy,grid_end=none)")
-    bench_mcl.add_parser(sub)
-    bench_slam.add_parser(sub)
-    bench_globloc.add_parser(sub)
-    a = ap.parse_args(argv)
-    if a.what == "train":
-        if a.exp and not a.init:
-            ap.error("--exp needs --init <trained nof.pt>")
-        run_train_bench(a)
-    elif a.what == "mcl":
-        bench_mcl.run_mcl_bench(a)
-    elif a.what == "slam":
-        bench_slam.run_slam_bench(a)
-    elif a.what == "globloc":
-        bench_globloc.run_globloc_bench(a)
-
-
-if __name__ == "__main__":
-    guard(main)

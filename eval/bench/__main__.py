@@ -1,0 +1,26 @@
+"""``python -m eval.bench train|mcl|slam|globloc ...``: see each module's docstring."""
+
+import argparse
+
+from eval.bench import globloc, mcl, slam, train
+from irmcl_warp.services.cli import guard
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m eval.bench")
+    sub = ap.add_subparsers(dest="what", required=True)
+    train.add_parser(sub)
+    mcl.add_parser(sub)
+    slam.add_parser(sub)
+    globloc.add_parser(sub)
+    a = ap.parse_args(argv)
+    if a.what == "train":
+        if a.exp and not a.init:
+            ap.error("--exp needs --init <trained nof.pt>")
+        train.run_train_bench(a)
+    else:
+        {"mcl": mcl.run_mcl_bench, "slam": slam.run_slam_bench, "globloc": globloc.run_globloc_bench}[a.what](a)
+
+
+if __name__ == "__main__":
+    guard(main)

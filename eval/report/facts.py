@@ -1,0 +1,144 @@
+"""The figures README.md's prose quotes, by name, computed from the kept records: ``python -m eval.tables
+--write`` puts each between ``<!-- fact:<name> -->`` and ``<!-- /fact -->``, and tests/test_tables.py fails
+when the prose and the results disagree."""
+
+from __future__ import annotations
+
+import re
+
+from eval.results.queries import converged, median_span, released_errors, slam_errors, slam_variant
+from eval.results.records import checks, find
+
+ROT2X = {"slam.srt": 0.4, "slam.stt": 0.4}  # slam=gmapping_rot2x
+LASER_FRAME = {"slam.frame": "laser"}
+GFS_INPUTS = {"slam.srt": 0.1, "slam.stt": 0.1, "slam.temporal_update": 5.0, "slam.beam_angles": "gfs",
+              "data.laser_offset": [0.0, 0.0, 0.0]}  # slam=gmapping_gfs data.laser_offset=[0,0,0]
+
+
+def _minute_spans(nof: dict, exp: str) -> dict[str, str]:
+    """The one-minute preset's kept runs on ``exp`` (train.name minute, minute_s1, ...): seeds, and medians
+    [min-max] over them of test MAE, Chamfer (m) and training time (s); {} when none is kept."""
+    found = []
+    for (e, preset), (syn, train) in nof.items():
+        if e == exp and (preset == "minute" or preset.startswith("minute_s")) and syn and train:
+            m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None)
+            if m:
+                found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
+    if not found:
+        return {}
+    mae, cham, secs = zip(*found)
+    return {"seeds": str(len(found)), "mae": median_span(mae, ".3f"), "chamfer": median_span(cham, ".3f"),
+            "time": median_span(secs, ".1f")}
+
+
+def _yaw_of(log: str, weighting: str | None) -> float | None:
+    """Heading RMSE of the authors' code (``weighting`` None) or of ours with their motion model on ``log``."""
+    if weighting is None:
+        found = [r for r in find("reference_irmcl", log, among=checks("irmcl_reference"), localize__mode="tracking")
+                 if r.draw == 0]
+    else:
+        study = "fr079_yaw" if log == "fr079" else "irmcl_reference"
+        found = [r for r in find("localize", log, among=checks(study), mcl__weighting=weighting, mcl__motion="irmcl",
+                                 mcl__sigma_m=0.5) if r.artifacts]
+    return found[0]["summary"]["yaw_rmse_deg_mean"] if found else None
+
+
+def _nof_mae(nof: dict, exp: str, preset: str, method: str = "NOF") -> str | None:
+    syn = nof.get((exp, preset), (None, None))[0]
+    m = next((v for k, v in syn["methods"].items() if k.startswith(method)), None) if syn else None
+    return f"{m['mae_m']:.3f} m" if m else None
+
+
+def _localized(pipe: list, exp: str) -> str | None:
+    """Of an experiment's pipeline runs (its second drives), how many localized: "k/n"."""
+    scored = [r.get("localization") for r in pipe if r.exp == exp and r.get("localization")]
+    return f"{sum(lo['success'] for lo in scored)}/{len(scored)}" if scored else None
+
+
+def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list = ()) -> dict[str, str]:
+    out = {}
+    for key, value in (("nof_paper_intel_mae", _nof_mae(nof, "intel", "paper")),
+                       ("grid5_intel_mae", _nof_mae(nof, "intel", "paper", "OGM 5 cm")),
+                       ("pipeline_sim_office_localized", _localized(pipe, "pipeline_sim_office")),
+                       ("pipeline_sim_office_30k_localized", _localized(pipe, "pipeline_sim_office_30k"))):
+        if value is not None:
+            out[key] = value
+    counted = [v.verdict for _, v in verdicts]
+    for name, verdict in (("reproduced", "reproduced"), ("partly", "partly"), ("not_reproduced", "not reproduced"),
+                          ("not_testable", "not testable here"), ("not_run", "not run")):
+        if counted:
+            out[f"claims_{name}"] = str(counted.count(verdict))
+
+    def count(name, errs):
+        if errs:
+            k, n, _, _ = converged(errs)
+            out[name] = f"{k}/{n}"
+
+    def error(name, errs):
+        conv = converged(errs)[2] if errs else None
+        if conv is not None:
+            out[name] = f"{conv:.3f} m"
+
+    for ds in ("fr079", "intel", "mit_csail"):
+        code, paper = slam_errors(slam, ds, "gmapping_code"), slam_errors(slam, ds, "paper")
+        count(f"{ds}_code", code)
+        count(f"{ds}_paper", paper)
+        count(f"{ds}_code_rot2x", slam_errors(slam, ds, "gmapping_code", variant=ROT2X))
+        error(f"{ds}_code_error", code)
+        error(f"{ds}_paper_error", paper)
+        rel = released_errors(released, ds)
+        count(f"{ds}_released", rel)
+        error(f"{ds}_released_error", rel)
+    count("fr079_code_60p", slam_errors(slam, "fr079", "gmapping_code", particles=60))
+    count("fr079_code_laserframe", slam_errors(slam, "fr079", "gmapping_code", variant=LASER_FRAME))
+    count("fr079_paper_laserframe", slam_errors(slam, "fr079", "paper", variant=LASER_FRAME))
+    for proposal, short in (("gmapping_code", "code"), ("paper", "paper")):  # MIT Killian, the paper's 60 particles
+        count(f"killian_{short}_60p", slam_errors(slam, "mit_killian", proposal, particles=60))
+        error(f"killian_{short}_60p_error", slam_errors(slam, "mit_killian", proposal, particles=60))
+    count("killian_paper_30p", slam_errors(slam, "mit_killian", "paper", particles=30))
+    count("killian_released_60p", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
+    error("killian_released_60p_error", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
+    processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
+    if processed:
+        out["intel_released_processed"] = "/".join(str(p) for p in processed)
+    ours = sorted({r["processed_scans"] for r in slam if r.get("dataset") == "intel" and r.get("proposal") == "gmapping_code"
+                   and r.get("particles") == 30 and not slam_variant(r)})
+    if ours:
+        out["intel_code_processed"] = "/".join(str(p) for p in ours)
+    count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
+    # the released code's own CARMEN tool (gfs_nogui) at its defaults, and ours on the same inputs
+    count("fr079_released_gfs", released_errors(released, "fr079", variant="gfs"))
+    error("fr079_released_gfs_error", released_errors(released, "fr079", variant="gfs"))
+    for p in ("gmapping_code", "paper"):
+        count(f"fr079_{'code' if p == 'gmapping_code' else p}_gfs_inputs", slam_errors(slam, "fr079", p, variant=GFS_INPUTS))
+    for ds in ("fr079", "intel"):  # the authors' MCL with our field beside our likelihood field (pose tracking)
+        for name, weighting in ((f"irmcl_theirs_yaw_{ds}", None), (f"irmcl_lf_yaw_{ds}", "likelihood_field")):
+            value = _yaw_of(ds, weighting)
+            if value is not None:
+                out[name] = f"{value:.2f} deg"
+    theirs = find("reference_irmcl_nof", "fr079", among=checks("irmcl_reference"))
+    if theirs:  # the authors' training script on our split
+        out["nof_theirs_mae"] = f"{theirs[0]['their_eval']['mae_m']:.3f} m"
+        out["nof_theirs_epochs"] = str(len(theirs[0].get("their_val_per_epoch") or []))
+    for ds in ("fr079", "intel"):  # the one-minute preset's kept seeds
+        for key, value in _minute_spans(nof, ds).items():
+            out[f"nof_minute_{ds}_{key}"] = value
+    heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
+    for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
+        out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
+    return out
+
+
+FACT = re.compile(r"<!-- fact:([a-z0-9_]+) -->(.*?)<!-- /fact -->", re.S)
+
+
+def readme_facts(text: str) -> dict[str, str]:
+    return {name: value for name, value in FACT.findall(text)}
+
+
+def write_facts(text: str, values: dict[str, str]) -> str:
+    """``text`` with every fact it quotes set to its value; a quoted fact the results cannot give is an error."""
+    missing = sorted(set(readme_facts(text)) - set(values))
+    if missing:
+        raise SystemExit(f"README.md quotes facts the results do not give: {missing}")
+    return FACT.sub(lambda m: f"<!-- fact:{m.group(1)} -->{values[m.group(1)]}<!-- /fact -->", text)
