@@ -91,6 +91,7 @@ class Stage:
     label: str | Callable[..., str]
     upstream: Callable[..., tuple[str, ...]] = lambda cfg: ()
     resumable: bool = False
+    command: str = ""  # how a user makes this stage's run (a format over the settings), for the stages that consume it
 
 
 STAGES: dict[str, Stage] = {
@@ -99,7 +100,7 @@ STAGES: dict[str, Stage] = {
     "slam": Stage(lambda c: ("data", *_sim(c), "slam", "device"),
                   "{slam.proposal}-{slam.resample}-{slam.num_particles}p-seed{slam.seed}"),
     "train": Stage(lambda c: ("data", *_sim(c), "model", "render", "train", "device"), "{train.name}",
-                   resumable=True),
+                   resumable=True, command="python -m irmcl_warp.train +exp={exp} train={train.name}"),
     # the NOF of the finished training run with these settings beside grids (mapping, raycast)
     "synthesis": Stage(lambda c: ("data", *_sim(c), "render", "mapping", "raycast", "device", "train.name"),
                        "{train.name}", lambda c: ("train",)),
@@ -114,14 +115,6 @@ STAGES: dict[str, Stage] = {
 FILE_KEYS = ("data.path", "data.laser_frame_path", "data.ground_truth_path", "data.relations_path",
              "data.relation_stamps_path", "data.splits_path", "data.train_poses_path", "localize.map_path",
              "localize.nof_path", "pipeline.path", "pipeline.ground_truth_path")
-
-
-def locate_file(key: str, value: str) -> Path:
-    """The file a setting names (``key`` only says which, for messages): as given (absolute, or from the
-    working directory) when it exists there, else under IRMCL_DATA (io.resolve)."""
-    from irmcl_warp.io import resolve
-
-    return resolve(value)
 
 
 # --- digests --------------------------------------------------------------------------------------------
@@ -209,6 +202,8 @@ def restricted(settings: dict):
 
 def input_files(settings: dict) -> dict[str, list[Path]]:
     """{setting: the files it names} for every file setting among ``settings`` that is set."""
+    from irmcl_warp.io import resolve
+
     out = {}
     for key in FILE_KEYS:
         try:
@@ -216,7 +211,7 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
         except KeyError:
             continue
         if value:
-            path = locate_file(key, value)
+            path = resolve(value)  # as given (absolute, or from the working directory), else under IRMCL_DATA
             out[key] = map_files(path) if key == "localize.map_path" else [path]
     return out
 
@@ -348,7 +343,7 @@ def finished(ident: Identity, root=OUTPUTS) -> Path | None:
     return folder if intact(folder, ident.id)[0] else None
 
 
-def require(ident: Identity, command: str, root=OUTPUTS) -> Path:
+def require(ident: Identity, root=OUTPUTS) -> Path:
     """The folder of a finished run that another stage consumes; an error saying what to run when there is
     none (an interrupted run of these settings is never used)."""
     folder = ident.folder(root)
@@ -357,8 +352,11 @@ def require(ident: Identity, command: str, root=OUTPUTS) -> Path:
         return folder
     partial = folder.with_name(f".{folder.name}.partial")
     state = (f"a {ident.stage} run of these settings was interrupted ({partial}); finish it" if partial.exists()
-             else f"no finished {ident.stage} run of these settings ({why})")
-    raise FileNotFoundError(f"{folder}: {state}: {command}")
+             else f"no finished {ident.stage} run of these settings ({why}); make it")
+    template = STAGES[ident.stage].command
+    command = re.sub(r"\{([a-z_.]+)\}", lambda m: str(_get(ident.settings, m.group(1))), template) if template else \
+        f"the {ident.stage} stage"
+    raise FileNotFoundError(f"{folder}: {state}: {command} (with the same settings)")
 
 
 # --- running ---------------------------------------------------------------------------------------------
@@ -465,14 +463,13 @@ def _lock(path: Path) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def start(cfg, stage: str, root=OUTPUTS, command: str | None = None) -> Iterator[Run]:
+def start(cfg, stage: str, root=OUTPUTS) -> Iterator[Run]:
     """Open the run of ``stage`` that ``cfg`` describes (see the module's docstring). Inside the block,
     ``run.done`` says the finished run is already there (``run.path``); otherwise the stage writes into
     ``run.dir`` and calls ``run.finish``. Leaving the block without finishing leaves no finished run."""
     ident = identify(cfg, stage)
     final = ident.folder(root)
-    upstream = {s: require(u, command or f"run the {s} stage with these settings first", root)
-                for s, u in ident.upstream.items()}
+    upstream = {s: require(u, root) for s, u in ident.upstream.items()}
     with _lock(final.with_name(f".{final.name}.lock")):
         ok, why = intact(final, ident.id)
         if ok:

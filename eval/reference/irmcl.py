@@ -176,8 +176,7 @@ def parse_their_log(text: str) -> dict:
 
 def trained(cfg) -> Path:
     """The finished training run of ``cfg``'s settings (``train=<preset>``): its nof.pt is the field they use."""
-    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
-    return runs.require(runs.identify(cfg, "train"), command)
+    return runs.require(runs.identify(cfg, "train"))
 
 
 def out_folder(cfg, repeat: int = 0) -> Path:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.geometry import align_rigid, compose, inverse
-from irmcl_warp.io import write_tum
+from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.track import follow, window
@@ -44,7 +44,7 @@ def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
         return grid_maps(grid, m.weighting)
     if not loc.nof_path:
         raise ValueError(f"mcl.weighting={m.weighting} reads a trained NOF: set localize.nof_path=<nof.pt>")
-    ckpt = runs.locate_file("localize.nof_path", loc.nof_path)
+    ckpt = resolve(loc.nof_path)
     torch_device = "cuda" if device.startswith("cuda") else "cpu"
     if m.weighting == "nof_direct":
         return WeightingMaps(model=load_nof(ckpt, torch_device)[0])
@@ -56,7 +56,7 @@ def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
 
 
 def run_in_map(cfg) -> Path:
-    map_file = runs.locate_file("localize.map_path", cfg.localize.map_path)
+    map_file = resolve(cfg.localize.map_path)
     load_map(map_file)  # a malformed map is an error naming it before anything else
     with runs.start(cfg, "localize") as run:
         return run.path if run.done else localize_in_map(run, map_file)

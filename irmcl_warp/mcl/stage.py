@@ -82,8 +82,7 @@ def run_localize(cfg) -> Path:
     if cfg.localize.run_s is None:
         raise ValueError("localize.run_s=null (to the end of the log) needs localize.map_path; the benchmark "
                          "protocol follows each start for localize.run_s seconds")
-    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
-    with runs.start(cfg, "localize", command=command) as run:
+    with runs.start(cfg, "localize") as run:
         return run.path if run.done else localize_starts(run)
 
 

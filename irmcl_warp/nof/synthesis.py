@@ -71,8 +71,7 @@ def plot_scan(path: Path, test: BeamSet, preds: dict, k: int) -> None:
 
 
 def run_synthesis(cfg) -> Path:
-    command = f"python -m irmcl_warp.train +exp={cfg.exp} train={cfg.train.name} (with the same settings)"
-    with runs.start(cfg, "synthesis", command=command) as run:
+    with runs.start(cfg, "synthesis") as run:
         return run.path if run.done else score_scans(run)
 
 
