@@ -434,3 +434,20 @@ def validate(cfg) -> None:
             lo_text = lo if isinstance(lo, builtins.str) else (f">= {lo}" if lo is not None else "")
             bounds = " and ".join(b for b in (lo_text, f"<= {hi}" if hi is not None else "") if b)
             raise ConfigError(f"{key}={v!r}: expected a number {bounds}")
+
+
+MIN_MEANINGFUL_PARTICLES = 50  # fewer particles cannot say how spread they are (a cloud of 2 reports 0.00 m)
+MIN_MEANINGFUL_FAR_M = 1.0  # a far bound under this leaves almost every beam of a room unused
+
+
+def settings_warnings(cfg) -> list[str]:
+    """Settings that run but make the result meaningless, each said with the key and why."""
+    out = []
+    n = cfg.mcl.num_particles
+    if n < MIN_MEANINGFUL_PARTICLES:
+        out.append(f"mcl.num_particles={n}: a cloud this small cannot tell its own spread or find a global start "
+                   f"(below {MIN_MEANINGFUL_PARTICLES} its spread and convergence mean little)")
+    far = cfg.data.far_m
+    if far is not None and far < MIN_MEANINGFUL_FAR_M:
+        out.append(f"data.far_m={far}: every beam longer than {far} m is dropped, which in a building is nearly all")
+    return out

@@ -29,6 +29,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.config import register
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import load_log, read_tum, write_tum
+from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.track import follow, window
@@ -101,6 +102,7 @@ def localize_second_log(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.n
     """(scan indices, estimates [n, 3], final particles) of global MCL over ``log`` in the SLAM map frame,
     with the filter every MCL user builds (services.filters.build_filter) and IR-MCL's protocol."""
     idx = window(log, cfg.pipeline.start_s, cfg.pipeline.run_s, "pipeline")
+    check_odometry(log.source, log.odom[idx])
     view = free_space_view(slam_map.probability, slam_map.origin_xy, slam_map.resolution_m, slam_map.known)
     m = OmegaConf.merge(cfg.mcl, {"weighting": "nog_raymarch"})  # the pipeline localizes with the NOG it baked
     pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg), device, WeightingMaps(nog=nog))

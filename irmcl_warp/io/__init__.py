@@ -16,6 +16,7 @@ from irmcl_warp.geometry import interpolate_se2
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
 from irmcl_warp.io.clock import estimate_clock_offset
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
+from irmcl_warp.io.plausibility import check_beam_order
 from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum, write_tum
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
@@ -180,4 +181,5 @@ def read_log(cfg) -> LaserLog:
         log.T_base_laser = read_bag_extrinsic(resolve(d.laser_frame_path), base_frame=d.base_frame)
     if d.ground_truth_path:
         apply_ground_truth(log, resolve(d.ground_truth_path), d)
+    check_beam_order(path, log.ranges_m, log.odom, log.info.angle_increment_rad)
     return log

@@ -16,6 +16,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
+from irmcl_warp.io.plausibility import near_no_return
 from irmcl_warp.io.errors import LogFormatError
 from irmcl_warp.types import DefectReport
 
@@ -150,6 +151,11 @@ def mask_ranges(path, ranges, no_return_m, report: DefectReport, tol_m: float = 
         beyond = ranges > no_return + tol_m
         report.add("ranges_beyond_no_return", int(beyond.sum()),
                    f"beams reading more than the log's no-return value {no_return:g} m, masked")
+        count, value = near_no_return(ranges, no_return, tol_m)
+        finite = int(np.isfinite(ranges).sum())
+        if np.isfinite(no_return) and count >= max(20, 1e-3 * finite):
+            report.add("near_no_return_code", count, f"beams reading {value:g} m, just under the no-return value "
+                       f"{no_return:g} m: a second no-return code? Kept as returns (data.no_return_m={value:g} masks them)")
         masked = ranges.astype(np.float32)
         masked[ranges >= no_return - tol_m] = np.nan
     zero = ranges <= 0.0

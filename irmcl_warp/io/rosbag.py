@@ -232,9 +232,11 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     finite = np.isfinite(ranges)
     beyond = float(np.max(ranges[finite])) if finite.any() else float(rmax.max())
     with np.errstate(invalid="ignore"):
-        bad = ~finite | (ranges < rmin) | (ranges >= rmax)
+        bad = ~finite | (ranges < rmin) | (ranges >= rmax) | (ranges == 0)
         report.add("beams_below_range_min", int(np.sum(finite & (ranges < rmin) & (ranges != 0))),
                    "beams below range_min, masked")
+        report.add("zero_ranges", int(np.sum(ranges == 0)), "beams reading 0 m (a driver's no echo, even where "
+                   "range_min is 0), masked as no return")
     ranges = np.where(bad, np.nan, ranges).astype(np.float32)
     rmin0, rmax0 = float(np.median(rmin)), float(np.median(rmax))
     info = LaserInfo(common.num_beams, common.angle_min_rad, common.angle_increment_rad, rmin0, rmax0,

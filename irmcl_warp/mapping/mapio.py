@@ -15,6 +15,7 @@ import numpy as np
 
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.errors import LogDefectWarning
+from irmcl_warp.io.plausibility import check_map
 from irmcl_warp.mapping.grid import OccupancyGrid
 
 OCCUPIED_THRESH, FREE_THRESH = 0.65, 0.196  # map_server's defaults
@@ -151,7 +152,9 @@ def load_map(path) -> OccupancyGrid:
         raise FileNotFoundError(f"{path}: no such map file (a map_server .yaml or a .npz)")
     if path.suffix == ".npz":
         with np.load(path) as z:
-            return OccupancyGrid(z["logodds"], tuple(z["origin_xy"].tolist()), float(z["resolution_m"]))
+            grid = OccupancyGrid(z["logodds"], tuple(z["origin_xy"].tolist()), float(z["resolution_m"]))
+        check_map(path, grid.probability, grid.known)  # mostly walls: an inverted map, say so
+        return grid
     meta = _read_map_yaml(path)
     origin, res = meta["origin"], meta["resolution"]
     if not (isinstance(origin, list) and len(origin) in (2, 3)
@@ -183,4 +186,6 @@ def load_map(path) -> OccupancyGrid:
     logodds = np.zeros(p.shape, dtype=np.float32)
     logodds[p > occ_t] = 4.0
     logodds[p < free_t] = -4.0
-    return OccupancyGrid(logodds, (float(origin[0]), float(origin[1])), float(res))
+    grid = OccupancyGrid(logodds, (float(origin[0]), float(origin[1])), float(res))
+    check_map(path, grid.probability, grid.known)
+    return grid

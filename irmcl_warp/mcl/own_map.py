@@ -24,6 +24,7 @@ import numpy as np
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp.nof.checkpoint import load_nof
@@ -81,6 +82,7 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         pf.init_uniform()
     t = log.stamps - log.stamps[0]
     idx = window(log, loc.start_s, loc.run_s, "localize")
+    check_odometry(log.source, log.odom[idx])  # a corrupt jump would carry the estimate off the map
     every = max(1, len(idx) // FRAMES)
     spread, frames = np.zeros((len(idx), 2)), []
     keep = np.random.default_rng(0)

@@ -25,6 +25,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from irmcl_warp.io import write_tum
+from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mcl.own_map import run_in_map
@@ -93,6 +94,7 @@ def localize_starts(run: runs.Run) -> Path:
     log = load_stream(cfg)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
+    check_odometry(log.source, log.odom)
     view, maps, image = build_maps(cfg, device, run.upstream["train"] / "nof.pt" if "train" in run.upstream else None)
     t = log.stamps - log.stamps[0]
     times = start_times(t, loc)

@@ -12,7 +12,7 @@ import errno
 import os
 import sys
 
-from irmcl_warp.config import ConfigError, validate
+from irmcl_warp.config import ConfigError, settings_warnings, validate
 from irmcl_warp.io.atomic import DiskFullError
 from irmcl_warp.io.errors import LogFormatError
 
@@ -38,6 +38,8 @@ def run_entry(run, cfg):
     """``run(cfg)`` after the settings are checked; an expected error becomes one line and exit status 2."""
     try:
         validate(cfg)
+        for line in settings_warnings(cfg):
+            print(f"warning: {line}", file=sys.stderr)
         return run(cfg)
     except EXPECTED as e:
         _fail(e)
