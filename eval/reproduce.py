@@ -7,10 +7,16 @@ a GPU run of it is kept in ``results/`` (pass ``--rerun-kept`` to run those too)
 folder is not done: it is run again. The remaining jobs of a sweep go to Hydra in one multirun through
 the launcher you pick:
 
-  --launcher basic    one job after the other (Hydra's default)
-  --launcher joblib   local processes, ``--jobs N`` at a time (hydra-joblib-launcher)
-  --launcher slurm    a SLURM cluster (hydra-submitit-launcher, ``pip install -e .[cluster]``; set the
-                      partition etc. in conf/hydra/launcher/slurm.yaml or with ``--hydra-arg``)
+  --launcher pool            (default) local processes, one job per GPU slot on a GPU host (--gpus N,
+                             --jobs-per-gpu K; CUDA_VISIBLE_DEVICES set per job), --jobs N CPU workers
+                             elsewhere; progress, a log per job, a failed job retried once, then reported
+                             (hydra_plugins/irmcl_warp_pool)
+  --launcher slurm           a SLURM cluster (hydra-submitit-launcher, ``pip install -e .[cluster]``; set the
+                             partition etc. in conf/hydra/launcher/slurm.yaml or with ``--hydra-arg``). The
+                             repository, outputs/ and IRMCL_DATA must be on a filesystem the nodes share: each
+                             job writes its run under outputs/ and the next call of this command looks there.
+  --launcher submitit_local  submitit's local executor (what CI runs, to keep the submitit path honest)
+  --launcher joblib | basic  hydra-joblib-launcher (--jobs N at a time) | one job after the other
 
   python -m eval.reproduce --list                 every job and whether it is done, kept or missing
   python -m eval.reproduce --only slam globloc    these groups only
@@ -24,21 +30,26 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import os
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+from eval.results.records import OUTPUTS
 from eval.results.records import kept as kept_records
 from irmcl_warp import runs
 from irmcl_warp.config import register
+from irmcl_warp.io.atomic import atomic_write_json
 from irmcl_warp.services.cli import guard
 
 REPO = Path(__file__).resolve().parents[1]
 STAGE = {"irmcl_warp.train": "train", "irmcl_warp.synthesis": "synthesis", "irmcl_warp.localize": "localize",
-         "irmcl_warp.slam": "slam", "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline"}  # module -> stage
+         "irmcl_warp.slam": "slam", "irmcl_warp.globloc": "globloc", "irmcl_warp.pipeline": "pipeline",
+         "irmcl_warp.inspect": "inspect", "irmcl_warp.relations": "relations"}  # module -> stage
 
 
 @dataclass
@@ -48,6 +59,10 @@ class Sweep:
     fixed: list[str]
     axes: dict[str, list] = field(default_factory=dict)  # swept overrides: their Cartesian product
     gpu: bool = False
+
+    def describe(self) -> str:
+        """What ``--match`` looks in: the stage's module, the fixed overrides, the swept keys."""
+        return " ".join([self.module, *self.fixed, *self.axes])
 
     def jobs(self) -> list[list[str]]:
         keys = list(self.axes)
@@ -115,23 +130,48 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
     """("done" | "kept" | "missing", where or why): done when a finished run of the job's identity is under
     ``outputs`` (irmcl_warp.runs: its settings and its inputs' content), kept when a record of the same
     settings is kept in ``results``."""
+    from omegaconf import OmegaConf
+
     cfg = compose_job(sweep.module, overrides)
     stage = STAGE[sweep.module]
     try:
         ident = runs.identify(cfg, stage)
+        folder = runs.finished(ident, outputs)
+        if folder is not None:
+            return "done", str(folder)
+        why = f"no finished run at {ident.folder(outputs)}"
     except FileNotFoundError as e:  # an upstream run this job consumes is not there yet
-        return "missing", str(e)
-    folder = runs.finished(ident, outputs)
-    if folder is not None:
-        return "done", str(folder)
+        why = str(e)
     if not rerun_kept:
-        from omegaconf import OmegaConf
-
-        same = runs.settings_id(OmegaConf.to_container(cfg, resolve=True), stage)
+        job = _flat(runs.settings_by_stage(OmegaConf.to_container(cfg, resolve=True), stage))
         for rec in _kept(results):
-            if rec.stage == stage and rec.exp == ident.exp and rec.settings_id == same:
+            if rec.stage == stage and rec.exp == cfg.exp and same_settings(job, rec):
                 return "kept", f"{results}/{rec.exp} [{rec.stage}/{rec.label}]"
-    return "missing", f"no finished run at {ident.folder(outputs)}"
+    return "missing", why
+
+
+def same_settings(job: dict, rec) -> bool:
+    """Whether a kept record ran the job: every setting it recorded equals the job's, where it ran aside
+    (``device``: kept runs are mostly GPU runs; the job asks for ``auto``). A setting the record lacks was
+    read by the stage only later and left at what the run did then; those records are kept as they are."""
+    if id(rec) not in _FLAT:
+        _FLAT[id(rec)] = _flat(runs.settings_by_stage(rec.config, rec.stage))
+    kept = _FLAT[id(rec)]
+    return all(job.get(k, _NONE) == v for k, v in kept.items() if k.rsplit(".", 1)[-1] != "device")
+
+
+_NONE = object()
+_FLAT: dict = {}  # id(kept record) -> its flattened settings
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 _KEPT: dict = {}
@@ -143,8 +183,22 @@ def _kept(results: Path) -> list:
     return _KEPT[results]
 
 
-def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, jobs: int, extra: list[str]) -> list[list[str]]:
-    """One Hydra multirun per set of missing jobs that differ only in their last override (seeds, mostly)."""
+LAUNCHER_ARGS = {  # this command's flags as each launcher's settings
+    "pool": lambda a: ([f"hydra.launcher.cpu_workers={a.jobs}"] if a.jobs else [])
+    + ([f"hydra.launcher.gpus={a.gpus}"] if a.gpus is not None else []) + [f"hydra.launcher.jobs_per_gpu={a.jobs_per_gpu}"],
+    "joblib": lambda a: [f"hydra.launcher.n_jobs={a.jobs or 2}"],
+}
+
+
+def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, a, extra: list[str]) -> list[list[str]]:
+    """The Hydra multiruns that run the missing jobs: one for the whole sweep when every job is missing (so
+    that a launcher sees all of them at once), else one per set of jobs that differ only in their last
+    override (seeds, mostly)."""
+    launch = [] if launcher == "basic" else [f"hydra/launcher={launcher}"]
+    launch += LAUNCHER_ARGS.get(launcher, lambda a: [])(a)
+    if sweep.axes and len(missing) == len(sweep.jobs()):
+        swept = [f"{k}={','.join(str(v) for v in values)}" for k, values in sweep.axes.items()]
+        return [[sys.executable, "-m", sweep.module, "-m", *sweep.fixed, *swept, *launch, *extra]]
     groups: dict[tuple, list[str]] = {}
     for ov in missing:
         key, last = (tuple(ov[:-1]), ov[-1]) if len(ov) > len(sweep.fixed) else (tuple(ov), None)
@@ -154,61 +208,94 @@ def multirun_commands(sweep: Sweep, missing: list[list[str]], launcher: str, job
     cmds = []
     for key, lasts in groups.items():
         swept = [f"{lasts[0].split('=')[0]}={','.join(x.split('=', 1)[1] for x in lasts)}"] if lasts else []
-        launch = [] if launcher == "basic" else [f"hydra/launcher={launcher}"]
-        if launcher == "joblib":
-            launch.append(f"hydra.launcher.n_jobs={jobs}")
         cmds.append([sys.executable, "-m", sweep.module, "-m", *key, *swept, *launch, *extra])
     return cmds
 
 
-def run_sweep(sweep: Sweep, a, outputs: Path, results: Path) -> int:
-    """Report the sweep's jobs; unless listing, run the missing ones. Returns the number of failed commands."""
+def run_sweep(sweep: Sweep, a, outputs: Path, results: Path) -> dict:
+    """Report the sweep's jobs; unless listing, run the missing ones. Returns what ran: jobs, failed commands,
+    wall time."""
     states = [(ov, *job_state(sweep, ov, outputs, results, a.rerun_kept)) for ov in sweep.jobs()]
     missing = [ov for ov, state, _ in states if state == "missing"]
     counts = {s: sum(1 for _, st, _ in states if st == s) for s in ("done", "kept", "missing")}
     print(f"[{sweep.group}] {sweep.module} {' '.join(sweep.fixed)}: {counts['done']} done, {counts['kept']} kept "
           f"(results/), {counts['missing']} to run" + ("  [sized for a GPU]" if sweep.gpu and missing else ""))
+    ran = {"group": sweep.group, "module": sweep.module, "fixed": sweep.fixed, "jobs_run": len(missing), **counts,
+           "failed_commands": 0, "wall_s": 0.0}
     if a.list:
         for ov, state, where in states:
             print(f"    {state:8s} {' '.join(ov[len(sweep.fixed):]) or '-':50s} {where}")
-        return 0
-    failed = 0
-    for cmd in multirun_commands(sweep, missing, a.launcher, a.jobs, a.hydra_arg):
+        return ran
+    t0 = time.perf_counter()
+    for cmd in multirun_commands(sweep, missing, a.launcher, a, a.hydra_arg):
         print("  $ " + " ".join(cmd[1:]), flush=True)
-        failed += subprocess.run(cmd, cwd=REPO).returncode != 0
-    return failed
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])}
+        ran["failed_commands"] += subprocess.run(cmd, cwd=outputs.parent, env=env).returncode != 0
+    ran["wall_s"] = time.perf_counter() - t0
+    return ran
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m eval.reproduce", description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="+", help="groups to run: nof mcl slam globloc pipeline")
-    ap.add_argument("--match", help="only the sweeps whose fixed overrides contain this, e.g. +exp=fr079")
+    ap.add_argument("--match", help="only the sweeps whose stage, fixed overrides or swept keys contain this, "
+                    "e.g. +exp=fr079 or pipeline.sim_path_seed")
     ap.add_argument("--list", action="store_true", help="show every job and its state; run nothing")
     ap.add_argument("--no-tables", action="store_true", help="run the experiments, leave tables and figures")
     ap.add_argument("--tables-only", action="store_true", help="only regenerate tables and figures")
-    ap.add_argument("--launcher", default="joblib", choices=["basic", "joblib", "slurm"])
-    ap.add_argument("--jobs", type=int, default=2, help="parallel local jobs (joblib)")
+    ap.add_argument("--launcher", default="pool", choices=["pool", "slurm", "submitit_local", "joblib", "basic"])
+    ap.add_argument("--jobs", type=int, help="local jobs at once without a GPU (pool: default half the cores; joblib: 2)")
+    ap.add_argument("--gpus", type=int, help="pool: GPUs to use (default every visible one; 0: CPU workers)")
+    ap.add_argument("--jobs-per-gpu", type=int, default=1, help="pool: jobs sharing one GPU at once")
+    ap.add_argument("--report", help="write what ran (per sweep: jobs run, failed, wall time) to this JSON file")
     ap.add_argument("--rerun-kept", action="store_true", help="also run jobs whose GPU results are kept in results/")
     ap.add_argument("--hydra-arg", action="append", default=[], help="extra override for every job, e.g. device=cpu")
-    ap.add_argument("--outputs", default=str(REPO / "outputs"))
+    ap.add_argument("--workdir", default=str(REPO), help="where the jobs run: their runs land in its outputs/")
     ap.add_argument("--results", default=str(REPO / "results"))
     a = ap.parse_args(argv)
-    outputs, results = Path(a.outputs), Path(a.results)
-    failed = 0
+    outputs, results = Path(a.workdir).resolve() / "outputs", Path(a.results)
     register()
     sweeps = [s for s in SWEEPS if not a.tables_only and (not a.only or s.group in a.only)
-              and (not a.match or any(a.match in f for f in s.fixed))]
-    # composing only in this process: the jobs run in their own. A job shared by several sweeps (the
-    # ablations' base run) is found done by the later ones.
+              and (not a.match or a.match in s.describe())]
+    t0 = time.perf_counter()
+    ran = []
+    # composing only in this process: the jobs run in their own (in --workdir, so their runs land in its
+    # outputs/). A job shared by several sweeps (the ablations' base run) is found done by the later ones.
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
         for sweep in sweeps:
-            failed += run_sweep(sweep, a, outputs, results)
-    if not a.list and not a.no_tables:
+            ran.append(run_sweep(sweep, a, outputs, results))
+    failed = sum(r["failed_commands"] for r in ran)
+    tables_s = None
+    if not a.list and not a.no_tables and outputs != OUTPUTS.resolve():
+        print(f"tables and figures left: they read {OUTPUTS} and results/, and these runs are in {outputs} "
+              f"(python -m eval.keep <run folders> keeps them in results/)")
+    elif not a.list and not a.no_tables:
+        t1 = time.perf_counter()
         failed += subprocess.run([sys.executable, "-m", "eval.tables", "--write"], cwd=REPO).returncode != 0
         failed += subprocess.run([sys.executable, "-m", "eval.plots"], cwd=REPO).returncode != 0
+        tables_s = time.perf_counter() - t1
+    wall = time.perf_counter() - t0
+    if not a.list:
+        print(f"reproduce: {len(ran)} sweep(s), {sum(r['jobs_run'] for r in ran)} job(s) run, {failed} command(s) "
+              f"failed, {wall:.0f} s wall" + (f" ({tables_s:.0f} s of it tables and figures)" if tables_s else ""))
+    if a.report:
+        doc = {"argv": sys.argv[1:] if argv is None else list(argv), "launcher": a.launcher, "gpus": a.gpus,
+               "jobs_per_gpu": a.jobs_per_gpu, "host_cores": os.cpu_count(), "gpu_names": gpu_names(),
+               "sweeps": ran, "tables_s": tables_s, "wall_s": wall, "failed_commands": failed}
+        atomic_write_json(Path(a.report), doc)
     if failed:
         print(f"{failed} command(s) failed: see their output above", file=sys.stderr)
     return 1 if failed else 0
+
+
+def gpu_names() -> list[str]:
+    """The GPUs the jobs may use, by name (nvidia-smi), for the report."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                             text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return [x.strip() for x in out.stdout.splitlines() if x.strip()]
 
 
 if __name__ == "__main__":

@@ -225,6 +225,12 @@ def settings_id(config: dict, stage: str) -> str:
     """The digest of the settings a run of ``stage`` and the runs it consumes read, files by name: what
     records are compared by (kept records carry no input digests; a run of yours replaces a kept one of the
     same settings id)."""
+    return digest(settings_by_stage(config, stage))
+
+
+def settings_by_stage(config: dict, stage: str) -> dict:
+    """{stage and each stage it consumes: the settings it reads, files by name} (what ``settings_id`` digests;
+    what the config lacks is left out)."""
     cfg = restricted(config)
     parts = {}
     for s in (stage, *STAGES[stage].upstream(cfg)):
@@ -236,7 +242,7 @@ def settings_id(config: dict, stage: str) -> str:
             except KeyError:
                 pass
         parts[s] = settings
-    return digest(parts)
+    return parts
 
 
 # --- identity -------------------------------------------------------------------------------------------

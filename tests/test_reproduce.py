@@ -1,6 +1,7 @@
 """The reproduction runner and the stages it drives: a finished stage is skipped, a damaged one is redone,
 jobs are told apart as done / kept / missing, and the missing ones go to Hydra's launchers."""
 
+import argparse
 import json
 from pathlib import Path
 
@@ -53,18 +54,32 @@ def test_runner_tells_done_kept_and_missing_apart(tmp_path):
             with runs.start(cfgs[k], "slam", outputs) as run:
                 run.finish({"seed": k}, "cpu")
         (runs.identify(cfgs[3], "slam").folder(outputs) / "metrics.json").write_text('{"seed": ')
-        gpu = fake_run(tmp_path / "gpu", "slam", OmegaConf.to_container(cfgs[1], resolve=True), {"seed": 1})
-        keep([gpu], results)  # a GPU run kept in the repository (eval.keep)
+        kept_cfg = OmegaConf.to_container(cfgs[1], resolve=True)
+        kept_cfg["device"] = "cuda:0"  # ran on a GPU; the job asks for device=auto: still the same run
+        other = {**kept_cfg, "slam": {**kept_cfg["slam"], "seed": 2, "num_particles": 31}}  # seed 2, but not its job
+        (doc,) = keep([fake_run(tmp_path / "gpu", "slam", c, {"seed": c["slam"]["seed"]}) for c in (kept_cfg, other)],
+                      results)  # kept in the repository (eval.keep)
+        kept_doc = json.loads(doc.read_text())
+        for rec in kept_doc["records"].values():
+            del rec["config"]["slam"]["line"]  # a setting read only since: what the runs did then
+        doc.write_text(json.dumps(kept_doc))
         states = [job_state(sweep, ov, outputs, results, rerun_kept=False)[0] for ov in sweep.jobs()]
         assert states == ["done", "kept", "missing", "missing"]
         assert job_state(sweep, sweep.jobs()[1], outputs, results, rerun_kept=True)[0] == "missing"
     missing = [ov for ov, s in zip(sweep.jobs(), states) if s == "missing"]
-    (cmd,) = multirun_commands(sweep, missing, "joblib", 3, ["device=cpu"])
+    flags = argparse.Namespace(jobs=3, gpus=2, jobs_per_gpu=4)
+    (cmd,) = multirun_commands(sweep, missing, "joblib", flags, ["device=cpu"])
     assert cmd[2:] == ["irmcl_warp.slam", "-m", "+exp=gmapping_sim", "slam.seed=2,3", "hydra/launcher=joblib",
                        "hydra.launcher.n_jobs=3", "device=cpu"]
+    (cmd,) = multirun_commands(sweep, sweep.jobs(), "basic", flags, [])  # all missing: one multirun, all at once
+    assert cmd[2:] == ["irmcl_warp.slam", "-m", "+exp=gmapping_sim", "slam.seed=0,1,2,3"]
+    (cmd,) = multirun_commands(sweep, missing, "pool", flags, [])
+    assert cmd[-4:] == ["hydra/launcher=pool", "hydra.launcher.cpu_workers=3", "hydra.launcher.gpus=2",
+                        "hydra.launcher.jobs_per_gpu=4"]
 
 
-@pytest.mark.parametrize("launcher,target", [("joblib", "JoblibLauncher"), ("slurm", "SlurmLauncher")])
+@pytest.mark.parametrize("launcher,target", [("joblib", "JoblibLauncher"), ("slurm", "SlurmLauncher"),
+                                             ("pool", "PoolLauncher"), ("submitit_local", "LocalLauncher")])
 def test_launcher_configs_compose(launcher, target):
     cfg = _compose(f"hydra/launcher={launcher}", hydra=True)
     assert cfg.hydra.launcher._target_.endswith(target)
