@@ -1,8 +1,8 @@
-"""``python -m eval.bench train|mcl|slam|globloc ...``: see each module's docstring."""
+"""``python -m eval.bench train|mcl|slam|globloc|sweeps ...``: see each module's docstring."""
 
 import argparse
 
-from eval.bench import globloc, mcl, slam, train
+from eval.bench import globloc, mcl, slam, sweeps, train
 from irmcl_warp.services.cli import guard
 
 
@@ -13,13 +13,15 @@ def main(argv=None):
     mcl.add_parser(sub)
     slam.add_parser(sub)
     globloc.add_parser(sub)
+    sweeps.add_parser(sub)
     a = ap.parse_args(argv)
     if a.what == "train":
         if a.exp and not a.init:
             ap.error("--exp needs --init <trained nof.pt>")
         train.run_train_bench(a)
     else:
-        {"mcl": mcl.run_mcl_bench, "slam": slam.run_slam_bench, "globloc": globloc.run_globloc_bench}[a.what](a)
+        {"mcl": mcl.run_mcl_bench, "slam": slam.run_slam_bench, "globloc": globloc.run_globloc_bench,
+         "sweeps": sweeps.run_sweeps_bench}[a.what](a)
 
 
 if __name__ == "__main__":
