@@ -144,24 +144,22 @@ def job_state(sweep: Sweep, overrides: list[str], outputs: Path, results: Path, 
         why = str(e)
     if not rerun_kept:
         job = _flat(runs.settings_by_stage(OmegaConf.to_container(cfg, resolve=True), stage))
-        for rec in _kept(results):
-            if rec.stage == stage and rec.exp == cfg.exp and same_settings(job, rec):
+        for rec, recorded in _kept(results):
+            if rec.stage == stage and rec.exp == cfg.exp and same_settings(job, recorded):
                 return "kept", f"{results}/{rec.exp} [{rec.stage}/{rec.label}]"
     return "missing", why
 
 
-def same_settings(job: dict, rec) -> bool:
-    """Whether a kept record ran the job: every setting it recorded equals the job's, where it ran aside
-    (``device``: kept runs are mostly GPU runs; the job asks for ``auto``). A setting the record lacks was
-    read by the stage only later and left at what the run did then; those records are kept as they are."""
-    if id(rec) not in _FLAT:
-        _FLAT[id(rec)] = _flat(runs.settings_by_stage(rec.config, rec.stage))
-    kept = _FLAT[id(rec)]
-    return all(job.get(k, _NONE) == v for k, v in kept.items() if k.rsplit(".", 1)[-1] != "device")
+def same_settings(job: dict, recorded: dict) -> bool:
+    """Whether a kept record ran the job (both as flat {"section.key": value}): every setting it recorded
+    equals the job's, where it ran aside (``device``: kept runs are mostly GPU runs; the job asks for
+    ``auto``). Keys a kept record lacks within its sections read at their schema default
+    (eval.results.records.complete); a section it lacks entirely was read by the stage only later, and is
+    not compared."""
+    return all(job.get(k, _NONE) == v for k, v in recorded.items() if k.rsplit(".", 1)[-1] != "device")
 
 
 _NONE = object()
-_FLAT: dict = {}  # id(kept record) -> its flattened settings
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
@@ -177,9 +175,11 @@ def _flat(d: dict, prefix: str = "") -> dict:
 _KEPT: dict = {}
 
 
-def _kept(results: Path) -> list:
+def _kept(results: Path) -> list[tuple]:
+    """The kept records under ``results``, each with its settings as ``same_settings`` compares them."""
     if results not in _KEPT:
-        _KEPT[results] = kept_records(results=results)
+        _KEPT[results] = [(rec, _flat(runs.settings_by_stage(rec.config, rec.stage)))
+                          for rec in kept_records(results=results)]
     return _KEPT[results]
 
 
@@ -227,9 +227,10 @@ def run_sweep(sweep: Sweep, a, outputs: Path, results: Path) -> dict:
             print(f"    {state:8s} {' '.join(ov[len(sweep.fixed):]) or '-':50s} {where}")
         return ran
     t0 = time.perf_counter()
+    # the jobs run in --workdir and import this repository's code from there
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])}
     for cmd in multirun_commands(sweep, missing, a.launcher, a, a.hydra_arg):
         print("  $ " + " ".join(cmd[1:]), flush=True)
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])])}
         ran["failed_commands"] += subprocess.run(cmd, cwd=outputs.parent, env=env).returncode != 0
     ran["wall_s"] = time.perf_counter() - t0
     return ran

@@ -60,11 +60,6 @@ def complete(config: dict) -> dict:
     return out
 
 
-def default_of(dotted: str):
-    section, key = dotted.split(".", 1)
-    return DEFAULTS.get(section, {}).get(key)
-
-
 @functools.lru_cache(maxsize=None)
 def _composed(exp: str, stage: str) -> str:
     from omegaconf import OmegaConf

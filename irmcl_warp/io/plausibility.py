@@ -43,30 +43,29 @@ def beam_order_votes(ranges_m: np.ndarray, odom: np.ndarray, increment_rad: floa
     consecutive scans that turn on the spot by at least ``min_shift`` beams: a counter-clockwise turn by dtheta
     moves a wall from beam i + s to beam i in the next scan (s = dtheta / increment)."""
     r = np.asarray(ranges_m, np.float64)
-    odom = np.asarray(odom, np.float64)
+    step = np.diff(np.asarray(odom, np.float64), axis=0)
+    shift = np.round(np.angle(np.exp(1j * step[:, 2])) / increment_rad).astype(int)
     B = r.shape[1]
+    turns = np.flatnonzero((np.hypot(step[:, 0], step[:, 1]) <= max_trans_m) & (np.abs(shift) >= min_shift)
+                           & (np.abs(shift) <= max_shift_share * B))
     ok_fwd = ok_rev = 0
-    for k in range(len(r) - 1):
-        step = odom[k + 1] - odom[k]
-        dtheta = float(np.angle(np.exp(1j * step[2])))
-        s = int(round(dtheta / increment_rad))
-        if np.hypot(step[0], step[1]) > max_trans_m or abs(s) < min_shift or abs(s) > max_shift_share * B:
-            continue
-        a, b = r[k], r[k + 1]
-
-        def mismatch(shift: int) -> float:
-            i = np.arange(B)
-            j = i + shift
-            inside = (j >= 0) & (j < B)
-            d = np.abs(b[i[inside]] - a[j[inside]])
-            d = d[np.isfinite(d)]
-            return float(np.median(d)) if len(d) > B // 4 else np.nan
-
-        fwd, rev = mismatch(s), mismatch(-s)
+    for k in turns:
+        fwd, rev = (_mismatch(r[k], r[k + 1], s) for s in (shift[k], -shift[k]))
         if np.isfinite(fwd) and np.isfinite(rev) and abs(fwd - rev) > 0.02:
             ok_fwd += fwd < rev
             ok_rev += rev < fwd
     return ok_fwd, ok_rev
+
+
+def _mismatch(a: np.ndarray, b: np.ndarray, shift: int) -> float:
+    """Median |b[i] - a[i + shift]| over the beams both scans return (NaN where under a quarter of them)."""
+    B = len(a)
+    i = np.arange(B)
+    j = i + shift
+    inside = (j >= 0) & (j < B)
+    d = np.abs(b[i[inside]] - a[j[inside]])
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if len(d) > B // 4 else np.nan
 
 
 def check_beam_order(path, ranges_m, odom, increment_rad: float, min_turns: int = 8) -> bool:
