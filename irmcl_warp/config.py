@@ -175,6 +175,23 @@ class MCLConfig:
     reduce_to: int = 5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never; when: localize.reduce_after_s)
     update_min_trans_m: float = 0.0  # weigh and resample only after the odometry moved more than this ...
     update_min_rot_rad: float = 0.0  # ... or turned more than this (0/0: any motion, as IR-MCL's code)
+    # (AMCL's update_min_d 0.2 m, update_min_a pi/6; ROS amcl wiki)
+    first_update: str = "scan"  # scan: the first scan is weighed at once (IR-MCL's code) | motion: not before the
+    # odometry passed the update_min_* gates (a robot standing still decides nothing from one view)
+    temper: float = 1.0  # log w += temper * log p(z | x): 1 = the model's likelihood; below 1 tempered to fewer
+    # independent beams (e.g. 4 / num_beams: beams 4 apart are about independent, AMCL's max_beams subsampling)
+    # grid models' likelihood (AMCL's laser_* parameters, their ROS defaults; Thrun et al. Tables 6.1 and 6.3)
+    z_hit: float = 0.95
+    z_short: float = 0.1  # beam_model only
+    z_max: float = 0.05  # beam_model only
+    z_rand: float = 0.05
+    sigma_hit_m: float = 0.2
+    lambda_short: float = 0.1  # beam_model only
+    field_max_dist_m: float = 2.0  # likelihood_field: end points farther from a wall count as this far (AMCL's
+    # laser_likelihood_max_dist)
+    field_occ_threshold: float = 0.65  # likelihood_field: cells at or above this p_occ are walls (map_server's
+    # occupied_thresh)
+    beam_occ_threshold: float = 0.5  # beam_model: rays stop in cells at or above this p_occ
     resample: str = "low_variance"  # low_variance | multinomial
     resample_threshold: float = 0.5  # resample when N_eff < threshold * N (1.0 = every step)
     map_resolution_m: float = 0.05  # NOG / grid resolution
@@ -289,6 +306,23 @@ class LocalizeConfig:
 
 
 @dataclass
+class WorldsConfig:
+    """Global localization on simulated floors nobody tuned on (issue 33; irmcl_warp/sim/floors.py): each world
+    of the split mapped by a drive of its own, then ``runs`` other drives localized from their first scan."""
+    split: str = "test"  # tuning | test (floors.SPLIT) | world names separated by "+" (office-7+loop-1003)
+    runs: int = 10  # drives per world (path seeds 1..runs; the map's drive is seed 0)
+    run_s: float = 60.0  # each drive localized for this long, from its first scan
+    map_drive_m: float = 400.0  # the mapping drive's length (the map: log-odds of its scans at their true poses)
+    kidnap_at_s: float = 0.0  # > 0: that far into each run, the robot is carried to another drive's place
+    calibration: Optional[str] = None  # the confidence's calibration (JSON of eval.confidence fit); None: the one
+    # shipped for mcl.weighting (irmcl_warp/mcl/calibration/<weighting>.json), else features only
+    confident_above: float = 0.8  # a run ends "localized" only with its confidence at or above this
+    lost_below: float = 0.2  # once localized, a confidence below this for lost_after_s ...
+    lost_after_s: float = 2.0  # ... means lost: the filter starts again from a uniform spread and says so
+    relocalize: bool = True  # False: only report when lost (side-by-side runs of the detector alone)
+
+
+@dataclass
 class PipelineConfig:
     """The pipeline's second log, localized globally in the map and NOF made from the first (data.*)."""
     path: Optional[str] = None  # None: the simulator's second session (sim_path_seed below), or data.path again
@@ -314,6 +348,7 @@ class Config:
     globloc: GlobLocConfig = field(default_factory=GlobLocConfig)
     localize: LocalizeConfig = field(default_factory=LocalizeConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    worlds: WorldsConfig = field(default_factory=WorldsConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
 
@@ -324,6 +359,14 @@ def register() -> None:
 
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the experiment configs (the apps' config_path)
+CALIBRATION_DIR = Path(__file__).resolve().parent / "mcl" / "calibration"  # the localizers' confidence, one file
+# per observation model (eval.confidence fit on the tuning worlds)
+
+
+def shipped_calibration(weighting: str) -> Path | None:
+    """The confidence calibration shipped for ``weighting``, or None."""
+    path = CALIBRATION_DIR / f"{weighting}.json"
+    return path if path.is_file() else None
 
 
 def compose_config(overrides=(), name: str = "config"):
@@ -348,7 +391,7 @@ CHOICES = {
     "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),
     "mcl.weighting": ("nog_raymarch", "nog_table", "nof_direct", "likelihood_field", "beam_model"),
     "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.beam_pick": ("spread", "stride"),
-    "mcl.resample": ("low_variance", "multinomial"),
+    "mcl.resample": ("low_variance", "multinomial"), "mcl.first_update": ("scan", "motion"),
     "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
     "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"), "slam.frame": ("base", "laser"),
     "slam.beam_angles": ("log", "gfs"),
@@ -375,6 +418,12 @@ RANGES = {
     "mcl.cluster_cell_m": ("> 0", None), "mcl.cluster_yaw_bins": (1, None), "mcl.reduce_to": (0, None),
     "mcl.update_min_trans_m": (0, None), "mcl.update_min_rot_rad": (0, None), "mcl.resample_threshold": (0, 1),
     "mcl.map_resolution_m": ("> 0", None), "mcl.recovery_alpha_slow": (0, 1), "mcl.recovery_alpha_fast": (0, 1),
+    "mcl.temper": ("> 0", 1), "mcl.z_hit": (0, 1), "mcl.z_short": (0, 1), "mcl.z_max": (0, 1), "mcl.z_rand": (0, 1),
+    "mcl.sigma_hit_m": ("> 0", None), "mcl.lambda_short": ("> 0", None), "mcl.field_max_dist_m": ("> 0", None),
+    "mcl.field_occ_threshold": ("> 0", 1), "mcl.beam_occ_threshold": ("> 0", 1),
+    "worlds.runs": (1, None), "worlds.run_s": ("> 0", None), "worlds.map_drive_m": ("> 0", None),
+    "worlds.kidnap_at_s": (0, None), "worlds.confident_above": (0, 1), "worlds.lost_below": (0, 1),
+    "worlds.lost_after_s": ("> 0", None),
     "localize.num_starts": (1, None), "localize.run_s": ("> 0", None), "localize.kidnap_at_s": (0, None),
     "localize.reduce_after_s": (0, None),
     "slam.num_particles": (1, None), "slam.resample_threshold": (0, 1), "slam.sigma": ("> 0", None),

@@ -45,6 +45,7 @@ from typing import Callable, Iterator
 
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.atomic import atomic_write_json as write_json
+from irmcl_warp.config import shipped_calibration
 
 REPO = Path(__file__).resolve().parents[1]
 OUTPUTS = Path("outputs")  # relative to the working directory, as Hydra's run dir
@@ -106,6 +107,7 @@ STAGES: dict[str, Stage] = {
                        "{train.name}", lambda c: ("train",)),
     "localize": Stage(_localize_reads, _localize_label, _localize_upstream),
     "globloc": Stage(lambda c: ("sim", "globloc", "mcl", "device"), "{globloc.scenario}"),
+    "worlds": Stage(lambda c: ("sim", "worlds", "mcl", "device"), "{worlds.split}-{mcl.weighting}-{mcl.num_particles}"),
     # the pipeline runs slam and train itself; its own run reads what those and its localization read
     "pipeline": Stage(lambda c: ("data", *_sim(c), "slam", "model", "render", "train", "mcl", "localize.reduce_after_s",
                                  "pipeline", "device"), _pipeline_label),
@@ -114,7 +116,7 @@ STAGES: dict[str, Stage] = {
 # settings that name files: a run depends on their content, not on where they lie
 FILE_KEYS = ("data.path", "data.laser_frame_path", "data.ground_truth_path", "data.relations_path",
              "data.relation_stamps_path", "data.splits_path", "data.train_poses_path", "localize.map_path",
-             "localize.nof_path", "pipeline.path", "pipeline.ground_truth_path")
+             "localize.nof_path", "pipeline.path", "pipeline.ground_truth_path", "worlds.calibration")
 
 
 # --- digests --------------------------------------------------------------------------------------------
@@ -210,6 +212,8 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
             value = _get(settings, key)
         except KeyError:
             continue
+        if not value and key == "worlds.calibration":  # none given: the one shipped for the weighting, if any
+            value = shipped_calibration(_get(settings, "mcl.weighting"))
         if value:
             path = resolve(value)  # as given (absolute, or from the working directory), else under IRMCL_DATA
             out[key] = map_files(path) if key == "localize.map_path" else [path]

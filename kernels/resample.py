@@ -16,10 +16,11 @@ from kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_devic
 
 
 @wp.kernel
-def accumulate_kernel(log_w: wp.array(dtype=wp.float32), log_likelihood: wp.array(dtype=wp.float32)):
-    """Importance weights multiply across steps until the set is resampled: log w += log p(z | x)."""
+def accumulate_kernel(log_w: wp.array(dtype=wp.float32), log_likelihood: wp.array(dtype=wp.float32), temper: float):
+    """Importance weights multiply across steps until the set is resampled: log w += temper * log p(z | x)
+    (temper 1: the likelihood as the model gives it; below 1 a likelihood tempered to fewer independent beams)."""
     i = wp.tid()
-    log_w[i] = log_w[i] + log_likelihood[i]
+    log_w[i] = log_w[i] + temper * log_likelihood[i]
 
 
 @wp.kernel

@@ -254,7 +254,7 @@ def localize_runs(run: runs.Run) -> Path:
         hyps = [hyp(st.rgb[j], st.ranges[i]) for j, i in enumerate(st.cam_idx)]
         for m in g.methods:
             est, relocs = run_method(m, cfg, st, hyps, grid, origin, device, np.random.default_rng(g.seed * 7 + k))
-            write_tum(out / f"run{k}-{m}.tum", st.stamps, np.nan_to_num(est, nan=0.0))
+            write_tum(out / f"run{k}-{m}.tum", st.stamps, est)  # no estimate yet: no line
             rows[m].append(score_run(est, st, relocs, g))
             if k == 0:
                 err = np.hypot(*(est[:, :2] - st.truth[:, :2]).T)

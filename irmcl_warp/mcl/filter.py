@@ -209,7 +209,8 @@ class ParticleFilter:
         inp.send()
         self.motion.launch(self.particles, inp.odom, inp.motion_seed)
         self.weighting(self.particles, self.T_base_laser, self.angles, inp.measured, self.log_lik)
-        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik], device=self.device)
+        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik, float(self.cfg.temper)],
+                  device=self.device)
         self.weights.update(self.log_w, self.particles)
         if self.estimator is not None:
             self.estimator.launch(self.particles, self.log_w)

@@ -33,7 +33,8 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
            step_times: list | None = None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised. As
     IR-MCL's code, the filter weighs and resamples only after the odometry moved (``m.update_min_*``), and
-    keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). A jump in
+    keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). With
+    ``m.first_update=motion`` the first scan waits for the gates too; until then the estimate is NaN (no pose). A jump in
     ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero. ``watch(j, pf)``, when given,
     sees the filter after every scan (plots, animations). ``step_times``, when given, gets the wall time (s)
     of every filter step (each reads its estimate back, so the step is done when it returns)."""
@@ -44,7 +45,7 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
         if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
             last_odom = log.odom[i]
         u = odometry_step(last_odom, log.odom[i])
-        if pose is None or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+        if (pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
             t0 = time.perf_counter()
             pose = pf.step(u, log.ranges_m[i])[0]
             if step_times is not None:
@@ -53,7 +54,7 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
             if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
                 pf.reduce(m.reduce_to)
                 reduce_pending = False
-        est[j] = pose
+        est[j] = np.nan if pose is None else pose  # (mcl.first_update=motion: no estimate before the first update)
         if watch is not None:
             watch(j, pf)
     return est

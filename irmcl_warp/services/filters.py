@@ -77,8 +77,15 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             return made
         return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below,
                              batch=mcl.march_batch, beam_major=_march_order(mcl.march_order), **shared)
-    return WEIGHTING.build(w, occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
-                           resolution_m=maps.resolution_m, max_range_m=far_m, device=device)
+    grid = dict(occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
+                resolution_m=maps.resolution_m, max_range_m=far_m, z_hit=mcl.z_hit, z_rand=mcl.z_rand,
+                sigma_hit_m=mcl.sigma_hit_m, device=device)
+    if w == "likelihood_field":
+        return WEIGHTING.build(w, max_dist_m=mcl.field_max_dist_m, occ_threshold=mcl.field_occ_threshold, **grid)
+    if w == "beam_model":
+        return WEIGHTING.build(w, z_short=mcl.z_short, z_max=mcl.z_max, lambda_short=mcl.lambda_short,
+                               occ_threshold=mcl.beam_occ_threshold, **grid)
+    return WEIGHTING.build(w, **grid)
 
 
 def _march_order(order: str) -> bool:

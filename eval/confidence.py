@@ -1,0 +1,122 @@
+"""The localizer's confidence: fitted on the tuning worlds, judged on the test worlds (issue 33).
+
+    python -m eval.confidence fit outputs/worlds/worlds/tuning-<...> [...] [--out irmcl_warp/mcl/calibration/<w>.json]
+    python -m eval.confidence judge outputs/worlds/worlds/test-<...> [...] [--calibration FILE] [--out results/worlds]
+
+``fit`` reads the features recorded at every filter update of worlds runs (``<world>-run<k>.npz``), labels each
+update right or wrong (the heaviest mode within 0.5 m / 10 deg of the truth) and fits the logistic model of
+irmcl_warp/mcl/confidence.py. It refuses runs on test worlds: the calibration is made on tuning data only.
+
+``judge`` applies a calibration to runs of the test worlds (it refuses tuning worlds): the AUROC of the confidence
+(right against wrong updates), its reliability curve (predicted against observed, per tenth), the same for the
+features alone (the top mode's weight, the spread: the signals the filter used to report), and writes a record
+``confidence-<weighting>.json`` with a plot ``confidence-<weighting>.png`` beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from irmcl_warp.mcl.confidence import CALIBRATION_DIR, FEATURES, Confidence, auroc, fit_logistic, reliability, right
+from irmcl_warp.services.outputs import save_figure, write_json
+from irmcl_warp.sim import floors
+
+
+def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
+    worlds of ``side`` (tuning | test)."""
+    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set()}
+    for d in run_dirs:
+        doc = json.loads((Path(d) / "metrics.json").read_text())
+        for r in doc["runs"]:
+            if floors.split_of(r["world"]) != side:
+                raise ValueError(f"{d}: world {r['world']} is a {floors.split_of(r['world'])} world; this step reads "
+                                 f"{side} worlds only")
+            z = np.load(Path(d) / f"{r['world']}-run{r['run']}.npz")
+            upd = z["updated"] & np.all(np.isfinite(z["features"]), 1) & np.all(np.isfinite(z["estimate"]), 1)
+            X.append(z["features"][upd])
+            y.append(right(z["estimate"][upd], z["truth"][upd]))
+            prov["worlds"].add(r["world"])
+        prov["runs"].append(Path(d).name)
+        prov["weighting"].add(doc["summary"]["weighting"])
+    if len(prov["weighting"]) != 1:
+        raise ValueError(f"runs of several weightings ({sorted(prov['weighting'])}): one calibration is for one")
+    prov = {"runs": prov["runs"], "worlds": sorted(prov["worlds"]), "weighting": prov["weighting"].pop()}
+    return np.concatenate(X), np.concatenate(y), prov
+
+
+def fit(args) -> Path:
+    X, y, prov = samples(args.runs, "tuning")
+    model = fit_logistic(X, y)
+    out = Path(args.out) if args.out else CALIBRATION_DIR / f"{prov['weighting']}.json"
+    model.meta = {"source": f"eval.confidence fit on {', '.join(prov['runs'])}", "tuning_worlds": prov["worlds"],
+                  "weighting": prov["weighting"], "updates": int(len(y)), "right_share": float(y.mean()),
+                  "tuning_auroc": auroc(model(X), y)}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json(out, model.to_json())
+    print(f"fitted on {len(y)} updates of {len(prov['worlds'])} tuning worlds ({100 * y.mean():.0f} % right); "
+          f"AUROC on them {model.meta['tuning_auroc']:.3f} -> {out}")
+    return out
+
+
+def judge(args) -> dict:
+    X, y, prov = samples(args.runs, "test")
+    cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
+    model = Confidence.load(cal)
+    p = model(X)
+    doc = {"weighting": prov["weighting"], "test_worlds": prov["worlds"], "runs": prov["runs"],
+           "calibration": str(cal), "tuning_worlds": model.meta.get("tuning_worlds"), "updates": int(len(y)),
+           "right_share": float(y.mean()), "auroc": auroc(p, y), "reliability": reliability(p, y),
+           "auroc_top_weight": auroc(X[:, FEATURES.index("top_weight")], y),
+           "auroc_spread": auroc(-X[:, FEATURES.index("log_spread")], y)}
+    doc["max_calibration_gap"] = max(abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / f"confidence-{prov['weighting']}.json", doc)
+    plot(out / f"confidence-{prov['weighting']}.png", doc)
+    print(f"{prov['weighting']} on {len(prov['worlds'])} test worlds, {len(y)} updates ({100 * y.mean():.0f} % right): "
+          f"AUROC {doc['auroc']:.3f} (top mode's weight alone {doc['auroc_top_weight']:.3f}, spread alone "
+          f"{doc['auroc_spread']:.3f}); largest calibration gap {doc['max_calibration_gap']:.2f}")
+    return doc
+
+
+def plot(path: Path, doc: dict) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    rel = doc["reliability"]
+    ax.plot([0, 1], [0, 1], "k:", lw=1, label="calibrated")
+    ax.plot([b["predicted"] for b in rel], [b["observed"] for b in rel], "o-", label="confidence")
+    for b in rel:
+        ax.annotate(str(b["count"]), (b["predicted"], b["observed"]), fontsize=6, xytext=(3, -8),
+                    textcoords="offset points")
+    ax.set_xlabel("predicted probability of being right")
+    ax.set_ylabel("share right (test worlds)")
+    ax.set_title(f"{doc['weighting']}: AUROC {doc['auroc']:.3f}")
+    ax.legend(loc="upper left")
+    save_figure(fig, path)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(prog="python -m eval.confidence", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    f = sub.add_parser("fit", help="fit the confidence on tuning-world runs")
+    f.add_argument("runs", nargs="+", type=Path)
+    f.add_argument("--out", help="calibration file (default: the one shipped for the weighting)")
+    j = sub.add_parser("judge", help="AUROC and reliability on test-world runs")
+    j.add_argument("runs", nargs="+", type=Path)
+    j.add_argument("--calibration")
+    j.add_argument("--out", default="results/worlds")
+    args = ap.parse_args(argv)
+    try:
+        fit(args) if args.command == "fit" else judge(args)
+    except (ValueError, FileNotFoundError) as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+if __name__ == "__main__":
+    main()

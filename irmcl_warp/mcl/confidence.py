@@ -1,0 +1,225 @@
+"""Is the estimate right? The modes of a particle set, the scan's agreement with the map, and a calibrated
+confidence built on them (issue 33).
+
+* ``modes(particles, log_w)``: the particle set's hypotheses, heaviest first: a weighted histogram of the
+  positions in ``cell_m`` cells; the heaviest 3 x 3 block of cells is a mode (its weight, its weighted mean pose),
+  its particles are taken out, and so on. The heaviest mode's pose is the estimate a multi-hypothesis user reads.
+* ``ScanAgreement``: the share of a scan's end points, placed from a pose, that lie within ``tolerance_m`` of a
+  wall of the map (its distance transform). Near 1 where the scan fits the map at that pose.
+* ``FEATURES``: what the robot has at each update: the heaviest mode's weight, the second's, the scan's agreement
+  at the heaviest mode and at the second, that agreement over the last updates, how many updates the filter has
+  made and the spread. ``Confidence``: a logistic model of these (fitted by ``fit_logistic`` on the tuning worlds'
+  runs, eval.confidence) giving a number meant as the probability that the estimate lies within
+  ``RIGHT_M`` / ``RIGHT_DEG`` of the truth.
+* ``auroc``, ``reliability``: how well a confidence separates right from wrong, and how well it is calibrated.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+
+from irmcl_warp.config import CALIBRATION_DIR, shipped_calibration
+
+RIGHT_M = 0.5  # issue 33: the estimate counts as right within 0.5 m ...
+RIGHT_DEG = 10.0  # ... and 10 deg of the truth
+FEATURES = ("top_weight", "second_weight", "agreement", "agreement_margin", "agreement_recent", "log_updates",
+            "log_spread")
+
+
+@dataclass
+class Modes:
+    poses: np.ndarray  # [k, 3] weighted mean pose of each mode, heaviest first
+    weights: np.ndarray  # [k] their share of the total weight
+
+
+def normalised(log_w: np.ndarray) -> np.ndarray:
+    w = np.exp(np.asarray(log_w, float) - np.max(log_w))
+    return w / w.sum()
+
+
+def modes(particles: np.ndarray, log_w: np.ndarray, cell_m: float = 1.0, k: int = 3) -> Modes:
+    """The ``k`` heaviest modes of the weighted particles (see the module's text)."""
+    p = np.asarray(particles, float)
+    w = normalised(log_w)
+    cells = np.floor(p[:, :2] / cell_m).astype(np.int64)
+    cells -= cells.min(0)
+    nx, ny = cells.max(0) + 3
+    flat = (cells[:, 1] + 1) * nx + cells[:, 0] + 1  # one empty cell of margin all round
+    left = np.ones(len(p), bool)
+    poses, weights = [], []
+    for _ in range(k):
+        if not left.any():
+            break
+        hist = np.bincount(flat[left], w[left], minlength=nx * ny).reshape(ny, nx)
+        block = sum(np.roll(np.roll(hist, dy, 0), dx, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        iy, ix = np.unravel_index(np.argmax(block), block.shape)
+        mine = left & (np.abs(cells[:, 0] + 1 - ix) <= 1) & (np.abs(cells[:, 1] + 1 - iy) <= 1)
+        if not mine.any() or w[mine].sum() <= 0:
+            break
+        ww = w[mine] / w[mine].sum()
+        yaw = np.arctan2(np.sum(ww * np.sin(p[mine, 2])), np.sum(ww * np.cos(p[mine, 2])))
+        poses.append([*(ww @ p[mine, :2]), yaw])
+        weights.append(float(w[mine].sum()))
+        left &= ~mine
+    return Modes(np.array(poses).reshape(-1, 3), np.array(weights))
+
+
+def spread(particles: np.ndarray, log_w: np.ndarray) -> float:
+    """sqrt(var x + var y) of the weighted particles (m)."""
+    w = normalised(log_w)
+    xy = np.asarray(particles, float)[:, :2]
+    mean = w @ xy
+    return float(np.sqrt(w @ np.sum((xy - mean) ** 2, 1)))
+
+
+class ScanAgreement:
+    """Share of a scan's end points within ``tolerance_m`` of a wall (cells at or above ``occ_threshold``) of
+    an occupancy grid ``occupancy`` [H, W] (p_occ; lower-left corner ``origin_xy``). Every ``beam_step``-th
+    beam is used; end points off the grid count as not agreeing."""
+
+    def __init__(self, occupancy, origin_xy, resolution_m: float, occ_threshold: float = 0.65,
+                 tolerance_m: float = 0.2, beam_step: int = 4):
+        walls = np.asarray(occupancy) >= occ_threshold
+        if not walls.any():
+            raise ValueError("scan agreement: the map has no wall")
+        self.near = distance_transform_edt(~walls) * resolution_m <= tolerance_m
+        self.origin, self.res, self.step = np.asarray(origin_xy, float), float(resolution_m), int(beam_step)
+
+    def __call__(self, pose, ranges_m, angles_rad, T_base_laser) -> float:
+        r = np.asarray(ranges_m, float)[::self.step]
+        a = np.asarray(angles_rad, float)[::self.step]
+        ok = np.isfinite(r)
+        if not ok.any():
+            return 0.0
+        x, y, yaw = pose
+        c, s = np.cos(yaw), np.sin(yaw)
+        lx, ly = x + c * T_base_laser[0] - s * T_base_laser[1], y + s * T_base_laser[0] + c * T_base_laser[1]
+        heading = yaw + T_base_laser[2] + a[ok]
+        ix = np.floor((lx + r[ok] * np.cos(heading) - self.origin[0]) / self.res).astype(int)
+        iy = np.floor((ly + r[ok] * np.sin(heading) - self.origin[1]) / self.res).astype(int)
+        H, W = self.near.shape
+        inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
+        hits = np.zeros(len(ix), bool)
+        hits[inside] = self.near[iy[inside], ix[inside]]
+        return float(hits.mean())
+
+
+class FeatureTracker:
+    """The confidence's features at each filter update, with the agreement's recent history (``recent``
+    updates) kept across updates."""
+
+    def __init__(self, agreement: ScanAgreement, recent: int = 10):
+        self.agreement = agreement
+        self.history = deque(maxlen=recent)
+        self.updates = 0
+
+    def reset(self) -> None:
+        """After a fresh uniform start (relocalization): the history belongs to the old hypothesis."""
+        self.history.clear()
+        self.updates = 0
+
+    def __call__(self, particles, log_w, ranges_m, angles_rad, T_base_laser) -> tuple[np.ndarray, Modes]:
+        m = modes(particles, log_w)
+        self.updates += 1
+        top = self.agreement(m.poses[0], ranges_m, angles_rad, T_base_laser)
+        second = self.agreement(m.poses[1], ranges_m, angles_rad, T_base_laser) if len(m.weights) > 1 else 0.0
+        self.history.append(top)
+        f = np.array([m.weights[0], m.weights[1] if len(m.weights) > 1 else 0.0, top, top - second,
+                      float(np.mean(self.history)), np.log1p(self.updates), np.log(spread(particles, log_w) + 0.01)])
+        return f, m
+
+
+def right(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Is each estimate [n, 3] within RIGHT_M and RIGHT_DEG of the truth [n, 3]?"""
+    d_yaw = np.degrees(np.abs(np.angle(np.exp(1j * (est[:, 2] - gt[:, 2])))))
+    return (np.hypot(*(est[:, :2] - gt[:, :2]).T) < RIGHT_M) & (d_yaw < RIGHT_DEG)
+
+
+class Confidence:
+    """p(right | features) = sigmoid(coef . (f - mean) / scale + intercept), the model of a calibration file."""
+
+    def __init__(self, coef, intercept: float, mean, scale, meta: dict | None = None):
+        self.coef, self.intercept = np.asarray(coef, float), float(intercept)
+        self.mean, self.scale = np.asarray(mean, float), np.asarray(scale, float)
+        self.meta = meta or {}
+
+    def __call__(self, features: np.ndarray) -> np.ndarray:
+        z = (np.asarray(features, float) - self.mean) / self.scale @ self.coef + self.intercept
+        return 1.0 / (1.0 + np.exp(-z))
+
+    @classmethod
+    def load(cls, path) -> "Confidence":
+        path = Path(path)
+        try:
+            doc = json.loads(path.read_text())
+            if tuple(doc["features"]) != FEATURES:
+                raise ValueError(f"features {doc['features']}, this code computes {list(FEATURES)}: fit it again "
+                                 "(python -m eval.confidence fit)")
+            return cls(doc["coef"], doc["intercept"], doc["mean"], doc["scale"], doc)
+        except (OSError, KeyError, json.JSONDecodeError) as e:
+            raise ValueError(f"{path}: not a confidence calibration ({e})") from None
+
+    def to_json(self) -> dict:
+        return {**self.meta, "features": list(FEATURES), "coef": self.coef.tolist(), "intercept": self.intercept,
+                "mean": self.mean.tolist(), "scale": self.scale.tolist()}
+
+
+shipped = shipped_calibration
+
+
+def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1e-3, iterations: int = 50) -> Confidence:
+    """Logistic regression by Newton's method (IRLS) on standardised features, a little L2 on the weights."""
+    X, y = np.asarray(X, float), np.asarray(y, float)
+    if len(np.unique(y)) < 2:
+        raise ValueError("calibration: every sample is right (or every one wrong): nothing to separate")
+    mean, scale = X.mean(0), X.std(0)
+    scale[scale == 0] = 1.0
+    Z = np.column_stack([(X - mean) / scale, np.ones(len(X))])
+    beta = np.zeros(Z.shape[1])
+    reg = np.full(Z.shape[1], l2 * len(X))
+    reg[-1] = 0.0
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-Z @ beta))
+        grad = Z.T @ (p - y) + reg * beta
+        hess = (Z * (p * (1 - p))[:, None]).T @ Z + np.diag(reg) + 1e-9 * np.eye(Z.shape[1])
+        delta = np.linalg.solve(hess, grad)
+        beta -= delta
+        if np.max(np.abs(delta)) < 1e-8:
+            break
+    return Confidence(beta[:-1], beta[-1], mean, scale)
+
+
+def auroc(score: np.ndarray, label: np.ndarray) -> float:
+    """Area under the ROC curve: the probability that a random right sample scores above a random wrong one
+    (ties count half); from the ranks (Mann-Whitney U)."""
+    score, label = np.asarray(score, float), np.asarray(label, bool)
+    n_pos, n_neg = label.sum(), (~label).sum()
+    if n_pos == 0 or n_neg == 0:
+        return float("nan")
+    order = np.argsort(score, kind="mergesort")
+    ranks = np.empty(len(score))
+    s = score[order]
+    i = 0
+    while i < len(s):  # average ranks over ties
+        j = i
+        while j + 1 < len(s) and s[j + 1] == s[i]:
+            j += 1
+        ranks[order[i:j + 1]] = (i + j) / 2 + 1
+        i = j + 1
+    return float((ranks[label].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+
+
+def reliability(prob: np.ndarray, label: np.ndarray, bins: int = 10) -> list[dict]:
+    """Per bin of predicted probability: the mean prediction, the observed share right, and the count."""
+    prob, label = np.asarray(prob, float), np.asarray(label, bool)
+    edges = np.linspace(0, 1, bins + 1)
+    which = np.clip(np.digitize(prob, edges) - 1, 0, bins - 1)
+    return [{"from": float(edges[b]), "to": float(edges[b + 1]), "predicted": float(prob[which == b].mean()),
+             "observed": float(label[which == b].mean()), "count": int((which == b).sum())}
+            for b in range(bins) if (which == b).any()]

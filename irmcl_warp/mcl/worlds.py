@@ -1,0 +1,258 @@
+"""The worlds stage: ``python -m irmcl_warp.worlds +exp=worlds [worlds.split=tuning|test] [mcl.*=...]``
+
+Global localization where nobody tuned (issue 33). For each world of ``worlds.split`` (irmcl_warp/sim/floors.py):
+a mapping drive (path seed 0, ``worlds.map_drive_m`` long) makes the map (log-odds of its scans at their true
+poses, as a robot's mapping run would), then ``worlds.runs`` other drives (seeds 1..runs) are localized in it
+from their first scan for ``worlds.run_s`` seconds, with the ``mcl`` settings given. With ``worlds.kidnap_at_s``
+the robot is carried, that far into a run, to where another drive is (the odometry does not see it).
+
+At every filter update the stage reads the particle set back and computes what the robot has (the modes, the
+scan's agreement with the map: irmcl_warp/mcl/confidence.py); with a calibration it turns them into the
+confidence, declares the robot localized at ``worlds.confident_above`` and lost when the confidence stays below
+``worlds.lost_below`` for ``worlds.lost_after_s`` (then, with ``worlds.relocalize``, starts again from a uniform
+spread and says so). The estimate is the heaviest mode's pose.
+
+Writes outputs/<exp>/worlds/<split>-<weighting>-<particles>-<id>/: per world and run ``<world>-run<k>.npz``
+(stamps, estimate, truth, features, confidence, updated) and ``.tum``; metrics.json (per run: the protocol's
+success, the verdict at the end, lost events, false alarms, kidnap detection; per world and overall counts).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+from tqdm import tqdm
+
+from irmcl_warp import runs
+from irmcl_warp.geometry import compose, relative
+from irmcl_warp.io import write_tum
+from irmcl_warp.mapping import integrate_scans
+from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, ScanAgreement, right, shipped
+from irmcl_warp.mcl.track import moved
+from irmcl_warp.services.filters import NOF_WEIGHTINGS, build_filter, free_space_view, grid_maps
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.outputs import save_figure
+from irmcl_warp.sim import drive_log
+from irmcl_warp.sim import floors
+from irmcl_warp.types import LaserLog
+from kernels import pick_device
+from kernels.motion import odometry_step
+
+DRIVE_SLACK = 1.6  # a drive's path is this much longer than run_s at the set speed (turns in place take time)
+
+
+def world_names(split: str) -> tuple[str, ...]:
+    if split in floors.SPLIT:
+        return floors.SPLIT[split]
+    names = tuple(s for s in split.split("+") if s)
+    for n in names:
+        floors.parse(n)
+    return names
+
+
+def run_worlds(cfg) -> Path:
+    if cfg.mcl.weighting in NOF_WEIGHTINGS:
+        raise ValueError(f"worlds: mcl.weighting={cfg.mcl.weighting} reads a NOF trained on each world, which this "
+                         "stage does not train yet; use likelihood_field or beam_model")
+    with runs.start(cfg, "worlds") as run:
+        return run.path if run.done else localize_worlds(run)
+
+
+def calibration_of(cfg) -> Confidence | None:
+    path = cfg.worlds.calibration or shipped(cfg.mcl.weighting)
+    return Confidence.load(path) if path else None
+
+
+def world_map(world, cfg, device):
+    """The occupancy grid of the world's mapping drive (true poses), at mcl.map_resolution_m."""
+    length = cfg.worlds.map_drive_m
+    log = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(0), length), 0, device=device)
+    T_map_laser = compose(log.ground_truth, log.T_base_laser)
+    return integrate_scans(T_map_laser, log.ranges_m, log.info.angles_rad, resolution_m=cfg.mcl.map_resolution_m,
+                           max_range_m=cfg.sim.max_range_m, device=device)
+
+
+def query_log(world, cfg, k: int, device) -> tuple[LaserLog, int | None]:
+    """Drive ``k`` (path seed k) for worlds.run_s; with worlds.kidnap_at_s the rest of the run is drive
+    ``k + 1000``'s, its odometry continuing the first's (the jump unseen). Returns (log, first scan after the jump)."""
+    w, s = cfg.worlds, cfg.sim
+    length = DRIVE_SLACK * s.speed_mps * w.run_s
+    first = drive_log(world, s, floors.drive(world, np.random.default_rng(k), length), k, w.run_s, device)
+    if w.kidnap_at_s <= 0:
+        return first, None
+    cut = int(np.searchsorted(first.stamps - first.stamps[0], w.kidnap_at_s))
+    other = drive_log(world, s, floors.drive(world, np.random.default_rng(k + 1000), length), k + 1000,
+                      w.run_s - w.kidnap_at_s, device)
+    odom = np.vstack([first.odom[:cut], compose(first.odom[cut - 1], relative(other.odom[0], other.odom))])
+    stamps = np.concatenate([first.stamps[:cut], first.stamps[cut - 1] + (other.stamps - other.stamps[0] + 1 / s.rate_hz)])
+    log = LaserLog(stamps, np.vstack([first.ranges_m[:cut], other.ranges_m]), odom, first.info, first.T_base_laser,
+                   np.vstack([first.ground_truth[:cut], other.ground_truth]), f"{first.source} kidnapped")
+    return log, cut
+
+
+def localize_worlds(run: runs.Run) -> Path:
+    cfg, out = run.cfg, run.dir
+    device = pick_device(cfg.device)
+    conf = calibration_of(cfg)
+    names = world_names(cfg.worlds.split)
+    per_world, rows = {}, []
+    bar = tqdm(total=len(names) * cfg.worlds.runs, desc="worlds", unit="run")
+    for name in names:
+        world = floors.build(name)
+        grid = world_map(world, cfg, device)
+        view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
+        maps = grid_maps(grid, cfg.mcl.weighting)
+        agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m,
+                                  cfg.mcl.field_occ_threshold)
+        results = []
+        for k in range(1, cfg.worlds.runs + 1):
+            log, cut = query_log(world, cfg, k, device)
+            pf = build_filter(cfg.mcl, view, log.T_base_laser, log.info.angles_rad, cfg.sim.max_range_m, device, maps)
+            pf.rng = np.random.default_rng(cfg.mcl.seed * 1000 + k)
+            pf.init_uniform()
+            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement), conf)
+            np.savez_compressed(out / f"{name}-run{k}.npz", stamps=log.stamps, truth=log.ground_truth, **trace)
+            write_tum(out / f"{name}-run{k}.tum", log.stamps, trace["estimate"])
+            result = score_run(log, trace, cut, cfg.worlds)
+            results.append({"world": name, "run": k, **result})
+            bar.update()
+            bar.set_postfix_str(f"{name}: {sum(r['success'] for r in results)}/{len(results)} right")
+        per_world[name] = world_summary(results)
+        rows += results
+    bar.close()
+    plot_worlds(out / "worlds.png", names, cfg)
+    summary = {"split": cfg.worlds.split, "worlds": list(names), "weighting": cfg.mcl.weighting,
+               "num_particles": cfg.mcl.num_particles, "device": device, "calibrated": conf is not None,
+               "calibration": conf.meta.get("source") if conf else None, **world_summary(rows)}
+    settings = {"mcl": OmegaConf.to_container(cfg.mcl), "worlds": OmegaConf.to_container(cfg.worlds)}
+    path = run.finish({"summary": summary, "per_world": per_world, "runs": rows, "settings": settings}, device)
+    print(verdict_line(summary, cfg.worlds) + f" -> {path}")
+    return path
+
+
+def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, conf: Confidence | None) -> dict:
+    """Drive the filter over the whole log (AMCL's gates and ``mcl.first_update`` as in mcl/track.follow); at
+    every update the features, the confidence and the heaviest mode's pose; lost-robot detection as the
+    module's text says. Returns per-scan arrays and the events."""
+    n = len(log.stamps)
+    est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
+    prob, updated = np.full(n, np.nan), np.zeros(n, bool)
+    lost_at, pose, p, weighed = [], None, np.nan, False
+    localized, low_since, last_odom = False, None, log.odom[0]
+    angles, T = log.info.angles_rad, log.T_base_laser
+    for i in range(n):
+        u = odometry_step(last_odom, log.odom[i])
+        if (not weighed and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+            pf.step(u, log.ranges_m[i])
+            last_odom, weighed, updated[i] = log.odom[i], True, True
+            f, md = tracker(pf.particles.numpy(), pf.log_w.numpy(), log.ranges_m[i], angles, T)
+            feats[i], pose = f, md.poses[0]
+            if conf is not None:
+                p = float(conf(f))
+                t = log.stamps[i]
+                if p >= w.confident_above:
+                    localized, low_since = True, None
+                elif localized and p < w.lost_below:
+                    low_since = t if low_since is None else low_since
+                    if t - low_since >= w.lost_after_s:
+                        lost_at.append(float(t - log.stamps[0]))
+                        localized, low_since = False, None
+                        if w.relocalize:
+                            pf.init_uniform()
+                            tracker.reset()
+                            weighed, pose = False, None
+                else:
+                    low_since = None
+        if pose is not None:
+            est[i] = pose
+        prob[i] = p
+    return {"estimate": est, "features": feats, "confidence": prob, "updated": updated,
+            "lost_at_s": np.array(lost_at, float)}
+
+
+def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
+    """The protocol's metrics (services.metrics) before any kidnapping, the verdict at the end, lost events."""
+    t = log.stamps - log.stamps[0]
+    end = cut if cut is not None else len(t)
+    est, gt = trace["estimate"], log.ground_truth
+    has = np.all(np.isfinite(est), 1)
+    ok = right(np.where(has[:, None], est, 0.0), gt) & has
+    m = localization_metrics(log.stamps[:end], est[:end], gt[:end], success_within_s=w.run_s) if has[:end].sum() >= 2 \
+        else {"converged": False, "success": False, "time_to_converge_s": None, "location_rmse_cm": None}
+    p_end = float(trace["confidence"][-1])
+    out = {"success": bool(m["success"]), "converged": bool(m["converged"]), "time_to_converge_s": m["time_to_converge_s"],
+           "location_rmse_cm": m.get("location_rmse_cm"), "right_at_end": bool(ok[-1]),
+           "error_at_end_m": float(np.hypot(*(est[-1, :2] - gt[-1, :2]))) if has[-1] else None,
+           "confidence_at_end": None if np.isnan(p_end) else p_end,
+           "localized_at_end": bool(p_end >= w.confident_above) if not np.isnan(p_end) else None,
+           "lost_at_s": trace["lost_at_s"].tolist()}
+    before = trace["lost_at_s"][trace["lost_at_s"] < (t[cut] if cut is not None else np.inf)]
+    right_when = [bool(ok[np.searchsorted(t, s) - 1 - int(round(w.lost_after_s / max(np.median(np.diff(t)), 1e-9)))])
+                  for s in before]  # was the estimate right when the confidence started to fall?
+    out["false_alarms"] = int(sum(right_when))
+    out["tracking_right_s"] = float(np.sum(np.diff(t, append=t[-1])[:end][ok[:end]]))
+    if cut is not None:
+        t_jump = t[cut]
+        after = trace["lost_at_s"][trace["lost_at_s"] >= t_jump]
+        out["kidnap_at_s"] = float(t_jump)
+        out["right_before_kidnap"] = bool(ok[cut - 1])
+        out["detected_after_s"] = float(after[0] - t_jump) if len(after) else None
+        if len(after):
+            i0 = int(np.searchsorted(t, after[0]))
+            back = np.flatnonzero(np.array([ok[j:].all() for j in range(i0, len(t))]))
+            out["reconverged_after_s"] = float(t[i0 + back[0]] - after[0]) if len(back) else None
+        else:
+            out["reconverged_after_s"] = None
+    return out
+
+
+def world_summary(rows: list[dict]) -> dict:
+    n = len(rows)
+    s = {"runs": n, "successes": int(sum(r["success"] for r in rows)),
+         "right_at_end": int(sum(r["right_at_end"] for r in rows)),
+         "localized_at_end": int(sum(bool(r["localized_at_end"]) for r in rows)),
+         "confidently_wrong_at_end": int(sum(bool(r["localized_at_end"]) and not r["right_at_end"] for r in rows)),
+         "false_alarms": int(sum(r["false_alarms"] for r in rows)),
+         "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600)}
+    kid = [r for r in rows if "kidnap_at_s" in r and r["right_before_kidnap"]]
+    if kid:
+        s["kidnaps"] = len(kid)
+        s["detected_within_2s"] = int(sum(r["detected_after_s"] is not None and r["detected_after_s"] <= 2.0 for r in kid))
+        s["reconverged_within_5s"] = int(sum(r["reconverged_after_s"] is not None and r["reconverged_after_s"] <= 5.0
+                                             for r in kid))
+    return s
+
+
+def verdict_line(summary: dict, w) -> str:
+    """The run's last line: how many runs ended right, and how many said so; never "localized" below the
+    threshold (a run that is not confident says it is not)."""
+    line = (f"{summary['split']}, {summary['weighting']} {summary['num_particles']} particles: "
+            f"{summary['successes']}/{summary['runs']} runs localized correctly (protocol), "
+            f"{summary['right_at_end']}/{summary['runs']} right at the end")
+    if summary["calibrated"]:
+        line += (f"; {summary['localized_at_end']} ended confident (>= {w.confident_above}), "
+                 f"{summary['confidently_wrong_at_end']} of them wrong; {summary['runs'] - summary['localized_at_end']} "
+                 "ended NOT localized (confidence below the threshold)")
+    else:
+        line += "; no confidence calibration for this weighting: no run is declared localized"
+    return line
+
+
+def plot_worlds(path: Path, names, cfg) -> None:
+    import matplotlib.pyplot as plt
+
+    cols = min(4, len(names))
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3 * rows), squeeze=False)
+    for ax, name in zip(axes.flat, names):
+        world = floors.build(name)
+        for x0, y0, x1, y1 in world.segments:
+            ax.plot([x0, x1], [y0, y1], "k-", lw=0.8)
+        ax.set_title(f"{name} ({floors.split_of(name)})")
+        ax.set_aspect("equal")
+        ax.axis("off")
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    save_figure(fig, path)

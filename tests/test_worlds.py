@@ -1,0 +1,277 @@
+"""Issue 33: floors nobody tuned on, the AMCL habits of the global localizer, and the confidence."""
+
+from __future__ import annotations
+
+import json
+import numpy as np
+import pytest
+
+from irmcl_warp.config import MCLConfig, compose_config
+from irmcl_warp.mcl.confidence import (FEATURES, Confidence, FeatureTracker, ScanAgreement, auroc, fit_logistic, modes,
+                                       reliability, right)
+from irmcl_warp.mcl.track import follow
+from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
+from irmcl_warp.sim import drive_log, floors
+from irmcl_warp.types import LaserInfo, LaserLog
+from tests.devices import DEVICE
+
+
+# --- floors ----------------------------------------------------------------------------------------------
+
+def test_the_split_keeps_tuning_and_test_worlds_apart():
+    tuning, test = set(floors.SPLIT["tuning"]), set(floors.SPLIT["test"])
+    assert tuning and test and not tuning & test
+    assert {floors.split_of(n) for n in tuning} == {"tuning"} and {floors.split_of(n) for n in test} == {"test"}
+    assert {floors.parse(n)[0] for n in test} == set(floors.KINDS)  # every kind of building is tested
+    with pytest.raises(ValueError, match="kind one of"):
+        floors.parse("castle-3")
+
+
+@pytest.mark.parametrize("kind", floors.KINDS)
+def test_every_kind_of_floor_gets_a_drive_clear_of_its_walls(kind):
+    world = floors.build(f"{kind}-{np.random.randint(3, 900)}")
+    points = floors.drive(world, np.random.default_rng(1), 40.0, clearance_m=0.3)
+    assert np.sum(np.hypot(*np.diff(points, axis=0).T)) >= 40.0
+    line = np.concatenate([p + np.linspace(0, 1, 20)[:, None] * (q - p) for p, q in zip(points[:-1], points[1:])])
+    assert floors.distance_to_segments(line, world.segments).min() >= 0.3 - 1e-9
+    inside = (line[:, 0] > 0) & (line[:, 0] < world.width_m) & (line[:, 1] > 0) & (line[:, 1] < world.height_m)
+    assert inside.all()
+
+
+def test_a_twin_floors_walls_repeat_after_a_half_turn():
+    world = floors.build("twin-1003")
+    W, H = world.width_m, world.height_m
+    walls = world.segments[:world.n_walls]
+    turned = np.column_stack([W - walls[:, 0], H - walls[:, 1], W - walls[:, 2], H - walls[:, 3]])
+    probe = np.random.default_rng(0).uniform([0, 0], [W, H], (300, 2))
+    assert np.allclose(floors.distance_to_segments(probe, walls), floors.distance_to_segments(probe, turned))
+
+
+def test_a_loop_drive_never_enters_the_closed_core():
+    world = floors.build("loop-1001")
+    (x0, y0, x1, y1), = world.solid
+    pts = floors.drive(world, np.random.default_rng(3), 120.0)
+    assert not np.any((pts[:, 0] > x0) & (pts[:, 0] < x1) & (pts[:, 1] > y0) & (pts[:, 1] < y1))
+
+
+# --- the confidence's parts -------------------------------------------------------------------------------
+
+def test_modes_find_two_clouds_with_their_weights_and_poses():
+    rng = np.random.default_rng()
+    a, b = np.array([2.0, 3.0, 0.5]), np.array([12.0, -4.0, -2.0])
+    n = 4000
+    particles = np.vstack([a + rng.normal(0, [0.1, 0.1, 0.02], (n, 3)), b + rng.normal(0, [0.1, 0.1, 0.02], (n, 3))])
+    share = rng.uniform(0.55, 0.8)
+    log_w = np.log(np.r_[np.full(n, share / n), np.full(n, (1 - share) / n)])
+    m = modes(particles, log_w)
+    assert m.weights[0] == pytest.approx(share, abs=1e-6) and m.weights[1] == pytest.approx(1 - share, abs=1e-6)
+    assert np.allclose(m.poses[0], a, atol=0.02) and np.allclose(m.poses[1], b, atol=0.02)
+
+
+def _box_map(res=0.05):
+    occ = np.zeros((200, 300), np.float32)
+    occ[[0, -1], :] = 1
+    occ[:, [0, -1]] = 1
+    occ[80:120, 150:154] = 1  # a pillar
+    return occ, (0.0, 0.0), res
+
+
+def test_the_scan_agrees_with_the_map_at_the_true_pose_and_not_beside_it():
+    occ, origin, res = _box_map()
+    pose, T = np.array([4.0, 5.0, 0.3]), np.array([0.1, 0.0, 0.0])
+    angles = np.linspace(-2.3, 2.3, 360)
+    # the true ranges by marching the grid from the laser pose
+    lx, ly = pose[0] + 0.1 * np.cos(pose[2]), pose[1] + 0.1 * np.sin(pose[2])
+    r = np.full(len(angles), np.nan)
+    for i, a in enumerate(angles):
+        for d in np.arange(0.05, 20, 0.01):
+            ix, iy = int((lx + d * np.cos(a + pose[2])) / res), int((ly + d * np.sin(a + pose[2])) / res)
+            if occ[iy, ix] >= 0.65:
+                r[i] = d
+                break
+    agree = ScanAgreement(occ, origin, res, tolerance_m=0.1, beam_step=1)
+    assert agree(pose, r, angles, T) > 0.97
+    assert agree(pose + [0.6, 0.4, 0.0], r, angles, T) < 0.5
+    assert agree(pose + [0.0, 0.0, 0.2], r, angles, T) < 0.5
+
+
+def test_auroc_is_the_share_of_right_wrong_pairs_ordered_right():
+    rng = np.random.default_rng()
+    score, label = rng.integers(0, 6, 60).astype(float), rng.random(60) < 0.4
+    pos, neg = score[label], score[~label]
+    pairs = np.mean([(p > q) + 0.5 * (p == q) for p in pos for q in neg])
+    assert auroc(score, label) == pytest.approx(pairs)
+    assert auroc(np.arange(10.0), np.arange(10) >= 5) == 1.0
+
+
+def test_a_logistic_fit_is_calibrated_on_data_drawn_from_a_logistic_model():
+    rng = np.random.default_rng()
+    X = rng.normal(0, 1, (20000, len(FEATURES)))
+    truth = np.linspace(-1.5, 1.5, len(FEATURES))
+    y = rng.random(len(X)) < 1 / (1 + np.exp(-(X @ truth + 0.3)))
+    model = fit_logistic(X, y)
+    assert np.allclose(model.coef, truth, atol=0.1) and model.intercept == pytest.approx(0.3, abs=0.1)
+    # the reliability curve lies within a stated band: 0.05 where a bin holds at least 500 samples
+    for b in reliability(model(X), y):
+        if b["count"] >= 500:
+            assert abs(b["predicted"] - b["observed"]) < 0.05
+    again = Confidence(**{k: v for k, v in model.to_json().items() if k in ("coef", "intercept", "mean", "scale")})
+    assert np.allclose(again(X[:50]), model(X[:50]))
+
+
+def test_right_means_within_half_a_metre_and_ten_degrees():
+    gt = np.zeros((4, 3))
+    est = np.array([[0.3, 0.3, 0.0], [0.4, 0.4, 0.0], [0.0, 0.0, np.radians(9.0)], [0.0, 0.0, np.radians(-11.0)]])
+    assert right(est, gt).tolist() == [True, False, True, False]
+
+
+# --- the filter's AMCL habits ------------------------------------------------------------------------------
+
+def _filter(**mcl):
+    occ, origin, res = _box_map()
+    cfg = MCLConfig(num_particles=2000, num_beams=30, resample_threshold=0.0, **mcl)
+    view = free_space_view(occ, origin, res)
+    maps = WeightingMaps(occupancy=occ, origin_xy=origin, resolution_m=res)
+    return build_filter(cfg, view, (0.1, 0, 0), np.linspace(-2.3, 2.3, 360), 20.0, DEVICE, maps)
+
+
+def test_a_tempered_likelihood_scales_the_accumulated_weights():
+    ranges = np.random.default_rng().uniform(1, 8, 360).astype(np.float32)
+    logs = []
+    for temper in (1.0, 0.25):
+        pf = _filter(weighting="likelihood_field", temper=temper)
+        pf.init_uniform()
+        pf.step((0.0, 0.0, 0.0), ranges)
+        logs.append(pf.log_w.numpy().copy())
+    assert np.allclose(logs[1], 0.25 * logs[0], rtol=1e-5, atol=1e-4) and np.ptp(logs[0]) > 1
+
+
+@pytest.mark.parametrize("weighting", ["likelihood_field", "beam_model"])
+def test_the_grid_models_constants_are_settings_that_reach_the_kernel(weighting):
+    ranges = np.random.default_rng().uniform(1, 8, 360).astype(np.float32)
+    out = []
+    for z_rand in (0.05, 0.5):
+        pf = _filter(weighting=weighting, z_rand=z_rand)
+        pf.set_particles(np.array([[4.0, 5.0, 0.1], [6.0, 3.0, 1.0]]))
+        pf.step((0.0, 0.0, 0.0), ranges)
+        out.append(pf.log_lik.numpy().copy())
+    assert not np.allclose(out[0], out[1])
+    assert np.all(out[1] > out[0])  # more of every beam's likelihood put on random readings: a likelihood never lower
+
+
+def _standing_then_driving_log(n=30):
+    odom = np.zeros((n, 3))
+    odom[10:, 0] = np.arange(n - 10) * 0.05  # stands for 10 scans, then drives along x
+    info = LaserInfo(360, -2.3, 4.6 / 359, 0.0, 20.0, 20.0)
+    ranges = np.full((n, 360), 3.0, np.float32)
+    return LaserLog(1000 + np.arange(n) * 0.2, ranges, odom, info, np.array([0.1, 0, 0]), None, "standing")
+
+
+def test_the_first_update_waits_for_motion_when_asked():
+    log = _standing_then_driving_log()
+    m = MCLConfig(update_min_trans_m=0.22, first_update="motion")
+    pf = _filter(weighting="likelihood_field", update_min_trans_m=0.22, first_update="motion")
+    pf.init_uniform()
+    est = follow(pf, log, np.arange(len(log.stamps)), m)
+    first = int(np.argmax(np.all(np.isfinite(est), 1)))
+    assert np.isnan(est[:first]).all() and first == 15 and pf.steps == 3  # scans 15, 20, 25
+    m_scan = MCLConfig(update_min_trans_m=0.22, first_update="scan")
+    pf = _filter(weighting="likelihood_field", update_min_trans_m=0.22)
+    pf.init_uniform()
+    assert np.isfinite(follow(pf, log, np.arange(len(log.stamps)), m_scan)).all()  # IR-MCL's code: the first scan at once
+
+
+def test_feature_tracker_gives_every_feature_and_resets():
+    occ, origin, res = _box_map()
+    tracker = FeatureTracker(ScanAgreement(occ, origin, res))
+    rng = np.random.default_rng()
+    particles = np.column_stack([rng.uniform(1, 14, 500), rng.uniform(1, 9, 500), rng.uniform(-3, 3, 500)])
+    f, m = tracker(particles, np.zeros(500), np.full(360, 3.0), np.linspace(-2.3, 2.3, 360), (0.1, 0, 0))
+    assert f.shape == (len(FEATURES),) and np.isfinite(f).all() and tracker.updates == 1
+    assert f[0] == pytest.approx(m.weights[0]) and f[0] < 0.5  # a uniform cloud has no dominant mode
+    tracker.reset()
+    assert tracker.updates == 0 and not tracker.history
+
+
+# --- the stage ----------------------------------------------------------------------------------------------
+
+def _worlds_cfg(*extra):
+    return compose_config(["+exp=worlds", "worlds.split=hall-5", "worlds.runs=1", "worlds.run_s=12",
+                           "worlds.map_drive_m=60", "mcl.num_particles=3000", f"device={DEVICE}", *extra])
+
+
+def _fake_calibration(path):
+    """A calibration that trusts the scan's agreement alone (for the stage's bookkeeping, not a fitted one)."""
+    coef = np.zeros(len(FEATURES))
+    coef[FEATURES.index("agreement")] = 6.0
+    path.write_text(json.dumps({"features": list(FEATURES), "coef": coef.tolist(), "intercept": 0.0,
+                                "mean": [0.0] * len(FEATURES), "scale": [1.0] * len(FEATURES)}))
+    return path
+
+
+def test_the_worlds_stage_records_every_update_and_ends_with_a_verdict(tmp_path, monkeypatch, capsys):
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    cal = _fake_calibration(tmp_path / "cal.json")
+    out = run_worlds(_worlds_cfg(f"worlds.calibration={cal}"))
+    doc = json.loads((out / "metrics.json").read_text())
+    z = np.load(out / "hall-5-run1.npz")
+    assert z["features"].shape == (len(z["stamps"]), len(FEATURES))
+    assert np.isfinite(z["features"][z["updated"]]).all() and np.isnan(z["features"][~z["updated"]]).all()
+    r = doc["runs"][0]
+    assert r["localized_at_end"] == (r["confidence_at_end"] >= 0.8)
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "ended NOT localized" in last and f"{doc['summary']['localized_at_end']} ended confident" in last
+    assert doc["summary"]["calibrated"] and doc["summary"]["runs"] == 1
+    # a second call with the same settings returns the finished run; another calibration is another run
+    assert run_worlds(_worlds_cfg(f"worlds.calibration={cal}")) == out
+    cal.write_text(cal.read_text().replace('"intercept": 0.0', '"intercept": -1.0'))
+    assert run_worlds(_worlds_cfg(f"worlds.calibration={cal}")) != out
+
+
+def test_the_worlds_stage_refuses_a_nof_weighting_it_cannot_train(tmp_path, monkeypatch):
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match="NOF trained on each world"):
+        run_worlds(_worlds_cfg("mcl.weighting=nog_raymarch"))
+
+
+def test_calibration_is_fitted_on_tuning_worlds_only(tmp_path):
+    from eval.confidence import samples
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text(json.dumps({"summary": {"weighting": "likelihood_field"},
+                                                  "runs": [{"world": "office-1001", "run": 1}]}))
+    with pytest.raises(ValueError, match="test world"):
+        samples([run], "tuning")
+
+
+def test_judging_refuses_tuning_worlds(tmp_path):
+    from eval.confidence import samples
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text(json.dumps({"summary": {"weighting": "likelihood_field"},
+                                                  "runs": [{"world": "office-3", "run": 1}]}))
+    with pytest.raises(ValueError, match="tuning world"):
+        samples([run], "test")
+
+
+def test_a_pose_without_estimate_has_no_tum_line(tmp_path):
+    from irmcl_warp.io import read_tum, write_tum
+
+    est = np.array([[np.nan] * 3, [1.0, 2.0, 0.5], [np.nan] * 3, [2.0, 2.0, 0.1]])
+    write_tum(tmp_path / "a.tum", [1.0, 2.0, 3.0, 4.0], est)
+    stamps, poses = read_tum(tmp_path / "a.tum")
+    assert stamps.tolist() == [2.0, 4.0] and np.allclose(poses[:, :2], est[[1, 3], :2])
+
+
+def test_a_drive_log_follows_its_waypoints():
+    cfg = compose_config([])
+    world = floors.build("hall-7")
+    pts = floors.drive(world, np.random.default_rng(2), 20.0)
+    log = drive_log(world, cfg.sim, pts, 2, device=DEVICE)
+    assert np.allclose(log.ground_truth[0, :2], pts[0]) and np.isfinite(log.ranges_m).any(1).all()
