@@ -275,3 +275,15 @@ def test_a_drive_log_follows_its_waypoints():
     pts = floors.drive(world, np.random.default_rng(2), 20.0)
     log = drive_log(world, cfg.sim, pts, 2, device=DEVICE)
     assert np.allclose(log.ground_truth[0, :2], pts[0]) and np.isfinite(log.ranges_m).any(1).all()
+
+
+def test_between_updates_the_pose_follows_the_odometry():
+    from irmcl_warp.geometry import compose, relative
+    from irmcl_warp.mcl.track import between_updates
+
+    rng = np.random.default_rng()
+    pose, o0 = rng.normal(0, 3, 3), rng.normal(0, 3, 3)
+    o1 = compose(o0[None], np.array([[0.15, 0.02, 0.4]]))[0]
+    moved = between_updates(pose, o0, o1)
+    assert np.allclose(relative(pose[None], moved[None])[0], [0.15, 0.02, 0.4])
+    assert between_updates(pose, o0, o0) is pose and np.isnan(between_updates(None, o0, o1)).all()

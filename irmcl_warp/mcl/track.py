@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from irmcl_warp.geometry import compose, relative
 from irmcl_warp.types import LaserLog
 from kernels.motion import odometry_step
 
@@ -27,6 +28,15 @@ def moved(odom_step, min_trans: float, min_rot: float) -> bool:
     """Has the robot moved enough since the last update (AMCL's update_min_d / update_min_a)?"""
     rot1, trans, rot2 = odom_step
     return abs(trans) > min_trans or abs(rot1 + rot2) > min_rot
+
+
+def between_updates(pose, odom_at_update, odom_now):
+    """The pose at a scan the filter did not weigh: the last update's estimate moved by the odometry since
+    (what AMCL's map -> odom transform gives a robot between updates). None yet: NaN (mcl.first_update=motion)."""
+    if pose is None:
+        return np.full(3, np.nan)
+    delta = relative(np.asarray(odom_at_update, float)[None], np.asarray(odom_now, float)[None])[0]
+    return pose if not np.any(delta) else compose(np.asarray(pose, float)[None], delta[None])[0]
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
@@ -54,7 +64,7 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
             if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
                 pf.reduce(m.reduce_to)
                 reduce_pending = False
-        est[j] = np.nan if pose is None else pose  # (mcl.first_update=motion: no estimate before the first update)
+        est[j] = np.nan if pose is None else between_updates(pose, last_odom, log.odom[i])
         if watch is not None:
             watch(j, pf)
     return est

@@ -30,7 +30,7 @@ from irmcl_warp.geometry import compose, relative
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, ScanAgreement, right, shipped
-from irmcl_warp.mcl.track import moved
+from irmcl_warp.mcl.track import between_updates, moved
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.services.outputs import save_figure
@@ -165,8 +165,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
                             weighed, pose = False, None
                 else:
                     low_since = None
-        if pose is not None:
-            est[i] = pose
+        est[i] = between_updates(pose, last_odom, log.odom[i])
         prob[i] = p
     return {"estimate": est, "features": feats, "confidence": prob, "updated": updated,
             "lost_at_s": np.array(lost_at, float)}
