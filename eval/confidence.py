@@ -10,7 +10,8 @@ irmcl_warp/mcl/confidence.py. It refuses runs on test worlds: the calibration is
 ``judge`` applies a calibration to runs of the test worlds (it refuses tuning worlds): the AUROC of the confidence
 (right against wrong updates), its reliability curve (predicted against observed, per tenth), the same for the
 features alone (the top mode's weight, the spread: the signals the filter used to report), and writes a record
-``confidence-<weighting>.json`` with a plot ``confidence-<weighting>.png`` beside it.
+``confidence-<weighting>-<particles>.json`` with a plot (``.png``) beside it. One calibration is for one observation
+model and one particle count (the features depend on both).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from irmcl_warp.sim import floors
 def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict]:
     """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
     worlds of ``side`` (tuning | test)."""
-    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set()}
+    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set(), "particles": set()}
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         for r in doc["runs"]:
@@ -43,9 +44,14 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
             prov["worlds"].add(r["world"])
         prov["runs"].append(Path(d).name)
         prov["weighting"].add(doc["summary"]["weighting"])
+        prov["particles"].add(doc["summary"].get("num_particles"))
     if len(prov["weighting"]) != 1:
         raise ValueError(f"runs of several weightings ({sorted(prov['weighting'])}): one calibration is for one")
-    prov = {"runs": prov["runs"], "worlds": sorted(prov["worlds"]), "weighting": prov["weighting"].pop()}
+    if len(prov["particles"]) != 1:
+        raise ValueError(f"runs of several particle counts ({sorted(map(str, prov['particles']))}): the features "
+                         "depend on the count (a larger cloud keeps a wider spread); one calibration is for one")
+    prov = {"runs": prov["runs"], "worlds": sorted(prov["worlds"]), "weighting": prov["weighting"].pop(),
+            "particles": prov["particles"].pop()}
     return np.concatenate(X), np.concatenate(y), prov
 
 
@@ -54,7 +60,7 @@ def fit(args) -> Path:
     model = fit_logistic(X, y)
     out = Path(args.out) if args.out else CALIBRATION_DIR / f"{prov['weighting']}.json"
     model.meta = {"source": f"eval.confidence fit on {', '.join(prov['runs'])}", "tuning_worlds": prov["worlds"],
-                  "weighting": prov["weighting"], "updates": int(len(y)), "right_share": float(y.mean()),
+                  "weighting": prov["weighting"], "num_particles": prov["particles"], "updates": int(len(y)), "right_share": float(y.mean()),
                   "tuning_auroc": auroc(model(X), y)}
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, model.to_json())
@@ -68,7 +74,7 @@ def judge(args) -> dict:
     cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
     model = Confidence.load(cal)
     p = model(X)
-    doc = {"weighting": prov["weighting"], "test_worlds": prov["worlds"], "runs": prov["runs"],
+    doc = {"weighting": prov["weighting"], "num_particles": prov["particles"], "test_worlds": prov["worlds"], "runs": prov["runs"],
            "calibration": str(cal), "tuning_worlds": model.meta.get("tuning_worlds"), "updates": int(len(y)),
            "right_share": float(y.mean()), "auroc": auroc(p, y), "reliability": reliability(p, y),
            "auroc_top_weight": auroc(X[:, FEATURES.index("top_weight")], y),
@@ -76,8 +82,9 @@ def judge(args) -> dict:
     doc["max_calibration_gap"] = max(abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / f"confidence-{prov['weighting']}.json", doc)
-    plot(out / f"confidence-{prov['weighting']}.png", doc)
+    name = f"confidence-{prov['weighting']}-{prov['particles'] // 1000}k"
+    write_json(out / f"{name}.json", doc)
+    plot(out / f"{name}.png", doc)
     print(f"{prov['weighting']} on {len(prov['worlds'])} test worlds, {len(y)} updates ({100 * y.mean():.0f} % right): "
           f"AUROC {doc['auroc']:.3f} (top mode's weight alone {doc['auroc_top_weight']:.3f}, spread alone "
           f"{doc['auroc_spread']:.3f}); largest calibration gap {doc['max_calibration_gap']:.2f}")
@@ -96,7 +103,7 @@ def plot(path: Path, doc: dict) -> None:
                     textcoords="offset points")
     ax.set_xlabel("predicted probability of being right")
     ax.set_ylabel("share right (test worlds)")
-    ax.set_title(f"{doc['weighting']}: AUROC {doc['auroc']:.3f}")
+    ax.set_title(f"{doc['weighting']}, {doc['num_particles'] // 1000}k: AUROC {doc['auroc']:.3f}")
     ax.legend(loc="upper left")
     save_figure(fig, path)
 

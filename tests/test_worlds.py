@@ -287,3 +287,31 @@ def test_between_updates_the_pose_follows_the_odometry():
     moved = between_updates(pose, o0, o1)
     assert np.allclose(relative(pose[None], moved[None])[0], [0.15, 0.02, 0.4])
     assert between_updates(pose, o0, o0) is pose and np.isnan(between_updates(None, o0, o1)).all()
+
+
+def test_a_rival_place_is_remembered_until_the_scans_rule_it_out():
+    """Two look-alike places: once the set drifted onto one, the other stays a rival while it explains the scans
+    as well (rival margin near 0), and is dropped once it does not."""
+    from irmcl_warp.mcl.confidence import FeatureTracker
+
+    class Agreement:  # the scan agrees at A always, at B until told otherwise
+        b_agrees = True
+
+        def __call__(self, pose, *_):
+            return 1.0 if pose[0] < 5 or self.b_agrees else 0.2
+
+    agree = Agreement()
+    tracker = FeatureTracker(agree, recent=3)
+    rng = np.random.default_rng()
+    a, b = np.array([2.0, 2.0, 0.0]), np.array([8.0, 2.0, np.pi])
+    both = np.vstack([a + rng.normal(0, 0.05, (500, 3)), b + rng.normal(0, 0.05, (500, 3))])
+    f, m = tracker(both, np.r_[np.full(500, 0.1), np.zeros(500)], None, None, None)  # A a little heavier
+    assert m.poses[0][0] < 5 and f[FEATURES.index("rival_margin")] == pytest.approx(0.0) and len(tracker.rivals) == 1
+    only_a = a + rng.normal(0, 0.05, (1000, 3))
+    f, _ = tracker(only_a, np.zeros(1000), None, None, None, (0.5, 0.0, 0.0))
+    assert f[FEATURES.index("rival_margin")] == pytest.approx(0.0)  # B is remembered: nothing ruled it out
+    assert tracker.rivals[0, 0] == pytest.approx(8.0 - 0.5, abs=0.05)  # moved with the odometry (B faces -x)
+    agree.b_agrees = False
+    for _ in range(3):
+        f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+    assert f[FEATURES.index("rival_margin")] == 1.0 and len(tracker.rivals) == 0

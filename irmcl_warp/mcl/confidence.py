@@ -7,8 +7,8 @@ confidence built on them (issue 33).
 * ``ScanAgreement``: the share of a scan's end points, placed from a pose, that lie within ``tolerance_m`` of a
   wall of the map (its distance transform). Near 1 where the scan fits the map at that pose.
 * ``FEATURES``: what the robot has at each update: the heaviest mode's weight, the second's, the scan's agreement
-  at the heaviest mode and at the second, that agreement over the last updates, how many updates the filter has
-  made and the spread. ``Confidence``: a logistic model of these (fitted by ``fit_logistic`` on the tuning worlds'
+  at the heaviest mode and at the second, that agreement over the last updates, its margin over the best rival
+  place the set once held (``FeatureTracker``), how many updates the filter has made and the spread. ``Confidence``: a logistic model of these (fitted by ``fit_logistic`` on the tuning worlds'
   runs, eval.confidence) giving a number meant as the probability that the estimate lies within
   ``RIGHT_M`` / ``RIGHT_DEG`` of the truth.
 * ``auroc``, ``reliability``: how well a confidence separates right from wrong, and how well it is calibrated.
@@ -31,8 +31,8 @@ MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set 
 # samples it evenly
 RIGHT_M = 0.5  # issue 33: the estimate counts as right within 0.5 m ...
 RIGHT_DEG = 10.0  # ... and 10 deg of the truth
-FEATURES = ("top_weight", "second_weight", "agreement", "agreement_margin", "agreement_recent", "log_updates",
-            "log_spread")
+FEATURES = ("top_weight", "second_weight", "agreement", "agreement_margin", "agreement_recent", "rival_margin",
+            "log_updates", "log_spread")
 
 
 @dataclass
@@ -114,30 +114,74 @@ class ScanAgreement:
 
 
 class FeatureTracker:
-    """The confidence's features at each filter update, with the agreement's recent history (``recent``
-    updates) kept across updates."""
+    """The confidence's features at each filter update, with what they remember across updates:
 
-    def __init__(self, agreement: ScanAgreement, recent: int = 10):
+    * the scan's agreement at the heaviest mode over the last ``recent`` updates;
+    * rivals: the places the particle set once held as a mode of at least ``rival_weight`` away from the
+      heaviest one, kept after their particles are gone (resampling drifts a set onto one of two look-alike
+      places without any evidence against the other). Each is moved by the odometry and its scan agreement kept
+      up to date; a rival whose recent agreement falls ``rule_out`` below the heaviest mode's has been ruled out
+      by the scans and is dropped. ``rival_margin`` is the heaviest mode's recent agreement less the best rival's
+      (1 without a rival): near 0 while another place explains the scans as well."""
+
+    def __init__(self, agreement: ScanAgreement, recent: int = 10, rival_weight: float = 0.02, rival_apart_m: float = 2.0,
+                 rule_out: float = 0.25, max_rivals: int = 16):
         self.agreement = agreement
-        self.history = deque(maxlen=recent)
-        self.updates = 0
+        self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
+        self.rule_out, self.max_rivals = rule_out, max_rivals
+        self.reset()
 
     def reset(self) -> None:
-        """After a fresh uniform start (relocalization): the history belongs to the old hypothesis."""
-        self.history.clear()
+        """After a fresh uniform start (relocalization): the history belongs to the old hypotheses."""
+        self.history = deque(maxlen=self.recent)
+        self.rivals = np.zeros((0, 3))
+        self.rival_history = np.zeros((0, self.recent))  # NaN-padded recent agreements, newest last
         self.updates = 0
 
-    def __call__(self, particles, log_w, ranges_m, angles_rad, T_base_laser) -> tuple[np.ndarray, Modes]:
+    def __call__(self, particles, log_w, ranges_m, angles_rad, T_base_laser, odom_delta=(0.0, 0.0, 0.0)
+                 ) -> tuple[np.ndarray, Modes]:
+        """``odom_delta``: the odometry's motion since the last update, in the robot's frame (x, y, yaw)."""
         stride = -(-len(log_w) // MAX_PARTICLES)  # a systematic sample of a large set (a GPU's 100k)
         particles, log_w = np.asarray(particles)[::stride], np.asarray(log_w)[::stride]
         m = modes(particles, log_w)
         self.updates += 1
-        top = self.agreement(m.poses[0], ranges_m, angles_rad, T_base_laser)
-        second = self.agreement(m.poses[1], ranges_m, angles_rad, T_base_laser) if len(m.weights) > 1 else 0.0
+        agree = lambda pose: self.agreement(pose, ranges_m, angles_rad, T_base_laser)  # noqa: E731
+        top = agree(m.poses[0])
+        second = agree(m.poses[1]) if len(m.weights) > 1 else 0.0
         self.history.append(top)
-        f = np.array([m.weights[0], m.weights[1] if len(m.weights) > 1 else 0.0, top, top - second,
-                      float(np.mean(self.history)), np.log1p(self.updates), np.log(spread(particles, log_w) + 0.01)])
+        recent_top = float(np.mean(self.history))
+        rival_margin = self._rivals(m, odom_delta, agree, recent_top)
+        f = np.array([m.weights[0], m.weights[1] if len(m.weights) > 1 else 0.0, top, top - second, recent_top,
+                      rival_margin, np.log1p(self.updates), np.log(spread(particles, log_w) + 0.01)])
         return f, m
+
+    def _rivals(self, m: Modes, odom_delta, agree, recent_top: float) -> float:
+        if len(self.rivals):  # moved as the robot moved
+            self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
+        for pose, w in zip(m.poses[1:], m.weights[1:]):
+            if w < self.rival_weight or np.hypot(*(pose[:2] - m.poses[0, :2])) < self.rival_apart_m:
+                continue
+            if len(self.rivals) and np.min(np.hypot(*(self.rivals[:, :2] - pose[:2]).T)) < self.rival_apart_m:
+                continue
+            if len(self.rivals) < self.max_rivals:
+                self.rivals = np.vstack([self.rivals, pose])
+                self.rival_history = np.vstack([self.rival_history, np.full(self.recent, np.nan)])
+        if not len(self.rivals):
+            return 1.0
+        near_top = np.hypot(*(self.rivals[:, :2] - m.poses[0, :2]).T) < self.rival_apart_m  # the set came to it
+        scores = np.array([agree(p) for p in self.rivals])
+        self.rival_history = np.column_stack([self.rival_history[:, 1:], scores])
+        recent = np.nansum(self.rival_history, 1) / np.maximum(np.isfinite(self.rival_history).sum(1), 1)
+        keep = ~near_top & (recent > recent_top - self.rule_out)
+        self.rivals, self.rival_history = self.rivals[keep], self.rival_history[keep]
+        return float(recent_top - recent[keep].max()) if keep.any() else 1.0
+
+
+def compose_rows(poses: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Each pose [k, 3] moved by ``delta`` (x, y, yaw) in its own frame."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    return np.column_stack([poses[:, 0] + c * delta[0] - s * delta[1], poses[:, 1] + s * delta[0] + c * delta[1],
+                            np.angle(np.exp(1j * (poses[:, 2] + delta[2])))])
 
 
 def right(est: np.ndarray, gt: np.ndarray) -> np.ndarray:

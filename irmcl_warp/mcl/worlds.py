@@ -146,8 +146,9 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
         u = odometry_step(last_odom, log.odom[i])
         if (not weighed and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
             pf.step(u, log.ranges_m[i])
+            delta = relative(last_odom[None], log.odom[i][None])[0]
             last_odom, weighed, updated[i] = log.odom[i], True, True
-            f, md = tracker(pf.particles.numpy(), pf.log_w.numpy(), log.ranges_m[i], angles, T)
+            f, md = tracker(pf.particles.numpy(), pf.log_w.numpy(), log.ranges_m[i], angles, T, delta)
             feats[i], pose = f, md.poses[0]
             if conf is not None:
                 p = float(conf(f))
