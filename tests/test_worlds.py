@@ -76,12 +76,9 @@ def _box_map(res=0.05):
     return occ, (0.0, 0.0), res
 
 
-def test_the_scan_agrees_with_the_map_at_the_true_pose_and_not_beside_it():
-    occ, origin, res = _box_map()
-    pose, T = np.array([4.0, 5.0, 0.3]), np.array([0.1, 0.0, 0.0])
-    angles = np.linspace(-2.3, 2.3, 360)
-    # the true ranges by marching the grid from the laser pose
-    lx, ly = pose[0] + 0.1 * np.cos(pose[2]), pose[1] + 0.1 * np.sin(pose[2])
+def _true_ranges(occ, res, pose, angles, laser_x=0.1):
+    """The ranges from the laser pose (``laser_x`` ahead of ``pose``), marching the grid in 1 cm steps."""
+    lx, ly = pose[0] + laser_x * np.cos(pose[2]), pose[1] + laser_x * np.sin(pose[2])
     r = np.full(len(angles), np.nan)
     for i, a in enumerate(angles):
         for d in np.arange(0.05, 20, 0.01):
@@ -89,6 +86,26 @@ def test_the_scan_agrees_with_the_map_at_the_true_pose_and_not_beside_it():
             if occ[iy, ix] >= 0.65:
                 r[i] = d
                 break
+    return r
+
+
+def test_refining_a_hypothesis_brings_it_back_onto_the_scan():
+    occ, origin, res = _box_map()
+    pose, T, angles = np.array([5.0, 4.0, -0.4]), np.array([0.1, 0.0, 0.0]), np.linspace(-2.3, 2.3, 180)
+    r = _true_ranges(occ, res, pose, angles)
+    agree = ScanAgreement(occ, origin, res, tolerance_m=0.1, beam_step=1)
+    off = pose + np.array([0.2, -0.1, 0.05])
+    refined, score = agree.refine(off, r, angles, T)
+    assert score > 0.95 > agree(off, r, angles, T)
+    assert np.hypot(*(refined[:2] - pose[:2])) < 0.08 and abs(refined[2] - pose[2]) < 0.03
+    assert np.allclose(agree.many(np.vstack([pose, off]), r, angles, T), [agree(pose, r, angles, T), agree(off, r, angles, T)])
+
+
+def test_the_scan_agrees_with_the_map_at_the_true_pose_and_not_beside_it():
+    occ, origin, res = _box_map()
+    pose, T = np.array([4.0, 5.0, 0.3]), np.array([0.1, 0.0, 0.0])
+    angles = np.linspace(-2.3, 2.3, 360)
+    r = _true_ranges(occ, res, pose, angles)
     agree = ScanAgreement(occ, origin, res, tolerance_m=0.1, beam_step=1)
     assert agree(pose, r, angles, T) > 0.97
     assert agree(pose + [0.6, 0.4, 0.0], r, angles, T) < 0.5
@@ -230,6 +247,26 @@ def test_the_worlds_stage_records_every_update_and_ends_with_a_verdict(tmp_path,
     assert run_worlds(_worlds_cfg(f"worlds.calibration={cal}")) != out
 
 
+def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
+    from eval.report.tables import worlds_table
+    from irmcl_warp import runs
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    cal = _fake_calibration(tmp_path / "cal.json")
+    out = run_worlds(_worlds_cfg(f"worlds.calibration={cal}", "worlds.split=hall-1005+loop-1004"))
+    doc = json.loads((out / "metrics.json").read_text())
+    rec = runs.Record(doc, "worlds", "worlds", "x" * 64, json.loads(json.dumps(
+        {"worlds": {"split": "test", "kidnap_at_s": 0.0}, "mcl": {"weighting": "likelihood_field",
+                                                                  "num_particles": 3000}})))
+    row = worlds_table([rec]).splitlines()[-1]
+    s = doc["summary"]
+    assert f"| {s['successes']}/2 | {s['right_at_end']}/2 | {s['localized_at_end']}/2 |" in row
+    assert "hall-1005" in row and "loop-1004" in row and 0.0 <= s["auroc"] <= 1.0 if s["auroc"] is not None else True
+    rec.config["worlds"]["split"] = "tuning"
+    assert len(worlds_table([rec]).splitlines()) == 2  # tuning runs are never reported
+
+
 def test_the_worlds_stage_refuses_a_nof_weighting_it_cannot_train(tmp_path, monkeypatch):
     from irmcl_warp.mcl.worlds import run_worlds
 
@@ -282,7 +319,7 @@ def test_between_updates_the_pose_follows_the_odometry():
     from irmcl_warp.mcl.track import between_updates
 
     rng = np.random.default_rng()
-    pose, o0 = rng.normal(0, 3, 3), rng.normal(0, 3, 3)
+    pose, o0 = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)  # (yaws within [-pi, pi], as the filter gives them)
     o1 = compose(o0[None], np.array([[0.15, 0.02, 0.4]]))[0]
     moved = between_updates(pose, o0, o1)
     assert np.allclose(relative(pose[None], moved[None])[0], [0.15, 0.02, 0.4])

@@ -300,3 +300,26 @@ def globloc_table(runs: list) -> str:
             rows.append(f"| {world} | {m['scenario']} | {label} | {sm['localized']}/{sm['runs']} "
                         f"| {lo:.2f}-{hi:.2f} | {ttl} | {rec} | {det} | {sm['false_relocalizations_per_hour']:.1f} | {rmse} |")
     return "\n".join(rows)
+
+
+def worlds_table(runs: list) -> str:
+    """Global localization on the held-out simulated floors (stage worlds): one row per kept run of the test split
+    (observation model, particles, kidnapped or not), its counts over all runs and, per floor, how many runs
+    ended right."""
+    rows = ["| floors | weighting | particles | device | kidnap | localized (protocol) | right at the end | ended "
+            "confident | confidently wrong | AUROC | false alarms per hour | kidnap detected <= 2 s | re-converged "
+            "<= 5 s | right at the end, per floor |", "|" + "---|" * 14]
+    test = [r for r in runs if r.setting("worlds.split") == "test"]
+    for r in sorted(test, key=lambda r: (r.setting("mcl.weighting"), r.setting("mcl.num_particles"),
+                                         r.setting("worlds.kidnap_at_s"))):
+        s, n = r["summary"], r["summary"]["runs"]
+        kid, k = r.setting("worlds.kidnap_at_s"), s.get("kidnaps")
+        per = " · ".join(f"{w} {v['right_at_end']}/{v['runs']}" for w, v in r["per_world"].items())
+        fa = s["false_alarms"] / s["tracking_right_h"] if s["tracking_right_h"] > 0 else None
+        detected = f"{s['detected_within_2s']}/{k}" if k else "-"
+        back = f"{s['reconverged_within_5s']}/{k}" if k else "-"
+        rows.append(f"| test ({len(s['worlds'])}) | {s['weighting'].replace('_', ' ')} | {s['num_particles'] // 1000}k "
+                    f"| {s['device']} | {f'{kid:g} s' if kid else '-'} | {s['successes']}/{n} | {s['right_at_end']}/{n} "
+                    f"| {s['localized_at_end']}/{n} | {s['confidently_wrong_at_end']} | {_f(s.get('auroc'), '{:.3f}')} "
+                    f"| {_f(fa)} | {detected} | {back} | {per} |")
+    return "\n".join(rows)

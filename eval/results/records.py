@@ -31,7 +31,7 @@ from irmcl_warp.runs import Record, find, matches  # noqa: F401  (the query inte
 REPO = Path(__file__).resolve().parents[2]
 RESULTS, OUTPUTS = REPO / "results", REPO / "outputs"
 GROUPS = {"train": "nof", "synthesis": "nof", "localize": "mcl", "slam": "slam", "globloc": "globloc",
-          "pipeline": "pipeline"}  # a stage's records are kept in results/<group>/<exp>.json
+          "pipeline": "pipeline", "worlds": "worlds"}  # a stage's records are kept in results/<group>/<exp>.json
 MAX_FILE_BYTES = 800_000  # one results file at most (the repository keeps no file over 1 MB)
 # settings that decide how fast a run goes, never what it gives (the same bits: tests/test_weighting.py
 # for the batched march, tests/test_mcl.py for the step's graph and the march order): tables ignore them

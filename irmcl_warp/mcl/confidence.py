@@ -95,22 +95,37 @@ class ScanAgreement:
         self.origin, self.res, self.step = np.asarray(origin_xy, float), float(resolution_m), int(beam_step)
 
     def __call__(self, pose, ranges_m, angles_rad, T_base_laser) -> float:
+        return float(self.many(np.asarray(pose, float)[None], ranges_m, angles_rad, T_base_laser)[0])
+
+    def many(self, poses, ranges_m, angles_rad, T_base_laser) -> np.ndarray:
+        """The agreement at each of ``poses`` [k, 3]: [k]."""
         r = np.asarray(ranges_m, float)[::self.step]
         a = np.asarray(angles_rad, float)[::self.step]
         ok = np.isfinite(r)
+        poses = np.asarray(poses, float)
         if not ok.any():
-            return 0.0
-        x, y, yaw = pose
+            return np.zeros(len(poses))
+        x, y, yaw = poses[:, :1], poses[:, 1:2], poses[:, 2:3]
         c, s = np.cos(yaw), np.sin(yaw)
         lx, ly = x + c * T_base_laser[0] - s * T_base_laser[1], y + s * T_base_laser[0] + c * T_base_laser[1]
-        heading = yaw + T_base_laser[2] + a[ok]
+        heading = yaw + T_base_laser[2] + a[ok][None]
         ix = np.floor((lx + r[ok] * np.cos(heading) - self.origin[0]) / self.res).astype(int)
         iy = np.floor((ly + r[ok] * np.sin(heading) - self.origin[1]) / self.res).astype(int)
         H, W = self.near.shape
         inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
-        hits = np.zeros(len(ix), bool)
+        hits = np.zeros(ix.shape, bool)
         hits[inside] = self.near[iy[inside], ix[inside]]
-        return float(hits.mean())
+        return hits.mean(1)
+
+    def refine(self, pose, ranges_m, angles_rad, T_base_laser, step_m: float = 0.1, step_rad: float = 0.05):
+        """(the pose of best agreement among ``pose`` and its 124 neighbours on a grid of +-2 steps in x, y and
+        yaw, its agreement): a hypothesis kept aligned with the scans without particles."""
+        d = np.arange(-2, 3)
+        grid = np.stack(np.meshgrid(d * step_m, d * step_m, d * step_rad, indexing="ij"), -1).reshape(-1, 3)
+        cand = np.asarray(pose, float) + grid
+        score = self.many(cand, ranges_m, angles_rad, T_base_laser)
+        best = int(np.argmax(score + 1e-6 * (np.abs(grid).sum(1) == 0)))  # ties: stay
+        return cand[best], float(score[best])
 
 
 class FeatureTracker:
@@ -122,11 +137,13 @@ class FeatureTracker:
       places without any evidence against the other). Each is moved by the odometry and its scan agreement kept
       up to date; a rival whose recent agreement falls ``rule_out`` below the heaviest mode's has been ruled out
       by the scans and is dropped. ``rival_margin`` is the heaviest mode's recent agreement less the best rival's
-      (1 without a rival): near 0 while another place explains the scans as well."""
+      (1 without a rival): near 0 while another place explains the scans as well. With ``refine_rivals`` each
+      rival is moved, at every update, to the best agreeing pose near it (``ScanAgreement.refine``): the odometry's
+      drift and a mode's rough mean pose would otherwise rule a true place out."""
 
     def __init__(self, agreement: ScanAgreement, recent: int = 10, rival_weight: float = 0.02, rival_apart_m: float = 2.0,
-                 rule_out: float = 0.25, max_rivals: int = 16):
-        self.agreement = agreement
+                 rule_out: float = 0.25, max_rivals: int = 16, refine_rivals: bool = False):
+        self.agreement, self.refine_rivals = agreement, refine_rivals
         self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
         self.rule_out, self.max_rivals = rule_out, max_rivals
         self.reset()
@@ -146,6 +163,7 @@ class FeatureTracker:
         m = modes(particles, log_w)
         self.updates += 1
         agree = lambda pose: self.agreement(pose, ranges_m, angles_rad, T_base_laser)  # noqa: E731
+        self._scan = (ranges_m, angles_rad, T_base_laser)
         top = agree(m.poses[0])
         second = agree(m.poses[1]) if len(m.weights) > 1 else 0.0
         self.history.append(top)
@@ -168,8 +186,13 @@ class FeatureTracker:
                 self.rival_history = np.vstack([self.rival_history, np.full(self.recent, np.nan)])
         if not len(self.rivals):
             return 1.0
+        if self.refine_rivals:
+            refined = [self.agreement.refine(p, *self._scan) for p in self.rivals]
+            self.rivals = np.array([p for p, _ in refined])
+            scores = np.array([a for _, a in refined])
+        else:
+            scores = np.array([agree(p) for p in self.rivals])
         near_top = np.hypot(*(self.rivals[:, :2] - m.poses[0, :2]).T) < self.rival_apart_m  # the set came to it
-        scores = np.array([agree(p) for p in self.rivals])
         self.rival_history = np.column_stack([self.rival_history[:, 1:], scores])
         recent = np.nansum(self.rival_history, 1) / np.maximum(np.isfinite(self.rival_history).sum(1), 1)
         keep = ~near_top & (recent > recent_top - self.rule_out)

@@ -36,7 +36,7 @@ def between_updates(pose, odom_at_update, odom_now):
     if pose is None:
         return np.full(3, np.nan)
     delta = relative(np.asarray(odom_at_update, float)[None], np.asarray(odom_now, float)[None])[0]
-    return pose if not np.any(delta) else compose(np.asarray(pose, float)[None], delta[None])[0]
+    return pose if np.all(np.abs(delta) < 1e-12) else compose(np.asarray(pose, float)[None], delta[None])[0]
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,

@@ -29,7 +29,8 @@ from irmcl_warp import runs
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
-from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, ScanAgreement, right, shipped
+from irmcl_warp.mcl.confidence import (FEATURES, Confidence, FeatureTracker, ScanAgreement, auroc, reliability,
+                                       right, shipped)
 from irmcl_warp.mcl.track import between_updates, moved
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
@@ -97,7 +98,7 @@ def localize_worlds(run: runs.Run) -> Path:
     device = pick_device(cfg.device)
     conf = calibration_of(cfg)
     names = world_names(cfg.worlds.split)
-    per_world, rows = {}, []
+    per_world, rows, judged = {}, [], []
     bar = tqdm(total=len(names) * cfg.worlds.runs, desc="worlds", unit="run")
     for name in names:
         world = floors.build(name)
@@ -112,20 +113,21 @@ def localize_worlds(run: runs.Run) -> Path:
             pf = build_filter(cfg.mcl, view, log.T_base_laser, log.info.angles_rad, cfg.sim.max_range_m, device, maps)
             pf.rng = np.random.default_rng(cfg.mcl.seed * 1000 + k)
             pf.init_uniform()
-            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement), conf)
+            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement, refine_rivals=cfg.worlds.refine_rivals), conf)
             np.savez_compressed(out / f"{name}-run{k}.npz", stamps=log.stamps, truth=log.ground_truth, **trace)
             write_tum(out / f"{name}-run{k}.tum", log.stamps, trace["estimate"])
             result = score_run(log, trace, cut, cfg.worlds)
             results.append({"world": name, "run": k, **result})
+            judged.append(judged_updates(log, trace))
             bar.update()
             bar.set_postfix_str(f"{name}: {sum(r['success'] for r in results)}/{len(results)} right")
-        per_world[name] = world_summary(results)
+        per_world[name] = {**world_summary(results), **separation(judged[-len(results):])}
         rows += results
     bar.close()
     plot_worlds(out / "worlds.png", names, cfg)
     summary = {"split": cfg.worlds.split, "worlds": list(names), "weighting": cfg.mcl.weighting,
                "num_particles": cfg.mcl.num_particles, "device": device, "calibrated": conf is not None,
-               "calibration": conf.meta.get("source") if conf else None, **world_summary(rows)}
+               "calibration": conf.meta.get("source") if conf else None, **world_summary(rows), **separation(judged)}
     settings = {"mcl": OmegaConf.to_container(cfg.mcl), "worlds": OmegaConf.to_container(cfg.worlds)}
     path = run.finish({"summary": summary, "per_world": per_world, "runs": rows, "settings": settings}, device)
     print(verdict_line(summary, cfg.worlds) + f" -> {path}")
@@ -206,6 +208,23 @@ def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
         else:
             out["reconverged_after_s"] = None
     return out
+
+
+def judged_updates(log: LaserLog, trace: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(confidence, right) at the run's updates with an estimate and a confidence."""
+    ok = trace["updated"] & np.isfinite(trace["confidence"]) & np.all(np.isfinite(trace["estimate"]), 1)
+    return trace["confidence"][ok], right(trace["estimate"][ok], log.ground_truth[ok])
+
+
+def separation(judged: list) -> dict:
+    """How well the confidence told right from wrong over these updates: AUROC and the reliability curve
+    (None without a calibration)."""
+    if not judged or not sum(len(p) for p, _ in judged):
+        return {"auroc": None}
+    p, y = np.concatenate([p for p, _ in judged]), np.concatenate([y for _, y in judged])
+    a = auroc(p, y)
+    return {"auroc": None if np.isnan(a) else a, "updates": int(len(y)), "right_share": float(y.mean()),
+            "reliability": reliability(p, y)}
 
 
 def world_summary(rows: list[dict]) -> dict:
