@@ -117,7 +117,7 @@ def main(argv=None) -> None:
     j = sub.add_parser("judge", help="AUROC and reliability on test-world runs")
     j.add_argument("runs", nargs="+", type=Path)
     j.add_argument("--calibration")
-    j.add_argument("--out", default="results/worlds")
+    j.add_argument("--out", default="outputs/worlds/judged")
     args = ap.parse_args(argv)
     try:
         fit(args) if args.command == "fit" else judge(args)

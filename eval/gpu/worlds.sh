@@ -9,7 +9,7 @@ set -uo pipefail
 export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
 W="python -m irmcl_warp.worlds +exp=worlds mcl.num_particles=100000 device=cuda:0"
-CAL=$PWD/results/worlds/calibration-likelihood_field-100k.json
+CAL=$PWD/irmcl_warp/mcl/calibration/likelihood_field-100k.json  # (results/worlds/ holds run records only)
 case "${1:-runs}" in
   tuning)
     # the features depend on the particle count (a 100k cloud keeps a wider spread): calibrate at 100k on the

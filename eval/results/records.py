@@ -190,6 +190,7 @@ def yours(stages=None, outputs: Path = OUTPUTS) -> list[Record]:
             rec.manifest = {k: manifest.get(k) for k in ("git_sha", "device", "package", "wall_time_s")}
             rec.kept_from = None
             rec.upstream = {s: u["id"] for s, u in manifest.get("upstream", {}).items()}
+            rec.config = complete(rec.config)  # a run made before a setting existed ran at its default, as kept ones
             out.append(rec)
     return out
 

@@ -1,6 +1,7 @@
 """Inputs that read without an error and are still wrong: each check says so loudly, naming the file.
 
-* ``check_map``: a map whose known cells are mostly occupied (an inverted image: white read as occupied);
+* ``check_map``: a map whose known cells are mostly occupied, or whose known free space is mostly cells beside
+  walls (an inverted image: white read as occupied, the walls' thin lines as free space);
 * ``check_beam_order``: a scan whose beams run clockwise while the log says counter-clockwise (or the
   reverse): turning on the spot, consecutive scans then line up with the odometry's rotation only mirrored;
 * ``check_odometry``: odometry that jumps farther between two scans than any robot drives (a corrupt
@@ -18,6 +19,7 @@ import numpy as np
 from irmcl_warp.io.errors import LogDefectWarning
 
 MAX_OCCUPIED_SHARE = 0.5  # of a map's known cells; buildings are mostly free space (our logs' maps: 10-30 %)
+MAX_FREE_ON_WALLS = 0.5  # of a map's known free cells touching a wall (our logs' 5 cm maps: well under a quarter)
 ABSURD_STEP_M = 100.0  # an odometry step between two scans this long is corrupt, not a motion
 
 
@@ -26,8 +28,27 @@ def occupied_share(occupancy_p: np.ndarray, known: np.ndarray) -> float:
     return float((np.asarray(occupancy_p)[k] > 0.5).mean()) if k.any() else 0.0
 
 
+def free_on_walls_share(occupancy_p: np.ndarray, known: np.ndarray) -> float:
+    """Share of the known free cells (p_occ < 0.5) that touch an occupied cell (8-neighbourhood): low in a
+    building's map (rooms and corridors are many cells wide), high where the "free space" is thin lines."""
+    from scipy.ndimage import binary_dilation
+
+    p, k = np.asarray(occupancy_p), np.asarray(known, bool)
+    free, occ = k & (p < 0.5), k & (p > 0.5)
+    if not free.any():
+        return 0.0
+    return float((binary_dilation(occ, np.ones((3, 3), bool)) & free).sum() / free.sum())
+
+
 def check_map(path, occupancy_p: np.ndarray, known: np.ndarray) -> float | None:
-    """Warn when most of the map's known cells are occupied; returns that share when it warned."""
+    """Warn when most of the map's known cells are occupied, or when its known free space is mostly the cells
+    beside walls (thin lines: walls read as free); returns the share it warned about."""
+    edge = free_on_walls_share(occupancy_p, known)
+    if edge > MAX_FREE_ON_WALLS:
+        warnings.warn(f"{path}: {100 * edge:.0f} % of its known free cells touch an occupied cell, where a building's "
+                      f"free space is rooms and corridors many cells wide: are walls read as free space (an inverted "
+                      f"image, map_server's 'negate')?", LogDefectWarning, stacklevel=2)
+        return edge
     share = occupied_share(occupancy_p, known)
     if share > MAX_OCCUPIED_SHARE:
         warnings.warn(f"{path}: {100 * share:.0f} % of its known cells are occupied, where a building's map is mostly "
