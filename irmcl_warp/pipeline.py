@@ -105,7 +105,8 @@ def localize_second_log(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.n
     check_odometry(log.source, log.odom[idx])
     view = free_space_view(slam_map.probability, slam_map.origin_xy, slam_map.resolution_m, slam_map.known)
     m = OmegaConf.merge(cfg.mcl, {"weighting": "nog_raymarch"})  # the pipeline localizes with the NOG it baked
-    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg), device, WeightingMaps(nog=nog))
+    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg, log.info.range_max_m), device,
+                    WeightingMaps(nog=nog))
     pf.rng = np.random.default_rng(m.seed)
     pf.init_uniform()
     est = follow(pf, log, idx, m, cfg.localize.reduce_after_s)

@@ -103,7 +103,18 @@ def test_odometry_step_treats_reversing_as_negative_translation():
     assert odometry_step((0.0, 0.0, 0.0), (0.005, 0.0, 0.2)) == pytest.approx((0.0, 0.005, 0.2))  # a turn in place
 
 
-def sim_tracking_run(duration_s: float, starts: int, run_s: float, particles: int):
+def test_without_data_far_m_the_far_bound_is_the_sensors_range_max(tmp_path, monkeypatch):
+    """Issue 35: every stage reads data.far_m, else floor(range_max) of the log (localize stopped with 'set
+    data.far_m' although the README promises the sensor's range_max)."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    out = sim_tracking_run(duration_s=20, starts=1, run_s=10, particles=300, extra=("data.far_m=null",
+                                                                                    "sim.max_range_m=12.5"))
+    assert json.loads((out / "metrics.json").read_text())["settings"]["far_m"] == 12.0
+
+
+def sim_tracking_run(duration_s: float, starts: int, run_s: float, particles: int, extra=()):
     """The localize stage on the simulator (likelihood field, pose tracking, 10 cm map) in the current folder."""
     from irmcl_warp.mcl.stage import run_localize
 
@@ -112,7 +123,7 @@ def sim_tracking_run(duration_s: float, starts: int, run_s: float, particles: in
         cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", f"sim.duration_s={duration_s}",
                                            "mcl.weighting=likelihood_field", "localize.mode=tracking",
                                            f"localize.num_starts={starts}", f"localize.run_s={run_s}",
-                                           f"mcl.num_particles={particles}", "mcl.map_resolution_m=0.1"])
+                                           f"mcl.num_particles={particles}", "mcl.map_resolution_m=0.1", *extra])
     return run_localize(cfg)
 
 

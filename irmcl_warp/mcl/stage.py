@@ -45,7 +45,7 @@ def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.nd
     """(free-space view for initialisation as a NOG, what the weighting reads, occupancy image for plots:
     p_occ, 0.5 where unknown) from the training split; ``nof``: the trained field (nof.pt) a NOF weighting reads."""
     train = prepare_beams(cfg)["train"]
-    m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg)
+    m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)
     grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
                            device=device)
     free_view = free_space_view(grid.probability, grid.origin_xy, res, grid.known)
@@ -90,8 +90,9 @@ def run_localize(cfg) -> Path:
 def localize_starts(run: runs.Run) -> Path:
     cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
-    m, loc, far = cfg.mcl, cfg.localize, far_bound_m(cfg)
+    m, loc = cfg.mcl, cfg.localize
     log = load_stream(cfg)
+    far = far_bound_m(cfg, log.info.range_max_m)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
     check_odometry(log.source, log.odom)

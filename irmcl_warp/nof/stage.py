@@ -21,7 +21,7 @@ from irmcl_warp import runs
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_scans
 from irmcl_warp.nof.trainer import Trainer
-from irmcl_warp.services.data import far_bound_m, prepare_beams
+from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
 from kernels import pick_device
 
@@ -64,7 +64,7 @@ def train(run: runs.Run) -> Path:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
     sets = prepare_beams(cfg)
-    near, far = cfg.render.near_m, far_bound_m(cfg)
+    near, far = cfg.render.near_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)  # (data.far_m, else the log's)
     meta = run_settings(cfg, sets["train"].name, far)
     model_cfg = ModelConfig(**meta["model_config"])
     trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, run.ident.id,

@@ -21,7 +21,7 @@ from irmcl_warp.nof.beams import BeamSet
 from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp.nof.render import make_renderer, render_scans
 from irmcl_warp import runs
-from irmcl_warp.services.data import far_bound_m, prepare_beams
+from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
 from irmcl_warp.services.outputs import save_figure
 from kernels import RAYCAST, pick_device
@@ -79,7 +79,7 @@ def score_scans(run: runs.Run) -> Path:
     cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
     sets = prepare_beams(cfg)
-    train, test, far = sets["train"], sets["test"], far_bound_m(cfg)
+    train, test, far = sets["train"], sets["test"], far_bound_m(cfg, load_stream(cfg).info.range_max_m)
     preds, methods = {}, {}
     nof_path = run.upstream["train"] / "nof.pt"
     t0 = time.time()
