@@ -189,7 +189,8 @@ def test_per_start_errors_are_compared_with_a_test(rng):
     low, high = list(rng.normal(5.0, 0.3, 10)), list(rng.normal(8.0, 0.3, 10))
     assert C.lower("a", low, "b", high, "cm", "RMSE")[0] == C.REPRODUCED, f"seed {rng.seed}"
     assert C.lower("a", high, "b", low, "cm", "RMSE")[0] == C.NOT_REPRODUCED, f"seed {rng.seed}"
-    same = list(rng.normal(5.0, 0.3, 10))
+    same = [v + rng.normal(0, 0.01) for v in low[::-1]]  # the same values, shuffled a little: no difference to
+    # find (two fresh draws of one distribution differed at p < 0.05 in one run of twenty: a flaky test)
     verdict, reason, test = C.lower("a", low, "b", same, "cm", "RMSE")
     assert verdict in (C.PARTLY, C.NOT_REPRODUCED) and "p = " in test, f"seed {rng.seed}: {reason}"
 
