@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.mcl.confidence import CALIBRATION_DIR, FEATURES, Confidence, auroc, fit_logistic, reliability, right
+from irmcl_warp.config import CALIBRATION_DIR
+from irmcl_warp.mcl.confidence import FEATURES, Confidence, auroc, fit_logistic, reliability, right
 from irmcl_warp.services.outputs import save_figure, write_json
 from irmcl_warp.sim import floors
 

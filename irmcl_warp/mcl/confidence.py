@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from irmcl_warp.config import CALIBRATION_DIR, shipped_calibration
+from irmcl_warp.config import shipped_calibration
 
 MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set (k = ceil(n / this)): 40 ms of
 # host work per update at 100k, 9 ms at 20k (2-core CPU); resampling keeps a set's copies together, so a stride
