@@ -124,7 +124,7 @@ def localize_worlds(run: runs.Run) -> Path:
         per_world[name] = {**world_summary(results), **separation(judged[-len(results):])}
         rows += results
     bar.close()
-    plot_worlds(out / "worlds.png", names, cfg)
+    plot_worlds(out / "worlds.png", names, out)
     summary = {"split": cfg.worlds.split, "worlds": list(names), "weighting": cfg.mcl.weighting,
                "num_particles": cfg.mcl.num_particles, "device": device, "calibrated": conf is not None,
                "calibration": conf.meta.get("source") if conf else None, **world_summary(rows), **separation(judged)}
@@ -259,7 +259,9 @@ def verdict_line(summary: dict, w) -> str:
     return line
 
 
-def plot_worlds(path: Path, names, cfg) -> None:
+def plot_worlds(path: Path, names, out: Path) -> None:
+    """Each world's walls with, per run, where the robot ended (black dot) and where the estimate put it: a green
+    circle when right, a red cross when wrong (a line joins the two), hollow when the run ended not confident."""
     import matplotlib.pyplot as plt
 
     cols = min(4, len(names))
@@ -268,7 +270,18 @@ def plot_worlds(path: Path, names, cfg) -> None:
     for ax, name in zip(axes.flat, names):
         world = floors.build(name)
         for x0, y0, x1, y1 in world.segments:
-            ax.plot([x0, x1], [y0, y1], "k-", lw=0.8)
+            ax.plot([x0, x1], [y0, y1], "k-", lw=0.6)
+        for f in sorted(out.glob(f"{name}-run*.npz")):
+            z = np.load(f)
+            est, gt, p = z["estimate"][-1], z["truth"][-1], z["confidence"][-1]
+            if not np.all(np.isfinite(est)):
+                continue
+            ok = bool(right(est[None], gt[None])[0])
+            sure = bool(np.isfinite(p) and p >= 0.8)
+            ax.plot([gt[0], est[0]], [gt[1], est[1]], "-", color="0.6", lw=0.6)
+            ax.plot(*gt[:2], "k.", ms=4)
+            ax.plot(*est[:2], "o" if ok else "x", color="tab:green" if ok else "tab:red", ms=6,
+                    mfc=("tab:green" if ok else "tab:red") if sure else "none")
         ax.set_title(f"{name} ({floors.split_of(name)})")
         ax.set_aspect("equal")
         ax.axis("off")
