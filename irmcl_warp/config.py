@@ -323,6 +323,8 @@ class WorldsConfig:
     relocalize: bool = True  # False: only report when lost (side-by-side runs of the detector alone)
     refine_rivals: bool = False  # the confidence's rival places re-aligned with each scan (mcl/confidence.py,
     # FeatureTracker; False: moved by the odometry only)
+    search_rivals_every: int = 0  # > 0: every this many updates, search the map's free space (0.5 m, 22.5 deg grid)
+    # for places the scan fits as well as the estimate's, and keep them as rivals (0: rivals are former modes only)
 
 
 @dataclass
@@ -426,7 +428,7 @@ RANGES = {
     "mcl.field_occ_threshold": ("> 0", 1), "mcl.beam_occ_threshold": ("> 0", 1),
     "worlds.runs": (1, None), "worlds.run_s": ("> 0", None), "worlds.map_drive_m": ("> 0", None),
     "worlds.kidnap_at_s": (0, None), "worlds.confident_above": (0, 1), "worlds.lost_below": (0, 1),
-    "worlds.lost_after_s": ("> 0", None),
+    "worlds.lost_after_s": ("> 0", None), "worlds.search_rivals_every": (0, None),
     "localize.num_starts": (1, None), "localize.run_s": ("> 0", None), "localize.kidnap_at_s": (0, None),
     "localize.reduce_after_s": (0, None),
     "slam.num_particles": (1, None), "slam.resample_threshold": (0, 1), "slam.sigma": ("> 0", None),

@@ -267,6 +267,18 @@ def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
     assert len(worlds_table([rec]).splitlines()) == 2  # tuning runs are never reported
 
 
+def test_the_stage_searches_for_rivals_when_asked(tmp_path, monkeypatch):
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    cal = _fake_calibration(tmp_path / "cal.json")
+    out = run_worlds(_worlds_cfg(f"worlds.calibration={cal}", "worlds.split=twin-9", "worlds.search_rivals_every=2",
+                                 "worlds.refine_rivals=true"))
+    z = np.load(out / "twin-9-run1.npz")
+    margin = z["features"][z["updated"], FEATURES.index("rival_margin")]
+    assert np.isfinite(margin).all() and (margin < 0.5).any()  # a half-turn floor: some place fits as well
+
+
 def test_the_worlds_stage_refuses_a_nof_weighting_it_cannot_train(tmp_path, monkeypatch):
     from irmcl_warp.mcl.worlds import run_worlds
 
@@ -352,3 +364,27 @@ def test_a_rival_place_is_remembered_until_the_scans_rule_it_out():
     for _ in range(3):
         f, _ = tracker(only_a, np.zeros(1000), None, None, None)
     assert f[FEATURES.index("rival_margin")] == 1.0 and len(tracker.rivals) == 0
+
+
+def test_the_search_finds_a_twin_floors_look_alike_place():
+    """On a floor whose walls repeat after a half turn, the place the scan fits as well as the truth is the truth
+    turned about the floor's centre (the furniture aside); the search over the free space finds it."""
+    from irmcl_warp.mcl.worlds import search_grid
+    from irmcl_warp.mapping import integrate_scans
+    from irmcl_warp.geometry import compose
+
+    cfg = compose_config([])
+    world = floors.build("twin-7")
+    world.segments = world.segments[:world.n_walls]  # walls only: the twin is exact
+    mapping = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(0), 150.0), 0, device=DEVICE)
+    grid = integrate_scans(compose(mapping.ground_truth, mapping.T_base_laser), mapping.ranges_m,
+                           mapping.info.angles_rad, resolution_m=0.05, max_range_m=20.0, device=DEVICE)
+    agree = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
+    log = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(5), 15.0), 5, device=DEVICE)
+    i = len(log.stamps) // 2
+    truth = log.ground_truth[i]
+    twin = np.array([world.width_m - truth[0], world.height_m - truth[1], np.angle(np.exp(1j * (truth[2] + np.pi)))])
+    found = agree.search(search_grid(grid), log.ranges_m[i], log.info.angles_rad, log.T_base_laser, truth, 2.0)
+    best, score = found[0]
+    assert np.hypot(*(best[:2] - twin[:2])) < 0.3 and abs(np.angle(np.exp(1j * (best[2] - twin[2])))) < 0.1
+    assert score > agree(truth, log.ranges_m[i], log.info.angles_rad, log.T_base_laser) - 0.1

@@ -29,6 +29,7 @@ from irmcl_warp.config import shipped_calibration
 MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set (k = ceil(n / this)): 40 ms of
 # host work per update at 100k, 9 ms at 20k (2-core CPU); resampling keeps a set's copies together, so a stride
 # samples it evenly
+COARSE_TOLERANCE_M = 0.5  # ScanAgreement.search's first pass: poses 0.5 m and 22.5 deg apart are scored this loosely
 RIGHT_M = 0.5  # issue 33: the estimate counts as right within 0.5 m ...
 RIGHT_DEG = 10.0  # ... and 10 deg of the truth
 FEATURES = ("top_weight", "second_weight", "agreement", "agreement_margin", "agreement_recent", "rival_margin",
@@ -91,14 +92,16 @@ class ScanAgreement:
         walls = np.asarray(occupancy) >= occ_threshold
         if not walls.any():
             raise ValueError("scan agreement: the map has no wall")
-        self.near = distance_transform_edt(~walls) * resolution_m <= tolerance_m
+        dist = distance_transform_edt(~walls) * resolution_m
+        self.near = dist <= tolerance_m
+        self.near_coarse = dist <= COARSE_TOLERANCE_M  # for a search over poses 0.5 m and 22.5 deg apart
         self.origin, self.res, self.step = np.asarray(origin_xy, float), float(resolution_m), int(beam_step)
 
     def __call__(self, pose, ranges_m, angles_rad, T_base_laser) -> float:
         return float(self.many(np.asarray(pose, float)[None], ranges_m, angles_rad, T_base_laser)[0])
 
-    def many(self, poses, ranges_m, angles_rad, T_base_laser) -> np.ndarray:
-        """The agreement at each of ``poses`` [k, 3]: [k]."""
+    def many(self, poses, ranges_m, angles_rad, T_base_laser, coarse: bool = False) -> np.ndarray:
+        """The agreement at each of ``poses`` [k, 3]: [k] (``coarse``: within COARSE_TOLERANCE_M of a wall)."""
         r = np.asarray(ranges_m, float)[::self.step]
         a = np.asarray(angles_rad, float)[::self.step]
         ok = np.isfinite(r)
@@ -111,11 +114,32 @@ class ScanAgreement:
         heading = yaw + T_base_laser[2] + a[ok][None]
         ix = np.floor((lx + r[ok] * np.cos(heading) - self.origin[0]) / self.res).astype(int)
         iy = np.floor((ly + r[ok] * np.sin(heading) - self.origin[1]) / self.res).astype(int)
-        H, W = self.near.shape
+        near = self.near_coarse if coarse else self.near
+        H, W = near.shape
         inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
         hits = np.zeros(ix.shape, bool)
-        hits[inside] = self.near[iy[inside], ix[inside]]
+        hits[inside] = near[iy[inside], ix[inside]]
         return hits.mean(1)
+
+    def search(self, candidates, ranges_m, angles_rad, T_base_laser, away_from, apart_m: float, count: int = 3,
+               chunk: int = 4096) -> list[tuple[np.ndarray, float]]:
+        """Look-alike places: the ``count`` best agreeing of ``candidates`` [k, 3] (a coarse grid of the map's free
+        space), each at least ``apart_m`` from ``away_from`` [x, y] and from each other, refined twice (0.2 m /
+        0.1 rad steps, then 0.1 m / 0.05 rad): [(pose, agreement)], best first."""
+        scan = (ranges_m, angles_rad, T_base_laser)
+        score = np.concatenate([self.many(candidates[i:i + chunk], *scan, coarse=True)
+                                for i in range(0, len(candidates), chunk)])
+        order = np.argsort(-score, kind="stable")
+        picked = []
+        for i in order[:200]:
+            xy = candidates[i, :2]
+            if np.hypot(*(xy - away_from[:2])) < apart_m or any(np.hypot(*(xy - p[:2])) < apart_m for p, _ in picked):
+                continue
+            pose, _ = self.refine(candidates[i], *scan, step_m=0.2, step_rad=0.1)
+            picked.append(self.refine(pose, *scan))
+            if len(picked) == count:
+                break
+        return sorted(picked, key=lambda pa: -pa[1])
 
     def refine(self, pose, ranges_m, angles_rad, T_base_laser, step_m: float = 0.1, step_rad: float = 0.05):
         """(the pose of best agreement among ``pose`` and its 124 neighbours on a grid of +-2 steps in x, y and
@@ -139,11 +163,16 @@ class FeatureTracker:
       by the scans and is dropped. ``rival_margin`` is the heaviest mode's recent agreement less the best rival's
       (1 without a rival): near 0 while another place explains the scans as well. With ``refine_rivals`` each
       rival is moved, at every update, to the best agreeing pose near it (``ScanAgreement.refine``): the odometry's
-      drift and a mode's rough mean pose would otherwise rule a true place out."""
+      drift and a mode's rough mean pose would otherwise rule a true place out. With ``search_every`` = k > 0,
+      every k-th update also searches ``search_poses`` (a coarse grid of the map's free space) for places the
+      scan fits as well as the estimate's, and keeps them as rivals (``ScanAgreement.search``): a look-alike place
+      the particle set never held, or dropped before it became a mode."""
 
     def __init__(self, agreement: ScanAgreement, recent: int = 10, rival_weight: float = 0.02, rival_apart_m: float = 2.0,
-                 rule_out: float = 0.25, max_rivals: int = 16, refine_rivals: bool = False):
+                 rule_out: float = 0.25, max_rivals: int = 16, refine_rivals: bool = False, search_poses=None,
+                 search_every: int = 0):
         self.agreement, self.refine_rivals = agreement, refine_rivals
+        self.search_poses, self.search_every = search_poses, int(search_every)
         self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
         self.rule_out, self.max_rivals = rule_out, max_rivals
         self.reset()
@@ -176,7 +205,11 @@ class FeatureTracker:
     def _rivals(self, m: Modes, odom_delta, agree, recent_top: float) -> float:
         if len(self.rivals):  # moved as the robot moved
             self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
-        for pose, w in zip(m.poses[1:], m.weights[1:]):
+        found = []
+        if self.search_every > 0 and self.search_poses is not None and self.updates % self.search_every == 0:
+            found = [(p, 1.0) for p, a in self.agreement.search(self.search_poses, *self._scan, m.poses[0],
+                                                                 self.rival_apart_m) if a > recent_top - self.rule_out]
+        for pose, w in [*zip(m.poses[1:], m.weights[1:]), *found]:
             if w < self.rival_weight or np.hypot(*(pose[:2] - m.poses[0, :2])) < self.rival_apart_m:
                 continue
             if len(self.rivals) and np.min(np.hypot(*(self.rivals[:, :2] - pose[:2]).T)) < self.rival_apart_m:

@@ -107,13 +107,15 @@ def localize_worlds(run: runs.Run) -> Path:
         maps = grid_maps(grid, cfg.mcl.weighting)
         agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m,
                                   cfg.mcl.field_occ_threshold)
+        search = search_grid(grid) if cfg.worlds.search_rivals_every > 0 else None
         results = []
         for k in range(1, cfg.worlds.runs + 1):
             log, cut = query_log(world, cfg, k, device)
             pf = build_filter(cfg.mcl, view, log.T_base_laser, log.info.angles_rad, cfg.sim.max_range_m, device, maps)
             pf.rng = np.random.default_rng(cfg.mcl.seed * 1000 + k)
             pf.init_uniform()
-            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement, refine_rivals=cfg.worlds.refine_rivals), conf)
+            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement, refine_rivals=cfg.worlds.refine_rivals, search_poses=search,
+                                                                      search_every=cfg.worlds.search_rivals_every), conf)
             np.savez_compressed(out / f"{name}-run{k}.npz", stamps=log.stamps, truth=log.ground_truth, **trace)
             write_tum(out / f"{name}-run{k}.tum", log.stamps, trace["estimate"])
             result = score_run(log, trace, cut, cfg.worlds)
@@ -132,6 +134,19 @@ def localize_worlds(run: runs.Run) -> Path:
     path = run.finish({"summary": summary, "per_world": per_world, "runs": rows, "settings": settings}, device)
     print(verdict_line(summary, cfg.worlds) + f" -> {path}")
     return path
+
+
+def search_grid(grid, spacing_m: float = 0.5, headings: int = 16) -> np.ndarray:
+    """Poses [k, 3] on the map's known free cells every ``spacing_m``, each at ``headings`` headings: where the
+    confidence looks for look-alike places."""
+    step = max(1, int(round(spacing_m / grid.resolution_m)))
+    free = grid.known & (grid.probability < 0.35)
+    free[np.arange(free.shape[0]) % step != 0] = False
+    free[:, np.arange(free.shape[1]) % step != 0] = False
+    iy, ix = np.nonzero(free)
+    xy = np.column_stack([ix, iy]) * grid.resolution_m + np.asarray(grid.origin_xy) + grid.resolution_m / 2
+    yaw = np.linspace(-np.pi, np.pi, headings, endpoint=False)
+    return np.column_stack([np.repeat(xy, headings, 0), np.tile(yaw, len(xy))])
 
 
 def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, conf: Confidence | None) -> dict:
