@@ -318,7 +318,10 @@ def worlds_table(runs: list) -> str:
         fa = s["false_alarms"] / s["tracking_right_h"] if s["tracking_right_h"] > 0 else None
         detected = f"{s['detected_within_2s']}/{k}" if k else "-"
         back = f"{s['reconverged_within_5s']}/{k}" if k else "-"
-        label = s["weighting"].replace("_", " ") + (" (rivals re-aligned)" if r.setting("worlds.refine_rivals") else "")
+        how = (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else []) + \
+            ([f"searched every {r.setting('worlds.search_rivals_every')} updates"] if r.setting("worlds.search_rivals_every")
+             else [])
+        label = s["weighting"].replace("_", " ") + (f" ({', '.join(how)})" if how else "")
         rows.append(f"| test ({len(s['worlds'])}) | {label} | {s['num_particles'] // 1000}k "
                     f"| {s['device']} | {f'{kid:g} s' if kid else '-'} | {s['successes']}/{n} | {s['right_at_end']}/{n} "
                     f"| {s['localized_at_end']}/{n} | {s['confidently_wrong_at_end']} | {_f(s.get('auroc'), '{:.3f}')} "
