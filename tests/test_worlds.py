@@ -287,26 +287,17 @@ def test_the_worlds_stage_refuses_a_nof_weighting_it_cannot_train(tmp_path, monk
         run_worlds(_worlds_cfg("mcl.weighting=nog_raymarch"))
 
 
-def test_calibration_is_fitted_on_tuning_worlds_only(tmp_path):
+@pytest.mark.parametrize("side,world,refused", [("tuning", "office-1001", "test world"),  # fit: tuning only
+                                                 ("test", "office-3", "tuning world")])  # judge: test only
+def test_calibration_is_fitted_on_tuning_worlds_and_judged_on_test_worlds_only(tmp_path, side, world, refused):
     from eval.confidence import samples
 
     run = tmp_path / "run"
     run.mkdir()
     (run / "metrics.json").write_text(json.dumps({"summary": {"weighting": "likelihood_field"},
-                                                  "runs": [{"world": "office-1001", "run": 1}]}))
-    with pytest.raises(ValueError, match="test world"):
-        samples([run], "tuning")
-
-
-def test_judging_refuses_tuning_worlds(tmp_path):
-    from eval.confidence import samples
-
-    run = tmp_path / "run"
-    run.mkdir()
-    (run / "metrics.json").write_text(json.dumps({"summary": {"weighting": "likelihood_field"},
-                                                  "runs": [{"world": "office-3", "run": 1}]}))
-    with pytest.raises(ValueError, match="tuning world"):
-        samples([run], "test")
+                                                  "runs": [{"world": world, "run": 1}]}))
+    with pytest.raises(ValueError, match=refused):
+        samples([run], side)
 
 
 def test_a_pose_without_estimate_has_no_tum_line(tmp_path):
@@ -348,6 +339,9 @@ def test_a_rival_place_is_remembered_until_the_scans_rule_it_out():
 
         def __call__(self, pose, *_):
             return 1.0 if pose[0] < 5 or self.b_agrees else 0.2
+
+        def many(self, poses, *_):
+            return np.array([self(p) for p in poses])
 
     agree = Agreement()
     tracker = FeatureTracker(agree, recent=3)

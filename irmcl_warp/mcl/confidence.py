@@ -191,23 +191,22 @@ class FeatureTracker:
         particles, log_w = np.asarray(particles)[::stride], np.asarray(log_w)[::stride]
         m = modes(particles, log_w)
         self.updates += 1
-        agree = lambda pose: self.agreement(pose, ranges_m, angles_rad, T_base_laser)  # noqa: E731
-        self._scan = (ranges_m, angles_rad, T_base_laser)
-        top = agree(m.poses[0])
-        second = agree(m.poses[1]) if len(m.weights) > 1 else 0.0
+        scan = (ranges_m, angles_rad, T_base_laser)
+        top = self.agreement(m.poses[0], *scan)
+        second = self.agreement(m.poses[1], *scan) if len(m.weights) > 1 else 0.0
         self.history.append(top)
         recent_top = float(np.mean(self.history))
-        rival_margin = self._rivals(m, odom_delta, agree, recent_top)
+        rival_margin = self._rivals(m, odom_delta, scan, recent_top)
         f = np.array([m.weights[0], m.weights[1] if len(m.weights) > 1 else 0.0, top, top - second, recent_top,
                       rival_margin, np.log1p(self.updates), np.log(spread(particles, log_w) + 0.01)])
         return f, m
 
-    def _rivals(self, m: Modes, odom_delta, agree, recent_top: float) -> float:
+    def _rivals(self, m: Modes, odom_delta, scan, recent_top: float) -> float:
         if len(self.rivals):  # moved as the robot moved
             self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
         found = []
         if self.search_every > 0 and self.search_poses is not None and self.updates % self.search_every == 0:
-            found = [(p, 1.0) for p, a in self.agreement.search(self.search_poses, *self._scan, m.poses[0],
+            found = [(p, 1.0) for p, a in self.agreement.search(self.search_poses, *scan, m.poses[0],
                                                                  self.rival_apart_m) if a > recent_top - self.rule_out]
         for pose, w in [*zip(m.poses[1:], m.weights[1:]), *found]:
             if w < self.rival_weight or np.hypot(*(pose[:2] - m.poses[0, :2])) < self.rival_apart_m:
@@ -220,11 +219,11 @@ class FeatureTracker:
         if not len(self.rivals):
             return 1.0
         if self.refine_rivals:
-            refined = [self.agreement.refine(p, *self._scan) for p in self.rivals]
+            refined = [self.agreement.refine(p, *scan) for p in self.rivals]
             self.rivals = np.array([p for p, _ in refined])
             scores = np.array([a for _, a in refined])
         else:
-            scores = np.array([agree(p) for p in self.rivals])
+            scores = self.agreement.many(self.rivals, *scan)
         near_top = np.hypot(*(self.rivals[:, :2] - m.poses[0, :2]).T) < self.rival_apart_m  # the set came to it
         self.rival_history = np.column_stack([self.rival_history[:, 1:], scores])
         recent = np.nansum(self.rival_history, 1) / np.maximum(np.isfinite(self.rival_history).sum(1), 1)

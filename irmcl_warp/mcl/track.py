@@ -64,7 +64,7 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
             if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
                 pf.reduce(m.reduce_to)
                 reduce_pending = False
-        est[j] = np.nan if pose is None else between_updates(pose, last_odom, log.odom[i])
+        est[j] = between_updates(pose, last_odom, log.odom[i])
         if watch is not None:
             watch(j, pf)
     return est

@@ -126,7 +126,7 @@ def localize_worlds(run: runs.Run) -> Path:
         per_world[name] = {**world_summary(results), **separation(judged[-len(results):])}
         rows += results
     bar.close()
-    plot_worlds(out / "worlds.png", names, out)
+    plot_worlds(out / "worlds.png", names, out, cfg.worlds.confident_above)
     summary = {"split": cfg.worlds.split, "worlds": list(names), "weighting": cfg.mcl.weighting,
                "num_particles": cfg.mcl.num_particles, "device": device, "calibrated": conf is not None,
                "calibration": conf.meta.get("source") if conf else None, **world_summary(rows), **separation(judged)}
@@ -218,7 +218,8 @@ def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
         out["detected_after_s"] = float(after[0] - t_jump) if len(after) else None
         if len(after):
             i0 = int(np.searchsorted(t, after[0]))
-            back = np.flatnonzero(np.array([ok[j:].all() for j in range(i0, len(t))]))
+            right_since = np.logical_and.accumulate(ok[::-1])[::-1]  # right from this scan to the end
+            back = np.flatnonzero(right_since[i0:])
             out["reconverged_after_s"] = float(t[i0 + back[0]] - after[0]) if len(back) else None
         else:
             out["reconverged_after_s"] = None
@@ -274,7 +275,7 @@ def verdict_line(summary: dict, w) -> str:
     return line
 
 
-def plot_worlds(path: Path, names, out: Path) -> None:
+def plot_worlds(path: Path, names, out: Path, confident_above: float) -> None:
     """Each world's walls with, per run, where the robot ended (black dot) and where the estimate put it: a green
     circle when right, a red cross when wrong (a line joins the two), hollow when the run ended not confident."""
     import matplotlib.pyplot as plt
@@ -292,7 +293,7 @@ def plot_worlds(path: Path, names, out: Path) -> None:
             if not np.all(np.isfinite(est)):
                 continue
             ok = bool(right(est[None], gt[None])[0])
-            sure = bool(np.isfinite(p) and p >= 0.8)
+            sure = bool(np.isfinite(p) and p >= confident_above)
             ax.plot([gt[0], est[0]], [gt[1], est[1]], "-", color="0.6", lw=0.6)
             ax.plot(*gt[:2], "k.", ms=4)
             ax.plot(*est[:2], "o" if ok else "x", color="tab:green" if ok else "tab:red", ms=6,
