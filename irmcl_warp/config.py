@@ -363,7 +363,7 @@ def register() -> None:
     cs.store(name="config_schema", node=Config)
 
 
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"  # the experiment configs (the apps' config_path)
+CONF_DIR = Path(__file__).resolve().parent / "conf"  # the experiment configs (pkg://irmcl_warp.conf: the top-level conf/)
 CALIBRATION_DIR = Path(__file__).resolve().parent / "mcl" / "calibration"  # the localizers' confidence, one file
 # per observation model (eval.confidence fit on the tuning worlds)
 

@@ -19,7 +19,7 @@ from irmcl_warp.mapping import build_map, save_map
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.types import LaserLog
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 from irmcl_warp.services.cli import run_entry
 
 
@@ -76,7 +76,7 @@ def inspect_log(run: runs.Run) -> Path:
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path="pkg://irmcl_warp.conf", config_name="config")
 def main(cfg) -> None:
     run_entry(run_inspect, cfg)
 

@@ -42,7 +42,7 @@ from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.slam.stage import run_slam
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 from irmcl_warp.services.cli import run_entry
 
 
@@ -202,7 +202,7 @@ def pipeline(run: runs.Run) -> Path:
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="pipeline")
+@hydra.main(version_base="1.3", config_path="pkg://irmcl_warp.conf", config_name="pipeline")
 def main(cfg) -> None:
     run_entry(run_pipeline, cfg)
 

@@ -46,7 +46,7 @@ def run_relations(cfg):
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path="pkg://irmcl_warp.conf", config_name="config")
 def main(cfg) -> None:
     run_entry(run_relations, cfg)
 

@@ -9,7 +9,7 @@ from irmcl_warp.services.cli import run_entry
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path="pkg://irmcl_warp.conf", config_name="config")
 def main(cfg) -> None:
     run_entry(run_worlds, cfg)
 

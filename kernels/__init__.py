@@ -5,8 +5,8 @@ a small callable object that owns its launch. Every entry has a numpy twin in ``
 and a parity test. Callers ask the registry once and never branch on names.
 """
 
-from kernels.registry import (ESTIMATE, MAPPING, MOTION, RAYCAST, REDUCE_THREADS, RENDER, RESAMPLE, SIM, SLAM,  # noqa: F401
+from irmcl_warp.kernels.registry import (ESTIMATE, MAPPING, MOTION, RAYCAST, REDUCE_THREADS, RENDER, RESAMPLE, SIM, SLAM,  # noqa: F401
                               WEIGHTING, Registry, init_warp, launch_reduction, pick_device)
 
 # importing the families registers their entries
-from kernels import camera, estimate, mapping, motion, raycast, render, resample, sim, slam, weighting  # noqa: E402,F401,I001
+from irmcl_warp.kernels import camera, estimate, mapping, motion, raycast, render, resample, sim, slam, weighting  # noqa: E402,F401,I001

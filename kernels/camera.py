@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import SIM, pick_device
-from kernels.sim import NO_HIT, ray_segment
+from irmcl_warp.kernels.registry import SIM, pick_device
+from irmcl_warp.kernels.sim import NO_HIT, ray_segment
 
 
 

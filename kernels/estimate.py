@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.resample import max_kernel
-from kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device
+from irmcl_warp.kernels.resample import max_kernel
+from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device
 
 
 @wp.kernel

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from kernels.registry import MAPPING
-from kernels.grid import inside, walk_start
+from irmcl_warp.kernels.registry import MAPPING
+from irmcl_warp.kernels.grid import inside, walk_start
 
 
 @wp.func

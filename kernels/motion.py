@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import MOTION, pick_device
+from irmcl_warp.kernels.registry import MOTION, pick_device
 
 
 def odometry_step(odom_from, odom_to, min_trans_m: float = 0.01) -> tuple[float, float, float]:

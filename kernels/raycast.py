@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import RAYCAST, pick_device
-from kernels.grid import inside, walk_start
+from irmcl_warp.kernels.registry import RAYCAST, pick_device
+from irmcl_warp.kernels.grid import inside, walk_start
 
 
 @wp.func

@@ -4,6 +4,8 @@ import these from here; ``kernels/__init__.py`` re-exports them and imports the 
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
 
 import warp as wp
 
@@ -44,19 +46,43 @@ class Registry:
 _initialised = False
 
 
+NO_DRIVER_LINE = "Could not find or load the NVIDIA CUDA driver"  # what Warp's C code prints on a CPU machine
+
+
 def init_warp() -> None:
+    """``wp.init()``, once. Warp's C code prints a line on every machine without an NVIDIA driver; on such a
+    machine that is no news (the CPU runs the kernels), so that one line is held back and any other output of
+    the start-up is passed on. Asking for a CUDA device there is an error instead (``pick_device``)."""
     global _initialised
-    if not _initialised:
-        _quiet()
-        wp.init()
-        _initialised = True
+    if _initialised:
+        return
+    _quiet()
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        held.seek(0)
+        said = held.read().decode(errors="replace").splitlines()
+    rest = [line for line in said if NO_DRIVER_LINE not in line]
+    if rest:
+        print("\n".join(rest), file=sys.stderr)
+    _initialised = True
 
 
 def pick_device(requested: str = "auto") -> str:
-    """``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``; any explicit name (``device=cpu``) wins."""
+    """``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``; any explicit name (``device=cpu``) wins. A CUDA device
+    asked for where Warp sees none is a ValueError (one line, not a traceback from the first launch)."""
     init_warp()
     if requested in (None, "", "auto"):
         return "cuda:0" if wp.is_cuda_available() else "cpu"
+    if str(requested).startswith("cuda") and not wp.is_cuda_available():
+        raise ValueError(f"device={requested}: Warp sees no CUDA device on this machine (no NVIDIA driver or GPU); "
+                         "use device=cpu (or device=auto)")
     return requested
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import torch
 import warp as wp
 
-from kernels.registry import RENDER, init_warp
+from irmcl_warp.kernels.registry import RENDER, init_warp
 
 WP_DTYPES = {torch.float32: wp.float32, torch.float64: wp.float64}
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device
+from irmcl_warp.kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device
 
 
 @wp.kernel

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import SIM, pick_device
+from irmcl_warp.kernels.registry import SIM, pick_device
 
 NO_HIT = 1.0e30
 

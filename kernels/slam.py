@@ -38,8 +38,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.registry import SLAM, pick_device
-from kernels.weighting import laser_pose
+from irmcl_warp.kernels.registry import SLAM, pick_device
+from irmcl_warp.kernels.weighting import laser_pose
 
 UNKNOWN = -1.0
 

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from kernels.raycast import dda_range, distance_to_occupied
-from kernels.registry import WEIGHTING, pick_device
+from irmcl_warp.kernels.raycast import dda_range, distance_to_occupied
+from irmcl_warp.kernels.registry import WEIGHTING, pick_device
 
 
 @wp.func

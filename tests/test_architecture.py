@@ -13,7 +13,8 @@ import grimp
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("irmcl_warp", "kernels", "eval")
+PACKAGES = ("irmcl_warp", "eval")  # the top-level kernels/ is irmcl_warp.kernels (irmcl_warp/kernels links to it)
+FOLDERS = ("irmcl_warp", "kernels", "conf", "eval")
 
 
 def _lint(root: Path) -> subprocess.CompletedProcess:
@@ -36,13 +37,25 @@ def test_import_contracts_hold():
     ("irmcl_warp/services/data.py", "from eval.tables import main", "(and the runs module) import no stage"),
 ])
 def test_a_forbidden_import_breaks_a_contract(tmp_path, importer, forbidden, contract):
-    for name in PACKAGES:
-        shutil.copytree(REPO / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
+    for name in FOLDERS:  # the links in irmcl_warp/ stay links, to the copies
+        shutil.copytree(REPO / name, tmp_path / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copy(REPO / "pyproject.toml", tmp_path / "pyproject.toml")
     with open(tmp_path / importer, "a") as f:
         f.write(f"\n{forbidden}  # noqa\n")
     run = _lint(tmp_path)
     assert run.returncode != 0 and f"{contract}" in run.stdout and "BROKEN" in run.stdout, run.stdout[-3000:]
+
+
+def test_the_kernels_leaf_contract_names_every_other_part_of_the_package():
+    """"kernels is a leaf" lists the package's other modules one by one (a contract cannot forbid the package
+    that holds its source): a new module must join the list, or kernels could import it unseen."""
+    import tomllib
+
+    contracts = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    leaf, = [c for c in contracts if c["name"].startswith("kernels is a leaf")]
+    parts = {f"irmcl_warp.{p.stem}" for p in (REPO / "irmcl_warp").iterdir()
+             if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").is_file()}
+    assert parts - {"irmcl_warp.kernels", "irmcl_warp.conf"} == set(leaf["forbidden_modules"]) - {"eval"}
 
 
 def test_no_module_imports_itself_through_others():

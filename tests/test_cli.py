@@ -22,6 +22,8 @@ REPO = Path(__file__).resolve().parents[1]
 def _run(args, cwd, **env):
     e = {**os.environ, **env}
     e.pop("IRMCL_TRACEBACK", None) if "IRMCL_TRACEBACK" not in env else None
+    if args[0].startswith("eval."):  # the repository's tools, not installed with the package: run from the checkout
+        e["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), e.get("PYTHONPATH")]))
     return subprocess.run([sys.executable, "-m", *args], cwd=cwd, capture_output=True, text=True, env=e, timeout=300)
 
 

@@ -75,7 +75,7 @@ def test_config_choices_are_what_the_code_implements():
     from irmcl_warp.nof.beams import SPLITS
     from irmcl_warp.nof.render import RENDERERS
     from irmcl_warp.slam.rbpf import RBPF
-    from kernels import MAPPING, RAYCAST, RESAMPLE, WEIGHTING
+    from irmcl_warp.kernels import MAPPING, RAYCAST, RESAMPLE, WEIGHTING
 
     implemented = {"mcl.weighting": WEIGHTING.names(), "mcl.estimate": ESTIMATORS, "mcl.resample": RESAMPLE.names(),
                    "render.name": RENDERERS, "raycast.name": RAYCAST.names(), "mapping.kernel": MAPPING.names(),

@@ -122,7 +122,7 @@ def test_retrieval_and_clusters(rng):
 def test_scan2map_prefers_the_true_pose(rng):
     world = _world()
     from irmcl_warp.globloc.run import grid_of
-    from kernels import SIM
+    from irmcl_warp.kernels import SIM
 
     grid, origin = grid_of(world, 0.05)
     angles = np.linspace(-np.pi, np.pi, 180, endpoint=False)
@@ -148,7 +148,7 @@ def test_the_trigger_fires_on_a_kidnap_and_not_on_normal_motion(confirm):
     from irmcl_warp.geometry import relative
     from irmcl_warp.globloc.run import Stream, grid_of, laser_angles, run_method, world_of
     from irmcl_warp.sim.trajectory import follow
-    from kernels import SIM
+    from irmcl_warp.kernels import SIM
 
     cfg = _cfg("globloc.num_particles=2000", "globloc.beams=30", f"globloc.trigger_confirm_frames={confirm}")
     world = world_of(cfg)

@@ -11,7 +11,7 @@ from irmcl_warp.config import register
 from irmcl_warp.inspect import run_inspect
 from irmcl_warp.mapping import load_map
 from irmcl_warp.sim import simulate
-from kernels import SIM
+from irmcl_warp.kernels import SIM
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

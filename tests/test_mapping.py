@@ -4,7 +4,7 @@ import warp as wp
 
 from irmcl_warp.mapping import OccupancyGrid, load_map, save_map
 from irmcl_warp.reference.mapping import integrate
-from kernels import MAPPING
+from irmcl_warp.kernels import MAPPING
 from tests.devices import DEVICE
 
 SETTINGS = dict(l_occ=0.85, l_free=-0.4, l_min=-4.0, l_max=4.0, max_range_m=3.0)

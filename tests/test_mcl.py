@@ -15,8 +15,8 @@ from irmcl_warp.mcl.filter import pick_beams
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.sim import simulate
-from kernels import SIM
-from kernels.motion import odometry_step
+from irmcl_warp.kernels import SIM
+from irmcl_warp.kernels.motion import odometry_step
 from tests.devices import DEVICE
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -47,7 +47,7 @@ def _filter(nog, cfg, log, weighting=None):
 
 @pytest.mark.parametrize("weighting", ["nog_raymarch", "nog_table", "likelihood_field"])
 def test_pose_tracking_stays_within_a_bound(weighting):
-    from kernels import WEIGHTING
+    from irmcl_warp.kernels import WEIGHTING
 
     log, nog = _world_and_map()
     lf = None

@@ -9,9 +9,9 @@ import warp as wp
 from irmcl_warp.reference.motion import sample_odometry
 from irmcl_warp.reference.resample import (effective_sample_size, low_variance_indices, multinomial_indices,
                                            weighted_mean, weighted_spread)
-from kernels import MOTION, RESAMPLE
-from kernels.motion import odometry_step
-from kernels.resample import ParticleWeights
+from irmcl_warp.kernels import MOTION, RESAMPLE
+from irmcl_warp.kernels.motion import odometry_step
+from irmcl_warp.kernels.resample import ParticleWeights
 from tests.devices import DEVICE
 
 ALPHAS = (0.1, 0.02, 0.08, 0.01)
@@ -96,7 +96,7 @@ def test_multinomial_draws_follow_the_weights(rng):
 
 def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
     from irmcl_warp.reference.estimate import top_share_mean
-    from kernels import ESTIMATE
+    from irmcl_warp.kernels import ESTIMATE
 
     n = 1000
     particles = np.column_stack([rng.normal(2.0, 0.1, n), rng.normal(-1.0, 0.1, n), rng.normal(3.1, 0.05, n)])
@@ -116,7 +116,7 @@ def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
 def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
     """60 % of the mass near A, 40 % near B: the cluster estimate lands on A, the plain mean between them."""
     from irmcl_warp.reference.estimate import best_cluster_mean
-    from kernels import ESTIMATE
+    from irmcl_warp.kernels import ESTIMATE
 
     n = 3000
     a, b = np.array([2.0, 3.0, 0.5]), np.array([-4.0, 1.0, -2.5])
@@ -154,7 +154,7 @@ def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
 def test_irmcl_motion_kernel_statistics_match_the_twin(rng):
     """IR-MCL's code's model: u = (dx, dy, dtheta) in the robot frame, variance C |u|, composed onto the pose."""
     from irmcl_warp.reference.motion import sample_irmcl
-    from kernels.motion import IRMCL_NOISE
+    from irmcl_warp.kernels.motion import IRMCL_NOISE
 
     n = 40000
     step = (rng.uniform(-0.4, 0.4), rng.uniform(0.05, 0.5), rng.uniform(-0.4, 0.4))

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from irmcl_warp.reference.raycast import cast
-from kernels import RAYCAST
-from kernels.raycast import distance_to_occupied
+from irmcl_warp.kernels import RAYCAST
+from irmcl_warp.kernels.raycast import distance_to_occupied
 from tests.devices import DEVICE
 
 

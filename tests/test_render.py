@@ -98,7 +98,7 @@ def _random_grid(rng, H=23, W=31):
 @pytest.mark.parametrize("t_min", [0.0, 1e-2, 0.3])
 def test_occupied_samples_match_the_twin(rng, t_min):
     from irmcl_warp.reference.render import occupied_samples_torch
-    from kernels import RENDER
+    from irmcl_warp.kernels import RENDER
 
     values, occupied = _random_grid(rng)
     origin, res = (-1.3, 0.7), 0.1
@@ -116,7 +116,7 @@ def test_occupied_samples_match_the_twin(rng, t_min):
 
 
 def test_occupied_samples_by_hand():
-    from kernels import RENDER
+    from irmcl_warp.kernels import RENDER
 
     # one row of cells at x in [0, 0.4): free, then occupied with values 0.5, 0.9, 0.9
     values = torch.tensor([[0.0, 0.5, 0.9, 0.9]], device=DEV)

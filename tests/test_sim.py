@@ -9,7 +9,7 @@ from irmcl_warp.reference.sim import lidar_ranges, rasterize
 from irmcl_warp.sim import simulate
 from irmcl_warp.sim.trajectory import noisy_odometry
 from irmcl_warp.sim.world import office
-from kernels import SIM
+from irmcl_warp.kernels import SIM
 from tests.devices import DEVICE
 
 

@@ -18,8 +18,8 @@ from irmcl_warp.sim import simulate
 from irmcl_warp.reference.resample import low_variance_indices
 from irmcl_warp.slam import RBPF
 from irmcl_warp.slam.rbpf import fit_gaussian
-from kernels import SLAM
-from kernels.slam import ParticleMaps
+from irmcl_warp.kernels import SLAM
+from irmcl_warp.kernels.slam import ParticleMaps
 from tests.devices import DEVICE
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -272,7 +272,7 @@ def test_a_gpu_climbs_a_scan_too_long_for_one_block_in_launched_rounds():
     """A thread per beam fits a block up to MAX_BLOCK_BEAMS beams; a longer scan (a 1081-beam Hokuyo's) climbs in
     launched rounds by default, and asking for blocks says why not."""
     from irmcl_warp.slam.rbpf import default_climb
-    from kernels.slam import MAX_BLOCK_BEAMS, block_dim_for
+    from irmcl_warp.kernels.slam import MAX_BLOCK_BEAMS, block_dim_for
 
     assert default_climb(False, 180) == "threads" and default_climb(False, 1081) == "threads"
     assert default_climb(True, 180) == "blocks" and default_climb(True, MAX_BLOCK_BEAMS) == "blocks"

@@ -12,7 +12,7 @@ import warp as wp
 from irmcl_warp.nog import NOG, evaluate_grid
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.reference.weighting import nog_log_weights, nog_render
-from kernels import WEIGHTING
+from irmcl_warp.kernels import WEIGHTING
 from tests.devices import DEVICE
 
 
@@ -127,7 +127,7 @@ def test_bake_from_a_checkpoint_is_cached_by_hash(tmp_path):
 
 def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     from irmcl_warp.reference.weighting import likelihood_field_log_weights
-    from kernels.raycast import distance_to_occupied
+    from irmcl_warp.kernels.raycast import distance_to_occupied
 
     occ = np.zeros((60, 80), np.float32)
     occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1.0  # a 8 x 6 m room at 0.1 m
@@ -135,7 +135,7 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     origin, res = (0.0, 0.0), 0.1
     true = np.array([3.0, 3.0, 0.3])
     angles = np.linspace(-np.pi, np.pi, 24, endpoint=False).astype(np.float32)
-    from kernels import RAYCAST
+    from irmcl_warp.kernels import RAYCAST
 
     caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=20.0, device=DEVICE)
     # +half a cell: end points inside the wall cell, not on its border (where float32 and float64 floor differ)
@@ -158,7 +158,7 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
 
 def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
     from irmcl_warp.reference.weighting import beam_model_log_weights
-    from kernels import RAYCAST
+    from irmcl_warp.kernels import RAYCAST
 
     occ = np.zeros((40, 50), np.float32)
     occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1.0  # a 5 x 4 m room at 0.1 m
@@ -282,7 +282,7 @@ def test_range_table_reads_what_the_march_renders():
     """At a node and one of the table's headings the table gives the march's range (to a quantum); off the
     node, moving along the beam shortens the range by the move (a wall across the beam); between headings
     the range of a straight wall stays close to the march's."""
-    from kernels.weighting import TABLE_LEVELS, table_headings
+    from irmcl_warp.kernels.weighting import TABLE_LEVELS, table_headings
 
     nog, far = _wall_nog(x_wall=2.0), 10.0
     A = 72
@@ -309,7 +309,7 @@ def test_range_table_reads_what_the_march_renders():
 
 
 def test_range_table_too_large_or_too_coarse_is_a_clear_error(monkeypatch):
-    import kernels.weighting as kw
+    import irmcl_warp.kernels.weighting as kw
 
     nog = _wall_nog()
     monkeypatch.setattr(kw, "TABLE_MAX_BYTES", 1 << 20)

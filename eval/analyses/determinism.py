@@ -19,8 +19,8 @@ from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.sim import simulate
-from kernels import pick_device
-from kernels.motion import odometry_step
+from irmcl_warp.kernels import pick_device
+from irmcl_warp.kernels.motion import odometry_step
 
 
 def run(log, nog, maps, weighting: str, seed: int, graph: str, device: str, **settings):

@@ -25,7 +25,7 @@ from irmcl_warp.globloc.run import Hypotheses, grid_of, laser_angles, make_strea
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, waypoints
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 
 
 def add_parser(sub) -> None:

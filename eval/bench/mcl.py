@@ -40,11 +40,11 @@ from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.reference.weighting import nog_log_weights_torch
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 from irmcl_warp.config import compose_config
 from irmcl_warp.sim import simulate
-from kernels import SIM
-from kernels import WEIGHTING
+from irmcl_warp.kernels import SIM
+from irmcl_warp.kernels import WEIGHTING
 
 VARIANTS = {
     "warp": dict(t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),

@@ -27,7 +27,7 @@ from irmcl_warp.services.outputs import write_json
 from irmcl_warp.config import compose_config
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.slam.stage import start_filter
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 
 
 def new_filter(exp: str, particles: int, device: str, overrides=()):

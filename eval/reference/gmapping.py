@@ -239,7 +239,7 @@ def motion_check(samples: int = 200_000, noise=(0.1, 0.2, 0.1, 0.2)) -> dict:
     import warp as wp
 
     from irmcl_warp.geometry import relative, wrap_angle
-    from kernels import SLAM
+    from irmcl_warp.kernels import SLAM
 
     if not MOTION.is_file():
         raise FileNotFoundError(f"{MOTION}: build it first: bash eval/reference/build_gmapping.sh <clone>")

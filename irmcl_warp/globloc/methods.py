@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.globloc.scan2map import Scan2Map
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
-from kernels.motion import odometry_step
+from irmcl_warp.kernels.motion import odometry_step
 
 
 def laser_angles(cfg) -> np.ndarray:

@@ -40,7 +40,7 @@ from irmcl_warp import runs
 from irmcl_warp.sim.camera import Camera, Session, appearance
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import office
-from kernels import SIM, pick_device
+from irmcl_warp.kernels import SIM, pick_device
 
 METHODS = ("lidar_mcl", "camera_only", "paper", "mcl_seeded")
 

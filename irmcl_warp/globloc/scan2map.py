@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from irmcl_warp.geometry import compose
-from kernels.raycast import distance_to_occupied
+from irmcl_warp.kernels.raycast import distance_to_occupied
 
 
 class Scan2Map:

@@ -9,7 +9,7 @@ import warp as wp
 
 from irmcl_warp.geometry import compose, transform_points
 from irmcl_warp.types import LaserLog
-from kernels import MAPPING, pick_device
+from irmcl_warp.kernels import MAPPING, pick_device
 
 
 @dataclass

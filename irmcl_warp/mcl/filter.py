@@ -20,8 +20,8 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.config import MCLConfig
-from kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
-from kernels.resample import LogMeanLikelihood, ParticleWeights, Resampler, accumulate_kernel, inject_kernel
+from irmcl_warp.kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
+from irmcl_warp.kernels.resample import LogMeanLikelihood, ParticleWeights, Resampler, accumulate_kernel, inject_kernel
 
 # mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
 ESTIMATORS = {

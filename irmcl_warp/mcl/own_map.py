@@ -34,7 +34,7 @@ from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_fil
 from irmcl_warp.services.metrics import aligned_error
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.services.plots import animate_particles, plot_own_map
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 
 FRAMES = 60  # animation frames over the run
 

@@ -38,7 +38,7 @@ from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.services.plots import plot_run
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 
 
 def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.ndarray]:

@@ -9,7 +9,7 @@ import numpy as np
 
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.types import LaserLog
-from kernels.motion import odometry_step
+from irmcl_warp.kernels.motion import odometry_step
 
 
 def window(log: LaserLog, start_s: float, run_s: float | None, section: str) -> np.ndarray:

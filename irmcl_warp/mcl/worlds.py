@@ -38,8 +38,8 @@ from irmcl_warp.services.outputs import save_figure
 from irmcl_warp.sim import drive_log
 from irmcl_warp.sim import floors
 from irmcl_warp.types import LaserLog
-from kernels import pick_device
-from kernels.motion import odometry_step
+from irmcl_warp.kernels import pick_device
+from irmcl_warp.kernels.motion import odometry_step
 
 DRIVE_SLACK = 1.6  # a drive's path is this much longer than run_s at the set speed (turns in place take time)
 

@@ -9,8 +9,8 @@ import torch
 import warp as wp
 
 from irmcl_warp.nof.checkpoint import load_nof
-from kernels import RENDER, WEIGHTING, pick_device
-from kernels.weighting import make_likelihood_kernel
+from irmcl_warp.kernels import RENDER, WEIGHTING, pick_device
+from irmcl_warp.kernels.weighting import make_likelihood_kernel
 
 
 class NofDirect:

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from kernels import RENDER
+from irmcl_warp.kernels import RENDER
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from kernels import RENDER
+from irmcl_warp.kernels import RENDER
 
 
 class _WarpComposite(torch.autograd.Function):

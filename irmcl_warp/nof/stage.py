@@ -23,7 +23,7 @@ from irmcl_warp.nof.render import make_renderer, render_scans
 from irmcl_warp.nof.trainer import Trainer
 from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
-from kernels import pick_device
+from irmcl_warp.kernels import pick_device
 
 
 def torch_device(cfg) -> torch.device:

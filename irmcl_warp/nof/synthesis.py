@@ -24,7 +24,7 @@ from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream, prepare_beams
 from irmcl_warp.services.metrics import scan_synthesis_metrics
 from irmcl_warp.services.outputs import save_figure
-from kernels import RAYCAST, pick_device
+from irmcl_warp.kernels import RAYCAST, pick_device
 
 GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 and 10 cm
 

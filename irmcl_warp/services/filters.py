@@ -21,7 +21,7 @@ import numpy as np
 
 from irmcl_warp.mcl.filter import ParticleFilter
 from irmcl_warp.nog import NOG
-from kernels import WEIGHTING
+from irmcl_warp.kernels import WEIGHTING
 
 FREE_BELOW_P = 0.35  # a known cell under this p_occ is free space for the particles' uniform start
 NOF_WEIGHTINGS = ("nog_raymarch", "nog_table", "nof_direct")  # the observation models that read the trained field

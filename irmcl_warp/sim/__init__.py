@@ -12,7 +12,7 @@ from irmcl_warp.geometry import compose
 from irmcl_warp.sim.trajectory import follow, noisy_odometry, waypoints
 from irmcl_warp.sim.world import World, office
 from irmcl_warp.types import LaserInfo, LaserLog
-from kernels import SIM
+from irmcl_warp.kernels import SIM
 
 
 def drive_log(world: World, cfg, waypoints_xy, path_seed: int, duration_s: float | None = None,

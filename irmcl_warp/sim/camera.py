@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from irmcl_warp.geometry import compose
-from kernels import SIM
+from irmcl_warp.kernels import SIM
 
 WALL_HEIGHT_M, FURNITURE_HEIGHT_M, PERSON_HEIGHT_M = 2.5, 0.8, 1.7
 POSTER_M = (0.8, 0.6, 1.2)  # a poster's width, height and the height of its lower edge (m)

@@ -35,8 +35,8 @@ from omegaconf import OmegaConf
 
 from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, relative, relative_one, wrap_angle, wrap_angle_one
-from kernels import SLAM, pick_device
-from kernels.slam import MAX_BLOCK_BEAMS, ParticleMaps, climb_candidates_kernel, climb_update_kernel
+from irmcl_warp.kernels import SLAM, pick_device
+from irmcl_warp.kernels.slam import MAX_BLOCK_BEAMS, ParticleMaps, climb_candidates_kernel, climb_update_kernel
 
 
 def low_variance_parents(w: np.ndarray, offset: float) -> np.ndarray:

@@ -34,8 +34,8 @@ from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.metrics import aligned_error, coverage_warning, relations_error
 from irmcl_warp.slam.rbpf import RBPF, per_scan_poses
-from kernels import SLAM, pick_device
-from kernels.slam import ParticleMaps
+from irmcl_warp.kernels import SLAM, pick_device
+from irmcl_warp.kernels.slam import ParticleMaps
 
 
 def initial_frame(pose, margin_m: float, res: float):
