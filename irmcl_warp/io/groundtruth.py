@@ -117,7 +117,7 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
 def write_tum(path, stamps, poses) -> None:
     """Poses [N, 3] (x, y, yaw) at ``stamps`` as a TUM trajectory (``read_tum``'s format), written atomically.
     A pose that is not finite (no estimate yet) has no line, as evo expects."""
-    lines = [f"{t:.6f} {x:.4f} {y:.4f} 0 0 0 {np.sin(a / 2):.6f} {np.cos(a / 2):.6f}" for t, (x, y, a) in zip(stamps, poses)
+    lines = [f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {np.sin(a / 2):.9f} {np.cos(a / 2):.9f}" for t, (x, y, a) in zip(stamps, poses)
              if np.isfinite(x) and np.isfinite(y) and np.isfinite(a)]
     atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
 

@@ -26,34 +26,15 @@ from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
-from irmcl_warp.nof.checkpoint import load_nof
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
-from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import aligned_error
-from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.services.plots import animate_particles, plot_own_map
 from irmcl_warp.kernels import pick_device
 
 FRAMES = 60  # animation frames over the run
-
-
-def weighting_maps(cfg, grid, far: float, device: str) -> WeightingMaps:
-    m, loc = cfg.mcl, cfg.localize
-    if m.weighting not in NOF_WEIGHTINGS:
-        return grid_maps(grid, m.weighting)
-    if not loc.nof_path:
-        raise ValueError(f"mcl.weighting={m.weighting} reads a trained NOF: set localize.nof_path=<nof.pt>")
-    ckpt = resolve(loc.nof_path)
-    torch_device = "cuda" if device.startswith("cuda") else "cpu"
-    if m.weighting == "nof_direct":
-        return WeightingMaps(model=load_nof(ckpt, torch_device)[0])
-    H, W = grid.shape
-    x0, y0 = grid.origin_xy
-    bounds = (x0, y0, x0 + W * grid.resolution_m, y0 + H * grid.resolution_m)
-    return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=runs.cache_dir(cfg, "nog"),
-                                      device=torch_device))
 
 
 def run_in_map(cfg) -> Path:
@@ -67,12 +48,10 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
     m, loc = cfg.mcl, cfg.localize
-    grid = load_map(map_file)
     log = load_stream(cfg)
     far = far_bound_m(cfg, log.info.range_max_m)
-    view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
-    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, weighting_maps(cfg, grid, far, device))
-    pf.rng = np.random.default_rng(m.seed)
+    pf, grid = filter_in_map(map_file, m, log.T_base_laser, log.info.angles_rad, far, device, loc.nof_path,
+                             runs.cache_dir(cfg, "nog"))  # the online localizer's filter (mcl/online.py)
     if loc.initial_pose is not None:
         pose = np.asarray(list(loc.initial_pose), np.float64)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):

@@ -1,9 +1,11 @@
-"""Driving a particle filter over a recorded log: ``follow(pf, log, idx, mcl)``, the loop every MCL user
-shares (the localize stage, the pipeline)."""
+"""The particle filter as a robot runs it, one scan and one odometry reading at a time (``Localizer``), and over
+a recorded log (``follow(pf, log, idx, mcl)``: the same class fed scan by scan; the localize stage and the
+pipeline use it)."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,32 +41,100 @@ def between_updates(pose, odom_at_update, odom_now):
     return pose if np.all(np.abs(delta) < 1e-12) else compose(np.asarray(pose, float)[None], delta[None])[0]
 
 
+@dataclass
+class Estimate:
+    """What the localizer says after a scan: the base's pose in the map [x, y, yaw] (NaN before the first
+    update, with ``mcl.first_update=motion``), whether this scan weighed the particles, and, where asked for,
+    the particles' covariance [3, 3] (x, y, yaw about the pose; NaN between updates and before the first)."""
+    pose: np.ndarray
+    updated: bool
+    covariance: np.ndarray | None = None
+
+
+def particle_covariance(particles: np.ndarray, log_w: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """The weighted particles' covariance [3, 3] about ``pose`` (yaw differences wrapped to [-pi, pi]), as AMCL
+    publishes with its pose."""
+    w = np.exp(log_w - log_w.max())
+    w /= w.sum()
+    d = np.asarray(particles, float) - pose
+    d[:, 2] = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return (d * w[:, None]).T @ d
+
+
+class Localizer:
+    """A particle filter fed one scan and one odometry reading at a time, with AMCL's node in mind: ``update``
+    returns the pose in the map (the map -> odom transform is that pose composed with the inverse odometry).
+    The filter weighs and resamples only after the odometry moved (``m.update_min_*``; the first scan at once
+    unless ``m.first_update=motion``); between updates the pose follows the odometry; ``reduce_after_s`` into
+    the run it keeps the ``m.reduce_to`` heaviest particles (IR-MCL; None: never). The offline stages drive
+    the same class (``follow``), so a robot and a benchmark run the same code.
+
+        loc = Localizer(pf, cfg.mcl)          # pf: services.filters.build_filter(...), already initialised
+        for stamp, ranges, odom in sensor:    # odom: the odometry's pose [x, y, yaw] in its own frame
+            est = loc.update(stamp, ranges, odom)
+    """
+
+    def __init__(self, pf, m, reduce_after_s: float | None = None, covariance: bool = False,
+                 step_times: list | None = None):
+        self.pf, self.m, self.covariance, self.step_times = pf, m, covariance, step_times
+        self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
+        self.reduce_after_s = reduce_after_s
+        self.odom_at_update = self.t_start = self.pose = None
+        self.cov = np.full((3, 3), np.nan)
+
+    def initial_pose(self, pose, std=(0.5, 0.5, 0.3)) -> None:
+        """Start again around ``pose`` (RViz's "2D pose estimate"): the next scan weighs at once."""
+        self.pf.init_gaussian(np.asarray(pose, float), std)
+        self.pose, self.odom_at_update = None, None
+
+    def global_start(self) -> None:
+        """Start again from particles spread over the map's free space (global localization)."""
+        self.pf.init_uniform()
+        self.pose, self.odom_at_update = None, None
+
+    def teleported(self, odom) -> None:
+        """The robot was carried (a jump the odometry did not see): go on from ``odom`` as if nothing moved."""
+        self.odom_at_update = np.asarray(odom, float)
+
+    def update(self, stamp: float, ranges_m, odom) -> Estimate:
+        """One scan (the whole scan, metres, NaN = no return) and the odometry's pose at its stamp."""
+        odom = np.asarray(odom, float)
+        if self.odom_at_update is None:
+            self.odom_at_update = odom
+        if self.t_start is None:
+            self.t_start = stamp
+        m = self.m
+        u = odometry_step(self.odom_at_update, odom)
+        weigh = (self.pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad)
+        if weigh:
+            t0 = time.perf_counter()
+            self.pose = self.pf.step(u, ranges_m)[0]
+            if self.step_times is not None:
+                self.step_times.append(time.perf_counter() - t0)
+            self.odom_at_update = odom
+            if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
+                self.pf.reduce(m.reduce_to)
+                self.reduce_pending = False
+            if self.covariance:
+                self.cov = particle_covariance(self.pf.particles.numpy(), self.pf.log_w.numpy(), self.pose)
+        pose = between_updates(self.pose, self.odom_at_update, odom)
+        return Estimate(pose, weigh, self.cov if self.covariance and weigh else
+                        (np.full((3, 3), np.nan) if self.covariance else None))
+
+
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
            step_times: list | None = None) -> np.ndarray:
-    """Estimates [len(idx), 3] of one run over the scans ``idx``; the filter is already initialised. As
-    IR-MCL's code, the filter weighs and resamples only after the odometry moved (``m.update_min_*``), and
-    keeps the ``m.reduce_to`` heaviest particles ``reduce_after_s`` into the run (None: never). With
-    ``m.first_update=motion`` the first scan waits for the gates too; until then the estimate is NaN (no pose). A jump in
-    ``idx`` (kidnapping) is invisible to the odometry: the step across it is zero. ``watch(j, pf)``, when given,
-    sees the filter after every scan (plots, animations). ``step_times``, when given, gets the wall time (s)
-    of every filter step (each reads its estimate back, so the step is done when it returns)."""
+    """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
+    filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
+    it is zero. ``watch(j, pf)``, when given, sees the filter after every scan (plots, animations).
+    ``step_times``, when given, gets the wall time (s) of every filter step (each reads its estimate back, so
+    the step is done when it returns)."""
+    loc = Localizer(pf, m, reduce_after_s, step_times=step_times)
     est = np.empty((len(idx), 3))
-    last_odom, t_start, pose = log.odom[idx[0]], log.stamps[idx[0]], None
-    reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
     for j, i in enumerate(idx):
         if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
-            last_odom = log.odom[i]
-        u = odometry_step(last_odom, log.odom[i])
-        if (pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
-            t0 = time.perf_counter()
-            pose = pf.step(u, log.ranges_m[i])[0]
-            if step_times is not None:
-                step_times.append(time.perf_counter() - t0)
-            last_odom = log.odom[i]
-            if reduce_pending and log.stamps[i] - t_start >= reduce_after_s:
-                pf.reduce(m.reduce_to)
-                reduce_pending = False
-        est[j] = between_updates(pose, last_odom, log.odom[i])
+            loc.teleported(log.odom[i])
+        est[j] = loc.update(log.stamps[i], log.ranges_m[i], log.odom[i]).pose
         if watch is not None:
             watch(j, pf)
     return est

@@ -1,0 +1,109 @@
+"""The online localizer (mcl/online.py, track.Localizer): fed one scan and one odometry reading at a time it gives
+the offline run's poses bit for bit, with a covariance and the updates AMCL's gates allow."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from irmcl_warp.config import SimConfig, register
+from irmcl_warp.io import write_bag, write_tum
+from irmcl_warp.mapping import build_map, save_map
+from irmcl_warp.mcl.online import open_localizer
+from irmcl_warp.mcl.stage import run_localize
+from irmcl_warp.mcl.track import particle_covariance, window
+from irmcl_warp.services.data import far_bound_m, load_stream
+from irmcl_warp.sim import simulate
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    d = tmp_path_factory.mktemp("online")
+    log, _ = simulate(OmegaConf.structured(SimConfig(width_m=14.0, height_m=10.0, duration_s=30.0)), "cpu")
+    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu"), d / "office")
+    return files["yaml"], write_bag(log, d / "drive.bag"), log.ground_truth
+
+
+def _cfg(bag, map_yaml, *overrides):
+    register()
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose("config", overrides=["data=bag", f"data.path={bag}", f"localize.map_path={map_yaml}",
+                                            "device=cpu", "mcl.weighting=likelihood_field", "localize.run_s=20",
+                                            "localize.start_s=2", "mcl.update_min_trans_m=0.2",
+                                            "mcl.update_min_rot_rad=0.5", *overrides])
+
+
+@pytest.mark.parametrize("start", ["pose", "global"])
+def test_one_scan_at_a_time_gives_the_offline_run_bit_for_bit(world, tmp_path, monkeypatch, start):
+    map_yaml, bag, truth = world
+    monkeypatch.chdir(tmp_path)
+    pose = [float(truth[0, 0]) + 0.2, float(truth[0, 1]) - 0.1, float(truth[0, 2]) + 0.05]
+    extra = (["mcl.num_particles=600", f"localize.initial_pose=[{pose[0]},{pose[1]},{pose[2]}]"] if start == "pose"
+             else ["mcl.num_particles=3000", "mcl.first_update=motion"])
+    cfg = _cfg(bag, map_yaml, *extra)
+    out = run_localize(cfg)  # the offline stage
+
+    log = load_stream(cfg)  # the log as the stage read it
+    idx = window(log, cfg.localize.start_s, cfg.localize.run_s, "localize")
+    loc = open_localizer(map_yaml, cfg.mcl, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg, log.info.range_max_m),
+                         device="cpu", initial_pose=cfg.localize.initial_pose, initial_std=list(cfg.localize.tracking_std),
+                         reduce_after_s=cfg.localize.reduce_after_s if start == "global" else None)
+    est, updated, covs = [], [], []
+    for i in idx:  # as a robot's driver would hand them over
+        e = loc.update(float(log.stamps[i]), log.ranges_m[i].copy(), log.odom[i].copy())
+        est.append(e.pose)
+        updated.append(e.updated)
+        covs.append(e.covariance)
+    write_tum(tmp_path / "online.tum", log.stamps[idx], np.array(est))
+    assert (tmp_path / "online.tum").read_bytes() == (out / "trajectory.tum").read_bytes()
+
+    updated = np.array(updated)
+    assert 0 < updated.sum() < len(idx)  # AMCL's gates: not every scan weighs
+    if start == "global":
+        assert not updated[0] and np.isnan(est[0]).all()  # first_update=motion: no pose before the robot moves
+    else:
+        assert updated[0]
+    cov = covs[int(np.flatnonzero(updated)[-1])]
+    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) >= -1e-12)
+    # the resampled set's x-y variance against the filter's own spread of the weighted set before resampling
+    assert 0.5 < (cov[0, 0] + cov[1, 1]) / loc.pf.spread ** 2 < 2.0
+    assert np.isnan(covs[int(np.flatnonzero(~updated)[-1])]).all()  # between updates: no fresh covariance
+
+
+def test_the_covariance_wraps_the_heading_and_weighs_the_particles():
+    rng = np.random.default_rng()
+    pose = np.array([1.0, 2.0, np.pi - 0.01])
+    particles = pose + rng.normal(0, [0.2, 0.1, 0.05], (4000, 3))
+    particles[:, 2] = (particles[:, 2] + np.pi) % (2 * np.pi) - np.pi  # across the +-pi seam
+    cov = particle_covariance(particles, np.zeros(len(particles)), pose)
+    assert np.allclose(np.sqrt(np.diag(cov)), [0.2, 0.1, 0.05], rtol=0.1)
+    heavy = np.zeros(len(particles))
+    heavy[0] = 50.0  # one particle holds (almost) all the weight: the covariance is its offset squared
+    d = particles[0] - pose
+    d[2] = (d[2] + np.pi) % (2 * np.pi) - np.pi
+    assert np.allclose(particle_covariance(particles, heavy, pose), np.outer(d, d), atol=1e-6)
+
+
+def test_the_ros2_example_calls_the_localizer_as_it_is():
+    """examples/ros2_localizer.py runs only where rclpy exists; here: what it imports from the package exists and
+    its call of open_localizer binds to the function's signature (so the example cannot rot unseen)."""
+    import ast
+    import importlib
+    import inspect
+
+    from irmcl_warp.mcl import online
+
+    tree = ast.parse((Path(__file__).resolve().parents[1] / "examples" / "ros2_localizer.py").read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module.startswith("irmcl_warp"):
+            module = importlib.import_module(node.module)
+            assert all(hasattr(module, a.name) for a in node.names), node.module
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", None) == "open_localizer"]
+    assert len(calls) == 1
+    inspect.signature(online.open_localizer).bind(*calls[0].args, **{k.arg: None for k in calls[0].keywords})
