@@ -185,6 +185,7 @@ def pipeline(run: runs.Run) -> Path:
         T_gt_map = align_rigid(poses, log.ground_truth[scans])  # from the mapping log only
         gt_map = compose(inverse(T_gt_map), log2.ground_truth[idx])  # the second log's truth in the map frame
         metrics["T_groundtruth_map"] = T_gt_map.tolist()
+        write_tum(out / "ground_truth.tum", log2.stamps[idx], gt_map)  # in the map frame, beside localization.tum
         metrics["localization"] = localization_metrics(log2.stamps[idx], est, gt_map)
         metrics["failure"] = failure_note(log2.stamps[idx], est, gt_map, metrics["localization"])
     write_report(out, cfg, metrics, slam_map, poses, log2.stamps[idx], est, gt_map, particles)

@@ -30,11 +30,28 @@ from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
-from irmcl_warp.services.metrics import aligned_error
+from irmcl_warp.services.metrics import CONVERGED_FOR_S, CONVERGED_M, aligned_error, localization_metrics
 from irmcl_warp.services.plots import animate_particles, plot_own_map
 from irmcl_warp.kernels import pick_device
 
 FRAMES = 60  # animation frames over the run
+
+
+def converged_index(stamps, est, gt) -> int | None:
+    """The first scan from which the estimate stays within the benchmark protocol's CONVERGED_M of the truth
+    for CONVERGED_FOR_S (services.metrics.localization_metrics), the two frames tied by a rigid alignment of the
+    run's second half (where a run that localizes has converged); None when it never does."""
+    half = len(stamps) // 2
+    if np.sum(np.all(np.isfinite(est[half:]), 1) & np.all(np.isfinite(gt[half:]), 1)) < 3:
+        return None
+    moved = compose(align_rigid(est[half:], gt[half:]), est)
+    has = np.all(np.isfinite(moved), 1) & np.all(np.isfinite(gt), 1)
+    if has.sum() < 2:
+        return None
+    t_conv = localization_metrics(stamps, moved, gt)["time_to_converge_s"]
+    if t_conv is None:
+        return None
+    return int(np.flatnonzero(has)[np.searchsorted(stamps[has] - stamps[has][0], t_conv - 1e-9)])
 
 
 def run_in_map(cfg) -> Path:
@@ -90,9 +107,19 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     gt, gt_in_map = log.ground_truth[idx] if log.ground_truth is not None else None, None
     if gt is not None and np.isfinite(gt).all(1).sum() >= 3:
         # a map of your own need not share the ground truth's frame (a SLAM map starts where its drive did):
-        # the estimate is scored after a rigid alignment to the ground truth, as evo's --align
-        metrics["aligned_to_ground_truth"] = aligned_error(est, gt)
-        gt_in_map = compose(inverse(align_rigid(est, gt)), gt)  # drawn in the map
+        # the estimate is scored after a rigid alignment to the ground truth, as evo's --align, from the time
+        # it converged on; the run as a whole, the global start's transient included, is reported beside it.
+        # ground_truth.tum holds the truth at the same stamps (for evo).
+        write_tum(out / "ground_truth.tum", stamps, gt)
+        metrics["aligned_whole_run"] = aligned_error(est, gt)
+        s = converged_index(stamps, est, gt)
+        if s is not None:
+            metrics["aligned_to_ground_truth"] = {**aligned_error(est[s:], gt[s:]), "from_s": float(stamps[s] - stamps[0])}
+            gt_in_map = compose(inverse(align_rigid(est[s:], gt[s:])), gt)  # drawn in the map
+        else:
+            metrics["aligned_to_ground_truth"] = None
+            print(f"{log.source}: the estimate never converged on the ground truth (error below "
+                  f"{CONVERGED_M} m for {CONVERGED_FOR_S:g} s after a rigid alignment): no score after convergence")
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     extent = (grid.origin_xy[0], grid.origin_xy[0] + grid.shape[1] * grid.resolution_m,
               grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)

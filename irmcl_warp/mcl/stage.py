@@ -126,6 +126,7 @@ def localize_starts(run: runs.Run) -> Path:
             stamps = stamps[0] + np.cumsum(dt)
         write_tum(out / f"start{k}.tum", stamps, est)
         gt = log.ground_truth[idx]
+        write_tum(out / f"ground_truth-start{k}.tum", stamps, gt)  # the truth at the same stamps (for evo)
         metrics = localization_metrics(stamps, est, gt)
         if kidnapped:
             before = localization_metrics(stamps[:cut], est[:cut], gt[:cut])
