@@ -284,106 +284,164 @@ def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report, repair: bo
     return interpolate_poses(src_t, src_p[first], stamps)
 
 
-def write_bag(log: LaserLog, path, *, version: int = 1, scan_topic="/scan", odom_topic="/odom",
-              odom_frame="odom", base_frame="base_link", laser_frame="laser", images: "CameraFrames | None" = None,
-              rgb_topic="/camera/rgb", depth_topic="/camera/depth", camera_frame="camera") -> Path:
-    """Write a LaserLog as a ROS1 bag (``version=1``) or ROS2 bag folder (``version=2``).
+class Messages:
+    """ROS messages of one typestore (ROS 1 Noetic or ROS 2 Humble), built from our arrays: the writers' part
+    that knows message layouts (write_bag, io.mcap_run)."""
 
-    No-return beams are written as +inf (REP 117); odometry as nav_msgs/Odometry and /tf; the extrinsic
-    on /tf_static. ``images``: camera frames as sensor_msgs/Image, rgb8 on ``rgb_topic`` and depth (16UC1 in
-    millimetres or 32FC1 in metres) on ``depth_topic``. Reading the result back with :func:`read_bag`
-    (and :func:`read_bag_images`) gives the same log (and frames).
-    """
-    from rosbags.typesys import Stores, get_typestore
+    def __init__(self, version: int):
+        from rosbags.typesys import Stores, get_typestore
 
-    path = Path(path)
-    ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
-    if TF not in ts.types:  # rosbags' noetic store lacks tf2_msgs: declare it from its .msg text
-        from rosbags.typesys import get_types_from_msg
+        self.version = version
+        self.ts = ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
+        if TF not in ts.types:  # rosbags' noetic store lacks tf2_msgs: declare it from its .msg text
+            from rosbags.typesys import get_types_from_msg
 
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF))
-    T = ts.types
-    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
-    Vec3, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+            ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF))
+        self.T = ts.types
+        self.serialize = ts.serialize_ros1 if version == 1 else ts.serialize_cdr
 
-    def header(stamp, frame, seq):
+    def header(self, stamp, frame, seq=0):
         ns = int(round(stamp * 1e9))
-        t = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-        return Header(seq=seq, stamp=t, frame_id=frame) if version == 1 else Header(stamp=t, frame_id=frame)
+        t = self.T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        H = self.T["std_msgs/msg/Header"]
+        return H(seq=seq, stamp=t, frame_id=frame) if self.version == 1 else H(stamp=t, frame_id=frame)
 
-    def quat(yaw):
-        return Quat(x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2)))
+    def quat(self, yaw):
+        return self.T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=float(np.sin(yaw / 2)), w=float(np.cos(yaw / 2)))
 
-    def tf_msg(stamp, parent, child, pose, seq):
-        tr = T["geometry_msgs/msg/Transform"](translation=Vec3(x=float(pose[0]), y=float(pose[1]), z=0.0),
-                                             rotation=quat(pose[2]))
-        return T[TF](transforms=[T["geometry_msgs/msg/TransformStamped"](header=header(stamp, parent, seq),
+    def vec3(self, x=0.0, y=0.0):
+        return self.T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=0.0)
+
+    def pose(self, p):
+        T = self.T
+        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=0.0),
+                                           orientation=self.quat(p[2]))
+
+    def tf(self, stamp, parent, child, pose, seq=0):
+        T = self.T
+        tr = T["geometry_msgs/msg/Transform"](translation=self.vec3(pose[0], pose[1]), rotation=self.quat(pose[2]))
+        return T[TF](transforms=[T["geometry_msgs/msg/TransformStamped"](header=self.header(stamp, parent, seq),
                                                                           child_frame_id=child, transform=tr)])
 
-    def odom_msg(stamp, pose, v, seq):
-        Cov = np.zeros(36)
-        pose_c = T["geometry_msgs/msg/PoseWithCovariance"](pose=T["geometry_msgs/msg/Pose"](
-            position=T["geometry_msgs/msg/Point"](x=float(pose[0]), y=float(pose[1]), z=0.0),
-            orientation=quat(pose[2])), covariance=Cov)
+    def odom(self, stamp, pose, v, odom_frame, base_frame, seq=0):
+        T, cov = self.T, np.zeros(36)
         tw = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
-            linear=Vec3(x=float(v), y=0.0, z=0.0), angular=Vec3(x=0.0, y=0.0, z=0.0)), covariance=Cov)
-        return T[ODOM](header=header(stamp, odom_frame, seq), child_frame_id=base_frame, pose=pose_c, twist=tw)
+            linear=self.vec3(v), angular=self.vec3()), covariance=cov)
+        return T[ODOM](header=self.header(stamp, odom_frame, seq), child_frame_id=base_frame,
+                       pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(pose), covariance=cov), twist=tw)
 
-    ranges = np.where(np.isfinite(log.ranges_m), log.ranges_m, np.inf).astype(np.float32)
+    def scan(self, stamp, info, ranges, laser_frame, seq=0):
+        return self.T[SCAN](header=self.header(stamp, laser_frame, seq), angle_min=info.angle_min_rad,
+                            angle_max=info.angle_min_rad + info.fov_rad, angle_increment=info.angle_increment_rad,
+                            time_increment=0.0, scan_time=0.0, range_min=info.range_min_m, range_max=info.range_max_m,
+                            ranges=np.where(np.isfinite(ranges), ranges, np.inf).astype(np.float32),
+                            intensities=np.zeros(0, np.float32))
+
+
+def latched_qos():
+    """ROS 2's QoS of a latched topic (/tf_static, /map): transient local, reliable, keep last 1."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    never = QosTime(sec=0, nsec=0)
+    return [Qos(history=QosHistory.KEEP_LAST, depth=1, reliability=QosReliability.RELIABLE,
+                durability=QosDurability.TRANSIENT_LOCAL, deadline=never, lifespan=never,
+                liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=never, avoid_ros_namespace_conventions=False)]
+
+
+def bag_writer(path: Path, version: int, storage: str = "sqlite3"):
+    """(a writer of a ROS 1 bag or ROS 2 bag folder into a hidden partial place beside ``path``, the function
+    that moves the finished bag to ``path``, the one that removes the partial on failure). A ROS 2 bag's storage
+    file is named after the bag (``<name>/<name>.db3`` or ``.mcap``), as ros2 bag record names it."""
+    if storage not in ("sqlite3", "mcap"):
+        raise ValueError(f"bag storage {storage!r}: choose sqlite3 or mcap")
+    if version == 1 and storage != "sqlite3":
+        raise ValueError("a ROS 1 bag has one storage format; storage=mcap needs version=2")
+    partial = path.with_name(f".{path.name}.partial")
+    shutil.rmtree(partial, ignore_errors=True) if partial.is_dir() else partial.unlink(missing_ok=True)
+    if version == 1:
+        from rosbags.rosbag1 import Writer
+
+        tmp, writer = partial, Writer(partial)
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        partial.mkdir(parents=True)
+        tmp = partial / path.name  # the bag folder under its own name: its storage file takes that name
+        writer = Writer(tmp, version=9 if storage == "mcap" else 8,
+                        storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+
+    def finish() -> Path:
+        if path.is_dir():
+            shutil.rmtree(path)
+        tmp.replace(path)  # written completely, then renamed: never half a bag under the final name
+        if partial != tmp:
+            partial.rmdir()
+        return path
+
+    def discard() -> None:
+        shutil.rmtree(partial, ignore_errors=True) if partial.is_dir() else partial.unlink(missing_ok=True)
+
+    return writer, finish, discard
+
+
+def add_connection(writer, msgs: Messages, topic: str, msgtype: str, latched: bool = False):
+    """A topic of ``msgtype``; ``latched``: a ROS 1 latching connection, a ROS 2 transient-local QoS."""
+    if msgs.version == 1:
+        return writer.add_connection(topic, msgtype, typestore=msgs.ts, latching=1 if latched else None)
+    return writer.add_connection(topic, msgtype, typestore=msgs.ts, offered_qos_profiles=latched_qos() if latched else ())
+
+
+def write_bag(log: LaserLog, path, *, version: int = 1, storage: str = "sqlite3", scan_topic="/scan", odom_topic="/odom",
+              odom_frame="odom", base_frame="base_link", laser_frame="laser", images: "CameraFrames | None" = None,
+              rgb_topic="/camera/rgb", depth_topic="/camera/depth", camera_frame="camera") -> Path:
+    """Write a LaserLog as a ROS1 bag (``version=1``) or ROS2 bag folder (``version=2``; ``storage`` sqlite3 or
+    mcap).
+
+    No-return beams are written as +inf (REP 117); odometry as nav_msgs/Odometry and /tf; the extrinsic
+    on /tf_static, latched (ROS 1) / transient local (ROS 2) as robot_state_publisher offers it, so a player
+    hands it to late subscribers. ``images``: camera frames as sensor_msgs/Image, rgb8 on ``rgb_topic`` and depth
+    (16UC1 in millimetres or 32FC1 in metres) on ``depth_topic``. Reading the result back with :func:`read_bag`
+    (and :func:`read_bag_images`) gives the same log (and frames).
+    """
+    path = Path(path)
+    msgs = Messages(version)
     dt = np.diff(log.stamps, prepend=log.stamps[0] - 1.0)
     step = np.diff(log.odom[:, :2], axis=0, prepend=log.odom[:1, :2])
     v = (step[:, 0] * np.cos(log.odom[:, 2]) + step[:, 1] * np.sin(log.odom[:, 2])) / np.maximum(dt, 1e-6)
-
-    tmp = path.with_name(f".{path.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
-    if version == 1:
-        from rosbags.rosbag1 import Writer
-        writer, ser = Writer(tmp), ts.serialize_ros1
-    else:
-        from rosbags.rosbag2 import Writer
-        writer, ser = Writer(tmp, version=8), ts.serialize_cdr
+    writer, finish, discard = bag_writer(path, version, storage)
     try:
-        _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic,
-                   odom_frame, base_frame, laser_frame, images, rgb_topic, depth_topic, camera_frame)
+        _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_frame, laser_frame, images,
+                   rgb_topic, depth_topic, camera_frame)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
+        discard()
         raise
-    if path.is_dir():
-        shutil.rmtree(path)
-    tmp.replace(path)  # written completely, then renamed: never half a bag under the final name
-    return path
+    return finish()
 
 
-def _write_all(writer, ser, ts, T, log, ranges, v, header, tf_msg, odom_msg, scan_topic, odom_topic, odom_frame,
-               base_frame, laser_frame, images=None, rgb_topic=None, depth_topic=None, camera_frame=None):
-    info = log.info
+def _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_frame, laser_frame, images=None,
+               rgb_topic=None, depth_topic=None, camera_frame=None):
+    T, ser = msgs.T, msgs.serialize
     with writer:
-        def conn(topic, msgtype):
-            return writer.add_connection(topic, msgtype, typestore=ts)
-
         if images is not None:
-            c_rgb, c_depth = conn(rgb_topic, IMAGE), conn(depth_topic, IMAGE)
+            c_rgb, c_depth = add_connection(writer, msgs, rgb_topic, IMAGE), add_connection(writer, msgs, depth_topic, IMAGE)
             for i, stamp in enumerate(images.stamps):
                 ns = int(round(stamp * 1e9))
                 for c, img, enc in ((c_rgb, images.rgb[i], "rgb8"), (c_depth, images.depth[i], images.depth_encoding)):
                     data, step = _encode(img, enc)
-                    msg = T[IMAGE](header=header(stamp, camera_frame, i), height=img.shape[0], width=img.shape[1],
+                    msg = T[IMAGE](header=msgs.header(stamp, camera_frame, i), height=img.shape[0], width=img.shape[1],
                                    encoding=enc, is_bigendian=0, step=step, data=data)
                     writer.write(c, ns, ser(msg, IMAGE))
 
-        c_static, c_scan, c_odom, c_tf = conn("/tf_static", TF), conn(scan_topic, SCAN), conn(odom_topic, ODOM), conn("/tf", TF)
+        c_static = add_connection(writer, msgs, "/tf_static", TF, latched=True)
+        c_scan, c_odom = add_connection(writer, msgs, scan_topic, SCAN), add_connection(writer, msgs, odom_topic, ODOM)
+        c_tf = add_connection(writer, msgs, "/tf", TF)
         t0 = float(log.stamps.min())
-        writer.write(c_static, int(round(t0 * 1e9)),
-                     ser(tf_msg(t0, base_frame, laser_frame, log.T_base_laser, 0), TF))
+        writer.write(c_static, int(round(t0 * 1e9)), ser(msgs.tf(t0, base_frame, laser_frame, log.T_base_laser), TF))
         for i, stamp in enumerate(log.stamps):
             ns = int(round(stamp * 1e9))
-            scan = T[SCAN](header=header(stamp, laser_frame, i), angle_min=info.angle_min_rad,
-                           angle_max=info.angle_min_rad + info.fov_rad, angle_increment=info.angle_increment_rad,
-                           time_increment=0.0, scan_time=0.0, range_min=info.range_min_m, range_max=info.range_max_m,
-                           ranges=ranges[i], intensities=np.zeros(0, np.float32))
-            writer.write(c_scan, ns, ser(scan, SCAN))
-            writer.write(c_odom, ns, ser(odom_msg(stamp, log.odom[i], v[i], i), ODOM))
-            writer.write(c_tf, ns, ser(tf_msg(stamp, odom_frame, base_frame, log.odom[i], i), TF))
+            writer.write(c_scan, ns, ser(msgs.scan(stamp, log.info, log.ranges_m[i], laser_frame, i), SCAN))
+            writer.write(c_odom, ns, ser(msgs.odom(stamp, log.odom[i], v[i], odom_frame, base_frame, i), ODOM))
+            writer.write(c_tf, ns, ser(msgs.tf(stamp, odom_frame, base_frame, log.odom[i], i), TF))
 
 
 def read_bag_extrinsic(path, laser_frame: str = "laser", base_frame: str | None = None) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
+from irmcl_warp.io.mcap_run import write_run_mcap
 from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.online import filter_in_map
@@ -83,16 +84,21 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     spread, frames = np.zeros((len(idx), 2)), []
     keep = np.random.default_rng(0)
 
+    cloud = {}  # scan position -> particles [<= 1500, 3]: the animation's frames and the MCAP's /particlecloud
+
     def watch(j, f):
         spread[j] = f.spread, f.num_particles
         if j % every == 0 or j == len(idx) - 1:
             p = f.particles.numpy()
-            frames.append((float(t[idx[j]]), p[keep.permutation(len(p))[:1500], :2]))
+            cloud[j] = p[keep.permutation(len(p))[:1500]]
+            frames.append((float(t[idx[j]]), cloud[j][:, :2]))
 
     first = pf.particles.numpy()
     frames.append((float(t[idx[0]]), first[keep.permutation(len(first))[:1500], :2]))  # the start, before any scan
     t_run = time.perf_counter()
-    est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch)
+    covariances = []
+    est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch,
+                 covariances=covariances)
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
     write_tum(out / "trajectory.tum", stamps, est)
@@ -125,6 +131,9 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
               grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)
     plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt_in_map)
     animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
+    # the run for Foxglove / RViz: replay/replay.mcap (a ROS 2 bag folder; io/mcap_run.py lists the topics)
+    write_run_mcap(out / "replay", log=log, idx=idx, est=est, grid=grid, covariances=np.array(covariances),
+                   particle_frames=cloud.items(), ground_truth_in_map=gt_in_map)
     out = run.finish(metrics, device)
     print(f"{log.source}: {len(idx)} scans localized in {map_file} ({metrics['start']} start); particle spread "
           f"{metrics['final_spread_m']:.2f} m at the end -> {out}")

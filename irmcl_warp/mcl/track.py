@@ -123,18 +123,22 @@ class Localizer:
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
-           step_times: list | None = None) -> np.ndarray:
+           step_times: list | None = None, covariances: list | None = None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
     it is zero. ``watch(j, pf)``, when given, sees the filter after every scan (plots, animations).
     ``step_times``, when given, gets the wall time (s) of every filter step (each reads its estimate back, so
-    the step is done when it returns)."""
-    loc = Localizer(pf, m, reduce_after_s, step_times=step_times)
+    the step is done when it returns). ``covariances``, when given, gets the particles' covariance [3, 3] at
+    every scan (NaN where the scan weighed nothing)."""
+    loc = Localizer(pf, m, reduce_after_s, covariance=covariances is not None, step_times=step_times)
     est = np.empty((len(idx), 3))
     for j, i in enumerate(idx):
         if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
             loc.teleported(log.odom[i])
-        est[j] = loc.update(log.stamps[i], log.ranges_m[i], log.odom[i]).pose
+        e = loc.update(log.stamps[i], log.ranges_m[i], log.odom[i])
+        est[j] = e.pose
+        if covariances is not None:
+            covariances.append(e.covariance)
         if watch is not None:
             watch(j, pf)
     return est
