@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import os
 import sys
 
 from irmcl_warp import __version__
@@ -72,13 +73,22 @@ def command_help(name: str) -> str:
                       SETTINGS_HINT.format(cmd=name)])
 
 
+def _say(text: str) -> None:
+    """Print, and end quietly when the reader went away (``irmcl-warp --help | head``), as Python's docs advise."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(1)
+
+
 def main(argv: list[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     if not args or args[0] in ("-h", "--help", "help"):
-        print(usage())
+        _say(usage())
         return
     if args[0] in ("-V", "--version"):
-        print(f"irmcl-warp {__version__}")
+        _say(f"irmcl-warp {__version__}")
         return
     name, rest = args[0], args[1:]
     if name not in COMMANDS:
@@ -87,7 +97,7 @@ def main(argv: list[str] | None = None) -> None:
               + f"; the commands: {', '.join(COMMANDS)}", file=sys.stderr)
         sys.exit(2)
     if any(a in ("-h", "--help") for a in rest):
-        print(command_help(name))
+        _say(command_help(name))
         return
     rest = ["--help" if a == "--hydra-help" else a for a in rest]
     module = importlib.import_module(COMMANDS[name][0])
