@@ -102,6 +102,35 @@ def test_a_dense_ground_truth_with_a_clock_offset_is_named_then_scores_every_rel
     assert np.hypot(*(got[:, :2] - want[:, :2]).T).max() < 1e-2  # two integration grids over 300 m, TUM decimals
 
 
+def test_a_simulated_drive_s_dense_truth_70_s_off_is_matched_by_the_hint_it_gets(tmp_path):
+    """The simulator's noisy odometry and a 20 Hz trajectory 70.18 s behind the log's clock, stamped between
+    the scans: the refusal names an offset within a tenth of the 0.2 s scan period and the settings that make
+    the trajectory meet the log, tried before they are suggested; set as said, the truth is attached."""
+    import re
+
+    from irmcl_warp.config import SimConfig
+    from irmcl_warp.sim import simulate
+
+    log, _ = simulate(OmegaConf.structured(SimConfig(duration_s=120.0)), "cpu")
+    truth, log.ground_truth = log.ground_truth, None
+    t = np.arange(log.stamps[0] + 0.013, log.stamps[-1], 0.05)
+    dense = np.column_stack([np.interp(t, log.stamps, truth[:, 0]), np.interp(t, log.stamps, truth[:, 1]),
+                             wrap_angle(np.interp(t, log.stamps, np.unwrap(truth[:, 2])))])
+    path = tmp_path / "truth.tum"
+    write_tum(path, t - 70.18, dense)
+    with pytest.raises(LogFormatError) as refused:
+        apply_ground_truth(log, path, gt_config())
+    said = re.search(r"set data.ground_truth_time_offset_s=([\d.]+) data.ground_truth_max_gap_s=([\d.]+) \(tried: "
+                     r"(\d+) % of the log", str(refused.value))
+    assert said, str(refused.value)
+    offset, gap = float(said[1]), float(said[2])
+    assert abs(offset - 70.18) < 0.02 and int(said[3]) >= 95
+    m = apply_ground_truth(log, path, gt_config(ground_truth_time_offset_s=offset, ground_truth_max_gap_s=gap))
+    assert m.mode == "interpolated" and m.share > 0.95
+    ok = np.isfinite(log.ground_truth[:, 0])
+    assert np.median(np.hypot(*(log.ground_truth[ok, :2] - truth[ok, :2]).T)) < 0.02
+
+
 def test_no_offset_is_claimed_for_unrelated_turns(rng):
     stamps = 0.2 * np.arange(2000)
     odom = drive(stamps)

@@ -6,6 +6,8 @@ ground-truth poses by stamp, and the laser extrinsic from a bag when the log has
 
 from __future__ import annotations
 
+import copy
+
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,12 +114,29 @@ def check_ground_truth(path, log: LaserLog, stamps, poses, match: GroundTruthMat
         if c.convincing:
             msg += (f". Its clock appears offset from the log's by {c.offset_s:+.3f} s (its turns then agree with "
                     f"the odometry's to {c.yaw_increment_error_deg:.2f} deg per step, {c.contrast:.2f} of the "
-                    f"disagreement a few seconds off): set data.ground_truth_time_offset_s={c.offset_s:.3f}")
+                    f"disagreement a few seconds off): " + _checked_hint(log, stamps, poses, c.offset_s))
         else:
             msg += ". No clock offset lines its turns up with the odometry's either"
     hint = ("; for a dense trajectory set data.ground_truth_max_gap_s (interpolate between poses), for keyframes "
             "whose stamps jitter data.ground_truth_tolerance_s")
     raise LogFormatError(path, None, msg + hint)
+
+
+def _checked_hint(log: LaserLog, stamps, poses, offset_s: float) -> str:
+    """The settings that make the ground truth meet the log at ``offset_s``, tried before they are suggested:
+    the offset alone (keyframes stamped as the scans), else with the trajectory read as dense (interpolated
+    between poses up to three of its median steps apart), each with the share it reaches."""
+    trial = copy.copy(log)
+    step = float(np.median(np.diff(np.sort(np.asarray(stamps, float)))))
+    tries = [({}, "as keyframes"), ({"max_gap_s": round(3 * step, 3)}, "interpolated")]
+    for extra, how in tries:
+        m = attach_ground_truth(trial, stamps, poses, offset_s=offset_s, **extra)
+        if m.share >= GT_MIN_SHARE and m.scans_posed > 0:
+            setting = f"data.ground_truth_time_offset_s={offset_s:.3f}" + (
+                f" data.ground_truth_max_gap_s={extra['max_gap_s']:g}" if extra else "")
+            return f"set {setting} (tried: {100 * m.share:.0f} % of the log then gets a pose, {how})"
+    return (f"but even at that offset it meets too little of the log ({100 * m.share:.0f} % interpolated); "
+            f"set data.ground_truth_time_offset_s={offset_s:.3f} and look at its stamps")
 
 
 def apply_ground_truth(log: LaserLog, path, d) -> GroundTruthMatch:
