@@ -170,7 +170,7 @@ def test_trajectory_files_with_repeated_or_backward_stamps(tmp_path):
     p.write_text(f"1.0 0 0 0 {q}\n2.0 1 0 0 {q}\n2.0 5 0 0 {q}\n")
     with pytest.raises(LogFormatError, match=r"t.tum, line 3: stamp 2.000000 was given at line 2 with another pose"):
         read_tum(p)
-    p.write_text(f"1.0 0 0 0 0 0 0 0\n")
+    p.write_text("1.0 0 0 0 0 0 0 0\n")
     with pytest.raises(LogFormatError, match=r"line 1: quaternion .* has length 0: expected a unit quaternion"):
         read_tum(p)
 
