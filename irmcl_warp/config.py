@@ -27,6 +27,8 @@ class DataConfig:
     ground_truth_max_gap_s: Optional[float] = None  # dense ground truth: SE(2)-interpolated at the scans between
     #                                                 poses at most this far apart; None: keyframes, matched by stamp
     ground_truth_tolerance_s: float = 1e-4  # keyframes: a pose stamped this close to a scan is that scan's
+    ground_truth_fill: str = "none"  # keyframes: "odometry" poses the scans between them by the last keyframe plus
+    #                                  the odometry since (how GMapping's own path between processed scans reads)
     relations_path: Optional[str] = None  # Kümmerle et al. 2009 relations
     relation_stamps_path: Optional[str] = None  # g2o file whose laser stamps stand in for synthetic log stamps
     splits_path: Optional[str] = None  # benchmark split ids (stamps)
@@ -390,7 +392,7 @@ class ConfigError(ValueError):
 # choices of the string settings (a typo is an error, not a silent fallback); the registries and strategy tables
 # that implement them sit above this module, so tests/test_config.py holds the two in agreement
 CHOICES = {
-    "data.format": ("sim", "carmen", "bag"), "data.beam_policy": ("error", "reject", "resample"),
+    "data.format": ("sim", "carmen", "bag"), "data.ground_truth_fill": ("none", "odometry"), "data.beam_policy": ("error", "reject", "resample"),
     "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
     "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"),
     "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from irmcl_warp.config import DataConfig
+from irmcl_warp.config import ConfigError, DataConfig, validate
 from irmcl_warp.geometry import compose, interpolate_poses, interpolate_se2, relative, se2_exp, se2_log, wrap_angle
 from irmcl_warp.io import (LogDefectWarning, LogFormatError, apply_ground_truth, attach_ground_truth, read_carmen,
                            read_carmen_poses, read_matched_csv, read_tum, write_tum)
@@ -129,6 +129,39 @@ def test_a_simulated_drive_s_dense_truth_70_s_off_is_matched_by_the_hint_it_gets
     assert m.mode == "interpolated" and m.share > 0.95
     ok = np.isfinite(log.ground_truth[:, 0])
     assert np.median(np.hypot(*(log.ground_truth[ok, :2] - truth[ok, :2]).T)) < 0.02
+
+
+def test_sparse_keyframes_filled_by_the_odometry_score_as_gmapping_s_own_path(tmp_path, rng):
+    """Corrected poses at every 8th scan only (a GMapping-corrected log's processed scans): with
+    data.ground_truth_fill=odometry each scan between them is the last keyframe plus the odometry since, exact at
+    the keyframes; on a winding drive whose odometry is good over a few scans, relations between nearby scans score
+    closer to the truth that way than by interpolating across the gaps."""
+    stamps = 100.0 + 0.2 * np.arange(800)
+    truth = drive(stamps)
+    steps = relative(truth[:-1], truth[1:]) * (1 + rng.normal(0, 0.01, (len(stamps) - 1, 3)))  # 1 % odometry noise
+    odom = np.zeros_like(truth)
+    for k, d in enumerate(steps):
+        odom[k + 1] = compose(odom[k], d)
+    log = make_log(stamps, odom)
+    key = np.arange(3, len(stamps), 8)
+    path = tmp_path / "corrected.tum"
+    write_tum(path, stamps[key], truth[key])
+    m = apply_ground_truth(log, path, gt_config(ground_truth_fill="odometry"))
+    assert m.mode == "keyframes+odometry" and m.share == 1.0
+    filled = log.ground_truth.copy()
+    assert np.isnan(filled[:3]).all() and np.isfinite(filled[3:]).all()
+    np.testing.assert_allclose(filled[key, :2], truth[key, :2], atol=2e-6)  # TUM's 6 decimals
+    j = 3 + 8 * 20 + 5  # 5 scans after a keyframe: that keyframe plus the odometry's 5 steps
+    np.testing.assert_allclose(filled[j], compose(filled[j - 5], relative(odom[j - 5], odom[j])), atol=1e-9)
+    k = np.arange(10, len(stamps) - 6, 5)
+    rel = Relations(stamps[k], stamps[k + 3], relative(truth[k], truth[k + 3]))
+    by_odometry = relations_error(log.stamps, filled, rel)
+    apply_ground_truth(log, path, gt_config(ground_truth_max_gap_s=2.0))
+    interpolated = relations_error(log.stamps, log.ground_truth, rel)
+    assert by_odometry["relations_used"] == interpolated["relations_used"] == len(k)
+    assert by_odometry["trans_abs_mean_m"] < 0.5 * interpolated["trans_abs_mean_m"]
+    with pytest.raises(ConfigError, match="data.ground_truth_fill"):
+        validate(OmegaConf.create({"data": {"ground_truth_fill": "spline"}}))
 
 
 def test_no_offset_is_claimed_for_unrelated_turns(rng):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.geometry import interpolate_se2
+from irmcl_warp.geometry import compose, interpolate_se2, relative
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
 from irmcl_warp.io.clock import estimate_clock_offset
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
@@ -71,10 +71,12 @@ class GroundTruthMatch:
 
 
 def attach_ground_truth(log: LaserLog, stamps, poses, *, offset_s: float = 0.0, max_gap_s: float | None = None,
-                        tol_s: float = 1e-4) -> GroundTruthMatch:
+                        tol_s: float = 1e-4, fill: str = "none") -> GroundTruthMatch:
     """Set ``log.ground_truth`` (NaN where unknown) from poses whose stamps plus ``offset_s`` are the log's
     clock: matched by stamp within ``tol_s`` (keyframes), or SE(2)-interpolated at every scan between two
-    poses at most ``max_gap_s`` apart (a dense trajectory)."""
+    poses at most ``max_gap_s`` apart (a dense trajectory). Keyframes with ``fill="odometry"``: every scan after
+    the first keyframe is posed by the last keyframe before it plus the odometry's motion since (GMapping's
+    path between its processed scans)."""
     t = np.asarray(stamps, np.float64) + float(offset_s)
     poses = np.asarray(poses, np.float64)
     if max_gap_s is None:
@@ -85,6 +87,11 @@ def attach_ground_truth(log: LaserLog, stamps, poses, *, offset_s: float = 0.0, 
         matched = int(np.sum(scan[inside] >= 0))
         considered = int(inside.sum())
         mode = "keyframes"
+        if fill == "odometry":
+            gt = fill_by_odometry(log.stamps, log.odom, gt)
+            mode = "keyframes+odometry"
+        elif fill != "none":
+            raise ValueError(f"ground truth fill {fill!r}: choose none or odometry")
     else:
         gt = interpolate_se2(t, poses, log.stamps, max_gap_s, tol_s)
         considered = int(np.sum((log.stamps >= t[0]) & (log.stamps <= t[-1])))
@@ -92,6 +99,20 @@ def attach_ground_truth(log: LaserLog, stamps, poses, *, offset_s: float = 0.0, 
         mode = "interpolated"
     log.ground_truth = gt
     return GroundTruthMatch(mode, int(np.isfinite(gt[:, 0]).sum()), considered, matched / max(considered, 1))
+
+
+def fill_by_odometry(scan_stamps, odom, keyed: np.ndarray) -> np.ndarray:
+    """Poses [N, 3] at every scan: where ``keyed`` holds a pose (a keyframe), that pose; at a scan after it (in
+    stamp order) until the next keyframe, the keyframe's pose composed with the odometry's motion from the
+    keyframe's scan to this one; NaN before the first keyframe."""
+    order = np.argsort(np.asarray(scan_stamps, float), kind="stable")
+    have = np.isfinite(keyed[order, 0])
+    last = np.maximum.accumulate(np.where(have, np.arange(len(order)), -1))  # the last keyframe at or before
+    out = np.full_like(keyed, np.nan)
+    ok = last >= 0
+    k, i = order[last[ok]], order[ok]
+    out[i] = compose(keyed[k], relative(odom[k], odom[i]))
+    return out
 
 
 def check_ground_truth(path, log: LaserLog, stamps, poses, match: GroundTruthMatch, offset_set: bool) -> None:
@@ -144,7 +165,7 @@ def apply_ground_truth(log: LaserLog, path, d) -> GroundTruthMatch:
     stamps, poses = read_ground_truth(path)
     offset = d.get("ground_truth_time_offset_s")
     match = attach_ground_truth(log, stamps, poses, offset_s=offset or 0.0, max_gap_s=d.get("ground_truth_max_gap_s"),
-                                tol_s=d.get("ground_truth_tolerance_s", 1e-4))
+                                tol_s=d.get("ground_truth_tolerance_s", 1e-4), fill=d.get("ground_truth_fill", "none"))
     check_ground_truth(path, log, stamps, poses, match, offset is not None)
     return match
 
