@@ -158,3 +158,14 @@ def test_gfs_beam_angles_follow_the_released_reader():
     assert np.allclose(np.diff(b), 1.0) and b[90] == 0 and np.isclose(b[0], -90)
     with pytest.raises(ValueError, match="361|200 beams"):
         gfs_flaser_angles(200)
+
+
+def test_a_file_of_another_format_is_called_not_a_carmen_log(tmp_path):
+    other = tmp_path / "other.txt"
+    other.write_text("L 0.1 0.2 0.3 5.0 5.1\nO 0.0 0.0 0.0\n")
+    with pytest.raises(LogFormatError, match=r"other.txt, line 1: .*found 'L': not a CARMEN log\?"):
+        read_carmen(other)
+    broken = tmp_path / "broken.log"
+    broken.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\n0.5 0.6\n")
+    with pytest.raises(LogFormatError, match=r"broken.log, line 2: .*a line broken in two\?"):
+        read_carmen(broken)

@@ -47,6 +47,7 @@ class CarmenContents:
     odom_lines: list = field(default_factory=list)  # (stamp, x, y, theta, tv)
     skipped: Counter = field(default_factory=Counter)
     truncated_last_line: bool = False
+    records_seen: int = 0  # lines read as a record (any name), to tell "not a CARMEN log" from a broken line
 
 
 def _need(path, line_no, tokens, count, what):
@@ -128,14 +129,17 @@ def parse_carmen(path) -> CarmenContents:
             v = parse_floats(path, n_line, tok[1:8], "ODOM")
             out.odom_lines.append((v[6], v[0], v[1], v[2], v[3]))
         elif not RECORD_NAME.fullmatch(kind):
+            first = not out.scans and not out.odom_lines and not out.records_seen
             raise LogFormatError(path, f"line {n_line}", f"expected a record name (FLASER, ODOM, ...), found "
-                                 f"{kind[:40]!r}: a line broken in two?")
+                                 f"{kind[:40]!r}: " + ("not a CARMEN log? (the CARMEN subset this reads and how to "
+                                 "bring another format in: README, 'Your own log')" if first else "a line broken in two?"))
         else:
             merged = next((t for t in tok[1:] if any(name in t for name in READ_RECORDS)), None)
             if merged is not None:
                 raise LogFormatError(path, f"line {n_line}", f"{kind} line holds {merged[:40]!r}: two records on one "
                                      f"line (a lost line break)?")
             out.skipped[kind] += 1
+        out.records_seen += 1
     return out
 
 
