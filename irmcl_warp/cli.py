@@ -100,9 +100,11 @@ def main(argv: list[str] | None = None) -> None:
         _say(command_help(name))
         return
     rest = ["--help" if a == "--hydra-help" else a for a in rest]
+    from irmcl_warp.services.cli import hydra_main
+
     module = importlib.import_module(COMMANDS[name][0])
     sys.argv = [f"irmcl-warp {name}", *rest]  # Hydra parses sys.argv
-    module.main()
+    hydra_main(module.main)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.types import LaserLog
 from irmcl_warp.kernels import pick_device
-from irmcl_warp.services.cli import run_entry
+from irmcl_warp.services.cli import hydra_main, run_entry
 
 
 def path_length_m(poses: np.ndarray) -> float:
@@ -82,4 +82,4 @@ def main(cfg) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    hydra_main(main)

@@ -4,7 +4,7 @@ import hydra
 
 from irmcl_warp.config import register
 from irmcl_warp.mcl.stage import run_localize
-from irmcl_warp.services.cli import run_entry
+from irmcl_warp.services.cli import hydra_main, run_entry
 
 register()
 
@@ -15,4 +15,4 @@ def main(cfg) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    hydra_main(main)

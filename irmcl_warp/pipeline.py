@@ -43,7 +43,7 @@ from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.slam.stage import run_slam
 from irmcl_warp.kernels import pick_device
-from irmcl_warp.services.cli import run_entry
+from irmcl_warp.services.cli import hydra_main, run_entry
 
 
 def with_overrides(cfg, **dotted):
@@ -209,4 +209,4 @@ def main(cfg) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    hydra_main(main)

@@ -14,7 +14,7 @@ from irmcl_warp.config import register
 from irmcl_warp import runs
 from irmcl_warp.io import read_relations, resolve
 from irmcl_warp.services.data import load_stream
-from irmcl_warp.services.cli import run_entry
+from irmcl_warp.services.cli import hydra_main, run_entry
 
 
 def run_relations(cfg):
@@ -52,4 +52,4 @@ def main(cfg) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    hydra_main(main)

@@ -102,3 +102,20 @@ def test_argparse_entry_points_report_bad_input_without_a_traceback(tmp_path):
                     "none.npz")
     kept = _run(["eval.keep", str(tmp_path / "not-a-run"), "--results", str(tmp_path / "results")], tmp_path)
     assert kept.returncode == 2 and "not a finished run" in kept.stderr and "Traceback" not in kept.stderr
+
+
+@pytest.mark.parametrize("mistake, said", [("mcl.no_such_key=1", "no_such_key"), ("+exp=no_such_experiment", "no_such_experiment")])
+def test_hydra_s_own_mistakes_exit_2_as_ours_do(tmp_path, mistake, said):
+    run = _run(["irmcl_warp.inspect", mistake], tmp_path)
+    assert run.returncode == 2 and said in run.stderr, (run.returncode, run.stderr[-2000:])
+    assert "Traceback" not in run.stderr
+
+
+def test_hydra_s_log_file_holds_what_the_run_said(tmp_path):
+    run = _run(["irmcl_warp.inspect", "sim.duration_s=4", "sim.num_beams=30", "device=cpu"], tmp_path)
+    assert run.returncode == 0, run.stderr[-2000:]
+    text = (tmp_path / "outputs" / "sim_office" / "inspect.log").read_text()
+    assert "[INFO] - sim_office: 20 scans of 30 beams" in text and "map from ground truth" in text
+    failed = _run(["irmcl_warp.inspect", "data=bag", f"data.path={tmp_path / 'none.bag'}"], tmp_path)
+    assert failed.returncode == 2
+    assert "[WARNING] - error: " in (tmp_path / "outputs" / "bag" / "inspect.log").read_text()
