@@ -155,10 +155,16 @@ def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, st
         conns = [c for c in reader.connections if c.topic in (scan_topic, odom_topic) or c.msgtype == TF]
         counters: dict[str, int] = {}
         messages = reader.messages(connections=conns)
+        from tqdm import tqdm
+
+        bar = tqdm(total=sum(c.msgcount for c in conns), desc=f"read {path.name}", unit="msg", mininterval=1.0,
+                   disable=None, leave=False)  # (on a terminal only)
         while True:
             try:
                 conn, _, raw = next(messages)
+                bar.update()
             except StopIteration:
+                bar.close()
                 break
             except Exception as e:
                 raise LogFormatError(path, f"after message {sum(counters.values())}", f"bag is truncated or corrupt: {e}") from e

@@ -98,7 +98,7 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     t_run = time.perf_counter()
     covariances = []
     est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch,
-                 covariances=covariances)
+                 covariances=covariances, progress=f"localize {Path(str(log.source)).name}")
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
     write_tum(out / "trajectory.tum", stamps, est)

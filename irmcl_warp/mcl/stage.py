@@ -115,7 +115,8 @@ def localize_starts(run: runs.Run) -> Path:
         t_run = time.perf_counter()
         # synchronous: every step reads its estimate back; IR-MCL reduces the particles in global runs only
         step_times = []
-        est = follow(pf, log, idx, m, loc.reduce_after_s if loc.mode == "global" else None, step_times=step_times)
+        est = follow(pf, log, idx, m, loc.reduce_after_s if loc.mode == "global" else None, step_times=step_times,
+                     progress=f"start {k + 1}/{len(times)}")
         ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
         all_steps.extend(step_times)
         stamps = log.stamps[idx]

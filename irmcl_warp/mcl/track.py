@@ -123,16 +123,21 @@ class Localizer:
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
-           step_times: list | None = None, covariances: list | None = None) -> np.ndarray:
+           step_times: list | None = None, covariances: list | None = None, progress: str | None = None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
     it is zero. ``watch(j, pf)``, when given, sees the filter after every scan (plots, animations).
     ``step_times``, when given, gets the wall time (s) of every filter step (each reads its estimate back, so
     the step is done when it returns). ``covariances``, when given, gets the particles' covariance [3, 3] at
-    every scan (NaN where the scan weighed nothing)."""
+    every scan (NaN where the scan weighed nothing). ``progress``: a progress bar with that label, on a terminal."""
     loc = Localizer(pf, m, reduce_after_s, covariance=covariances is not None, step_times=step_times)
     est = np.empty((len(idx), 3))
-    for j, i in enumerate(idx):
+    scans = enumerate(idx)
+    if progress is not None:
+        from tqdm import tqdm
+
+        scans = tqdm(scans, total=len(idx), desc=progress, unit="scan", mininterval=1.0, disable=None, leave=False)
+    for j, i in scans:
         if j > 0 and idx[j - 1] != i - 1:  # teleported: continue from here as if nothing moved
             loc.teleported(log.odom[i])
         e = loc.update(log.stamps[i], log.ranges_m[i], log.odom[i])
