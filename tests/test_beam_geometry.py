@@ -178,3 +178,18 @@ def test_one_absurd_range_does_not_win_the_no_return_detection(tmp_path):
         log = read_carmen(p)
     assert log.info.no_return_m == pytest.approx(81.91)  # the driver's value, carried by every scan
     assert np.isnan(log.ranges_m[:, -1]).all() and np.isnan(log.ranges_m[0, 0])
+
+
+def test_the_log_s_geometry_is_the_majority_s_even_when_its_increment_jitters(rng):
+    """Three in four scans of 180 beams whose float32 increment jitters by a few 1e-9 rad, one in four of 181:
+    the 180-beam geometry is the log's, and rejecting keeps three in four (it kept the 181 minority's quarter)."""
+    from irmcl_warp.io.beams import harmonise_beams
+    from irmcl_warp.types import DefectReport
+
+    n = 400
+    minority = rng.random(n) < 0.25
+    geometries = [ScanGeometry(181, -1.5708, 0.0174533) if m else
+                  ScanGeometry(180, -1.5708, float(np.float32(0.0175504 + rng.normal(0, 3e-9)))) for m in minority]
+    scans = [rng.uniform(1, 5, g.num_beams) for g in geometries]
+    ranges, kept, common = harmonise_beams("log", scans, [f"scan {i}" for i in range(n)], "reject", DefectReport(), geometries)
+    assert common.num_beams == 180 and len(kept) == int((~minority).sum()) and ranges.shape == (len(kept), 180)

@@ -36,7 +36,11 @@ class ScanGeometry:
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.num_beams)
 
     def key(self) -> tuple:
-        return (self.num_beams, round(self.angle_min_rad / ANGLE_TOL_RAD), round(self.angle_increment_rad * 1e9))
+        """Equal for geometries within the tolerance (bar the rounding edge): the count, the first beam's angle
+        and the last beam's, each on a grid of ANGLE_TOL_RAD. (The increment itself rounded to 1e-9 split the
+        scans of a driver whose float32 increment jitters into many keys, and a steady minority won the vote.)"""
+        last = self.angle_min_rad + self.angle_increment_rad * (self.num_beams - 1)
+        return (self.num_beams, round(self.angle_min_rad / ANGLE_TOL_RAD), round(last / ANGLE_TOL_RAD))
 
     def same_as(self, other: "ScanGeometry") -> bool:
         if self.num_beams != other.num_beams:
