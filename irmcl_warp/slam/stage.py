@@ -14,6 +14,7 @@ differs from the first is an error (the readers' data.beam_policy can reject or 
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -58,12 +59,61 @@ def filter_frame(cfg, log) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"slam.frame={frame!r}: choose base or laser")
 
 
+def available_memory(device: str) -> int:
+    """Bytes the maps may take: the GPU's free memory, or the host's MemAvailable (/proc/meminfo; the physical
+    memory where that file is missing)."""
+    if device.startswith("cuda"):
+        return int(wp.get_device(device).free_memory)
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+
+
+def maps_memory(log, odom, usable_m: float, resolution_m: float, particles: int) -> tuple[int, int, tuple[int, int]]:
+    """(bytes of the particles' maps over the box the scans' end points span on the odometry, the bytes they may
+    take at their peak, the cells [W, H] of that box). ParticleMaps holds one vec4 of float32 per cell and
+    particle; its frame grows with up to a quarter of slack per side and holds the old and the grown frame at
+    once while it grows (the peak). The odometry's box is no bound either way: a SLAM path spans about as much,
+    less where the odometry drifted (MIT Killian's box is 2-3 times the building's)."""
+    ok = np.isfinite(log.ranges_m) & (log.ranges_m < usable_m)
+    r = np.where(ok, log.ranges_m, 0.0)
+    T = compose(odom, np.asarray(log.T_base_laser, float)[None])
+    a = T[:, 2:3] + log.info.angles_rad[None].astype(np.float64)
+    x, y = T[:, 0:1] + r * np.cos(a), T[:, 1:2] + r * np.sin(a)
+    x, y = np.concatenate([x[ok], T[:, 0]]), np.concatenate([y[ok], T[:, 1]])
+    W, H = int(np.ceil((np.ptp(x) + 2.0) / resolution_m)), int(np.ceil((np.ptp(y) + 2.0) / resolution_m))
+    box = particles * W * H * 16
+    return box, int(2 * 1.25 ** 2 * box), (W, H)
+
+
+def check_maps_fit(cfg, log, odom, usable_m: float, device: str) -> None:
+    """Refuse a SLAM run whose maps cannot fit before it starts (a hospital-sized log filled 13 GB and died at 8 %
+    of its scans), naming the estimate and a resolution that fits; warn where the peak may not fit."""
+    s = cfg.slam
+    box, peak, (W, H) = maps_memory(log, odom, usable_m, s.resolution_m, s.num_particles)
+    have = available_memory(device)
+    gib = 2.0 ** 30
+    if box > 0.9 * have:
+        fits = s.resolution_m * np.sqrt(box / (0.3 * have))  # the area in cells goes as 1 / resolution^2
+        raise ValueError(f"slam: {s.num_particles} particle maps over the {W} x {H} cells the log spans at "
+                         f"{s.resolution_m} m (on its odometry) need about {box / gib:.1f} GiB, {have / gib:.1f} GiB is "
+                         f"free on {device}: set slam.resolution_m={np.ceil(fits * 100) / 100:g} or fewer slam.num_particles")
+    if peak > 0.5 * have:
+        print(f"warning: slam: the particle maps take about {box / gib:.1f} GiB over the log's extent and may reach "
+              f"{peak / gib:.1f} GiB while they grow, of the {have / gib:.1f} GiB free on {device}", file=sys.stderr)
+
+
 def start_filter(cfg, log, device: str) -> tuple[RBPF, np.ndarray]:
     """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need), and
     the odometry its steps take (``filter_frame``)."""
     s = cfg.slam
     usable = far_bound_m(cfg, log.info.range_max_m)
     odom, T = filter_frame(cfg, log)
+    check_maps_fit(cfg, log, log.odom, usable, device)
     shape, origin = initial_frame(odom[0], s.map_margin_m, s.resolution_m)
     angles = gfs_flaser_angles(log.ranges_m.shape[1]) if s.get("beam_angles", "log") == "gfs" else log.info.angles_rad
     rbpf = RBPF(s, shape, origin, T, angles, usable, device)
