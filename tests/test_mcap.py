@@ -109,8 +109,9 @@ def test_bags_we_write_latch_tf_static_and_name_their_storage_after_the_bag(tmp_
     back = read_bag(bag)
     assert np.array_equal(np.nan_to_num(back.ranges_m, nan=-1), np.nan_to_num(log.ranges_m, nan=-1))
     assert np.allclose(back.T_base_laser, log.T_base_laser)
+    assert np.allclose(back.ground_truth, log.ground_truth)  # the simulator's truth travels on /ground_truth
     if storage == "mcap":
-        assert set(_read_all(bag / "drive.mcap")) == {"/tf_static", "/scan", "/odom", "/tf"}
+        assert set(_read_all(bag / "drive.mcap")) == {"/tf_static", "/scan", "/odom", "/tf", "/ground_truth"}
 
 
 def test_a_ros1_bag_cannot_be_mcap(tmp_path):

@@ -4,6 +4,7 @@ refused loudly."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -29,7 +30,7 @@ def world(tmp_path_factory):
     d = tmp_path_factory.mktemp("own")
     log, _ = simulate(OmegaConf.structured(SimConfig(**SMALL)), "cpu")
     files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu"), d / "office")
-    bag = write_bag(log, d / "drive.bag")
+    bag = write_bag(dataclasses.replace(log, ground_truth=None), d / "drive.bag")  # a bag without the truth
     return d, files["yaml"], bag, log.ground_truth, log.stamps
 
 
@@ -51,7 +52,8 @@ def test_a_bag_without_ground_truth_is_localized_in_a_map_server_map(world, tmp_
     for name in ("trajectory.tum", "spread.csv", "run.png", "particles.gif", "metrics.json", "manifest.json"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     m = json.loads((out / "metrics.json").read_text())
-    assert "localization" not in m and m["scans"] == len(stamps)  # nothing to score against: no ground truth
+    assert "aligned_to_ground_truth" not in m and m["scans"] == len(stamps)  # nothing to score against: no truth
+    assert not (out / "ground_truth.tum").exists()
     st, est = read_tum(out / "trajectory.tum")
     err = np.hypot(*(est[:, :2] - truth[np.searchsorted(stamps, st), :2]).T)
     assert np.median(err[st - st[0] > 10]) < 0.1, np.median(err[st - st[0] > 10])  # the map is in the truth's frame

@@ -9,7 +9,7 @@ Odometry is interpolated at the scan stamps. The base->laser extrinsic is read f
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +19,10 @@ from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams
 from irmcl_warp.io.defects import (count_stamps_backwards, count_velocity_contradictions, repair_reversing,
                                    scan_defects)
 from irmcl_warp.io.errors import LogFormatError, warn_defects
-from irmcl_warp.types import DefectReport, LaserInfo, LaserLog
+from irmcl_warp.types import DefectReport, LaserInfo, LaserLog, match_stamps
 
 SCAN, ODOM, TF = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage"
+GROUND_TRUTH_TOPIC = "/ground_truth"  # nav_msgs/Odometry of the base in the world (the simulator's bags): read as truth
 IMAGE = "sensor_msgs/msg/Image"
 
 
@@ -122,6 +123,7 @@ class _Streams:
     tf_static: list  # (parent, child, x, y, yaw)
     path: Path = Path()
     quats: _Quaternions = None
+    truth: list = field(default_factory=list)  # (stamp, x, y, yaw) on GROUND_TRUTH_TOPIC
 
     def yaw(self, q, where) -> float:
         return self.quats.yaw(q, self.path, where)
@@ -151,8 +153,10 @@ def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, st
         scan_topic = _pick_topic(path, reader.connections, SCAN, scan_topic)
         if scan_topic is None:
             raise LogFormatError(path, None, f"no {SCAN} topic (topics: {sorted({c.topic for c in reader.connections})})")
-        odom_topic = _pick_topic(path, reader.connections, ODOM, odom_topic)
-        conns = [c for c in reader.connections if c.topic in (scan_topic, odom_topic) or c.msgtype == TF]
+        odom_topic = _pick_topic(path, [c for c in reader.connections if c.topic != GROUND_TRUTH_TOPIC], ODOM, odom_topic)
+        truth = GROUND_TRUTH_TOPIC if any(c.topic == GROUND_TRUTH_TOPIC and c.msgtype == ODOM for c in reader.connections) \
+            else None
+        conns = [c for c in reader.connections if c.topic in (scan_topic, odom_topic, truth) or c.msgtype == TF]
         counters: dict[str, int] = {}
         messages = reader.messages(connections=conns)
         from tqdm import tqdm
@@ -183,6 +187,9 @@ def _collect(s: _Streams, conn, msg, scan_topic, odom_topic, k):
     if conn.topic == scan_topic:
         s.scans.append((_stamp(msg.header), getattr(msg.header, "seq", k), np.asarray(msg.ranges, dtype=np.float64),
                          msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max, msg.header.frame_id, k))
+    elif conn.topic == GROUND_TRUTH_TOPIC and conn.msgtype == ODOM:
+        p = msg.pose.pose
+        s.truth.append((_stamp(msg.header), p.position.x, p.position.y, s.yaw(p.orientation, f"message {k} on {conn.topic}")))
     elif conn.topic == odom_topic:
         p = msg.pose.pose
         s.odom.append((_stamp(msg.header), getattr(msg.header, "seq", k), p.position.x, p.position.y,
@@ -253,7 +260,13 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     odom = _odometry_at(path, s, stamps, base, odom_frame, report, repair_reversing)
     scan_defects(report, stamps, odom, max_speed_mps=max_speed_mps, max_step_m=max_step_m)
     warn_defects(path, report)
-    return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
+    truth = None
+    if s.truth:  # the simulator's bags (write_bag) carry the truth at the scans' stamps
+        t = np.array(s.truth)
+        at = match_stamps(stamps, t[:, 0], 1e-4)
+        truth = np.full((len(stamps), 3), np.nan)
+        truth[at[at >= 0]] = t[at >= 0, 1:]
+    return LaserLog(stamps, ranges, odom, info, T_base_laser, truth, str(path), report)
 
 
 def _extrinsic(tf_static, laser_frame, base_frame, report):
@@ -441,6 +454,7 @@ def _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_fr
         c_static = add_connection(writer, msgs, "/tf_static", TF, latched=True)
         c_scan, c_odom = add_connection(writer, msgs, scan_topic, SCAN), add_connection(writer, msgs, odom_topic, ODOM)
         c_tf = add_connection(writer, msgs, "/tf", TF)
+        c_truth = add_connection(writer, msgs, GROUND_TRUTH_TOPIC, ODOM) if log.ground_truth is not None else None
         t0 = float(log.stamps.min())
         writer.write(c_static, int(round(t0 * 1e9)), ser(msgs.tf(t0, base_frame, laser_frame, log.T_base_laser), TF))
         for i, stamp in enumerate(log.stamps):
@@ -448,6 +462,8 @@ def _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_fr
             writer.write(c_scan, ns, ser(msgs.scan(stamp, log.info, log.ranges_m[i], laser_frame, i), SCAN))
             writer.write(c_odom, ns, ser(msgs.odom(stamp, log.odom[i], v[i], odom_frame, base_frame, i), ODOM))
             writer.write(c_tf, ns, ser(msgs.tf(stamp, odom_frame, base_frame, log.odom[i], i), TF))
+            if c_truth is not None and np.all(np.isfinite(log.ground_truth[i])):
+                writer.write(c_truth, ns, ser(msgs.odom(stamp, log.ground_truth[i], 0.0, "world", base_frame, i), ODOM))
 
 
 def read_bag_extrinsic(path, laser_frame: str = "laser", base_frame: str | None = None) -> np.ndarray:
