@@ -82,3 +82,11 @@ def test_config_choices_are_what_the_code_implements():
                    "data.split": SPLITS, "slam.proposal": RBPF.PROPOSALS}
     for key, names in implemented.items():
         assert sorted(CHOICES[key]) == sorted(names), key
+
+
+def test_the_amcl_preset_is_the_worlds_stage_s_filter():
+    """mcl=amcl (for your own map) and +exp=worlds (where it was measured on held-out floors) are one filter."""
+    from irmcl_warp.config import compose_config
+
+    assert compose_config(["mcl=amcl"]).mcl == compose_config(["+exp=worlds"]).mcl
+    assert compose_config(["mcl=amcl"]).mcl != compose_config([]).mcl
