@@ -30,13 +30,12 @@ def world(tmp_path_factory):
     return files["yaml"], write_bag(log, d / "drive.bag"), log.ground_truth
 
 
-def _cfg(bag, map_yaml, *overrides):
+def _cfg(bag, map_yaml, *overrides, gates=("mcl.update_min_trans_m=0.2", "mcl.update_min_rot_rad=0.5")):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         return compose("config", overrides=["data=bag", f"data.path={bag}", f"localize.map_path={map_yaml}",
                                             "device=cpu", "mcl.weighting=likelihood_field", "localize.run_s=20",
-                                            "localize.start_s=2", "mcl.update_min_trans_m=0.2",
-                                            "mcl.update_min_rot_rad=0.5", *overrides])
+                                            "localize.start_s=2", *gates, *overrides])
 
 
 @pytest.mark.parametrize("start", ["pose", "global"])
@@ -130,3 +129,49 @@ def test_the_converter_template_turns_arrays_into_a_bag_we_read_back(tmp_path):
     assert np.array_equal(np.isnan(back.ranges_m), np.isnan(log.ranges_m))
     assert np.allclose(np.nan_to_num(back.ranges_m), np.nan_to_num(log.ranges_m)) and np.allclose(back.odom, log.odom)
     assert np.allclose(back.info.angles_rad, log.info.angles_rad) and np.allclose(back.T_base_laser, log.T_base_laser)
+
+
+def test_a_calibrated_confidence_judges_the_run_and_changes_no_pose(world, tmp_path, monkeypatch, capsys):
+    """With the calibrated filter (mcl=amcl) an own-map run writes its confidence per scan and ends saying
+    whether it is localized (never "localized" below the threshold); the judge reads the filter and changes no
+    pose; with another filter the run says it has no calibrated confidence."""
+    import json
+
+    from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
+
+    map_yaml, bag, truth = world
+    monkeypatch.chdir(tmp_path)
+    out = run_localize(_cfg(bag, map_yaml, "mcl=amcl", "localize.run_s=25", gates=()))
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    m = json.loads((out / "metrics.json").read_text())
+    c = m["confidence_at_end"]
+    assert 0 <= c <= 1 and m["localized_at_end"] == (c >= CONFIDENT_ABOVE)
+    assert (f"localized, confidence {c:.2f}" in last) if c >= CONFIDENT_ABOVE else ("NOT localized" in last)
+    spread = np.genfromtxt(out / "spread.csv", delimiter=",", names=True)
+    assert np.isfinite(spread["confidence"][-1]) and np.isnan(spread["confidence"][0])  # none before the first update
+    plain = run_localize(_cfg(bag, map_yaml, "mcl=amcl", "localize.run_s=25", "mcl.temper=0.031",
+                              gates=()))  # another filter: no calibration holds
+    assert "no confidence: the filter differs from the calibrated one (mcl=amcl) in temper" in capsys.readouterr().out
+    assert json.loads((plain / "metrics.json").read_text())["confidence_at_end"] is None
+
+
+def test_the_judge_changes_no_pose(world):
+    from irmcl_warp.config import compose_config
+    from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement
+    from irmcl_warp.mcl.online import filter_in_map
+    from irmcl_warp.mcl.track import follow
+    from irmcl_warp.io import read_bag
+
+    map_yaml, bag, truth = world
+    log = read_bag(bag)
+    m = compose_config(["mcl=amcl", "mcl.num_particles=3000"]).mcl
+    runs_ = []
+    for judged in (False, True):
+        pf, grid = filter_in_map(map_yaml, m, log.T_base_laser, log.info.angles_rad, 20.0, "cpu")
+        pf.init_uniform()
+        judge = Judge(FeatureTracker(ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy,
+                                                   grid.resolution_m)),
+                      Confidence(np.zeros(8), 0.0, np.zeros(8), np.ones(8)), log.info.angles_rad, log.T_base_laser)
+        conf = []
+        runs_.append(follow(pf, log, np.arange(60), m, judge=judge if judged else None, confidences=conf))
+    assert np.array_equal(runs_[0], runs_[1], equal_nan=True)

@@ -20,13 +20,16 @@ import time
 from pathlib import Path
 
 import numpy as np
+from omegaconf import OmegaConf
 
+from irmcl_warp.config import CONF_DIR, shipped_calibration
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.mcap_run import write_run_mcap
 from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement
 from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp import runs
@@ -36,6 +39,26 @@ from irmcl_warp.services.plots import animate_particles, plot_own_map
 from irmcl_warp.kernels import pick_device
 
 FRAMES = 60  # animation frames over the run
+
+
+CONFIDENT_ABOVE = 0.8  # as worlds.confident_above: a run ends "localized" only at or above it
+
+
+def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
+    """(the confidence judge for this run, what it is or why there is none). A calibration holds for the filter
+    it was fitted on: the worlds stage's (``mcl=amcl``, conf/mcl/amcl.yaml) at the calibration's particle count."""
+    m = cfg.mcl
+    path = shipped_calibration(m.weighting if m.num_particles == 20000 else f"{m.weighting}-{m.num_particles // 1000}k")
+    preset = OmegaConf.load(CONF_DIR / "mcl" / "amcl.yaml")
+    differ = sorted(k for k in preset if k != "num_particles" and m.get(k) != preset[k])
+    if path is None or differ:
+        why = (f"no calibration for {m.weighting} with {m.num_particles} particles" if path is None else
+               f"the filter differs from the calibrated one (mcl=amcl) in {', '.join(differ)}")
+        return None, f"no confidence: {why}"
+    occupancy = np.where(grid.known, grid.probability, 0.0)
+    agreement = ScanAgreement(occupancy, grid.origin_xy, grid.resolution_m, m.field_occ_threshold)
+    judge = Judge(FeatureTracker(agreement), Confidence.load(path), log.info.angles_rad, log.T_base_laser)
+    return judge, f"confidence calibrated by {path.name}"
 
 
 def converged_index(stamps, est, gt) -> int | None:
@@ -96,20 +119,24 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     first = pf.particles.numpy()
     frames.append((float(t[idx[0]]), first[keep.permutation(len(first))[:1500], :2]))  # the start, before any scan
     t_run = time.perf_counter()
-    covariances = []
+    covariances, confidences = [], []
+    judge, judged = calibrated_judge(cfg, grid, log)
     est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch,
-                 covariances=covariances, progress=f"localize {Path(str(log.source)).name}")
+                 covariances=covariances, progress=f"localize {Path(str(log.source)).name}", judge=judge,
+                 confidences=confidences)
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
     write_tum(out / "trajectory.tum", stamps, est)
-    atomic_write_bytes(out / "spread.csv", ("stamp,spread_m,particles\n" + "".join(
-        f"{s:.6f},{a:.4f},{int(n)}\n" for s, (a, n) in zip(stamps, spread))).encode())
+    atomic_write_bytes(out / "spread.csv", ("stamp,spread_m,particles,confidence\n" + "".join(
+        f"{s:.6f},{a:.4f},{int(n)},{c:.4f}\n" for s, (a, n), c in zip(stamps, spread, confidences))).encode())
     settled = np.flatnonzero(spread[:, 0] < 0.3)
     metrics = {"log": str(log.source), "map": str(map_file), "weighting": m.weighting, "device": device,
                "start": "initial pose" if loc.initial_pose is not None else "global", "scans": int(len(idx)),
                "duration_s": float(stamps[-1] - stamps[0]), "ms_per_scan": ms_per_scan,
                "final_spread_m": float(spread[-1, 0]),
-               "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None}
+               "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None,
+               "confidence": judged, "confidence_at_end": None if np.isnan(confidences[-1]) else confidences[-1],
+               "localized_at_end": None if np.isnan(confidences[-1]) else bool(confidences[-1] >= CONFIDENT_ABOVE)}
     gt, gt_in_map = log.ground_truth[idx] if log.ground_truth is not None else None, None
     if gt is not None and np.isfinite(gt).all(1).sum() >= 3:
         # a map of your own need not share the ground truth's frame (a SLAM map starts where its drive did):
@@ -135,6 +162,9 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     write_run_mcap(out / "replay", log=log, idx=idx, est=est, grid=grid, covariances=np.array(covariances),
                    particle_frames=cloud.items(), ground_truth_in_map=gt_in_map)
     out = run.finish(metrics, device)
-    print(f"{log.source}: {len(idx)} scans localized in {map_file} ({metrics['start']} start); particle spread "
-          f"{metrics['final_spread_m']:.2f} m at the end -> {out}")
+    c = metrics["confidence_at_end"]
+    verdict = (f"{judged}" if c is None else f"localized, confidence {c:.2f}" if metrics["localized_at_end"] else
+               f"NOT localized: confidence {c:.2f} at the end, below {CONFIDENT_ABOVE}")
+    print(f"{log.source}: {len(idx)} scans in {map_file} ({metrics['start']} start); particle spread "
+          f"{metrics['final_spread_m']:.2f} m at the end; {verdict} -> {out}")
     return out

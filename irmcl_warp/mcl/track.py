@@ -49,6 +49,7 @@ class Estimate:
     pose: np.ndarray
     updated: bool
     covariance: np.ndarray | None = None
+    confidence: float = float("nan")  # P(within 0.5 m / 10 deg) at the last update, where a judge was given
 
 
 def particle_covariance(particles: np.ndarray, log_w: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -75,8 +76,11 @@ class Localizer:
     """
 
     def __init__(self, pf, m, reduce_after_s: float | None = None, covariance: bool = False,
-                 step_times: list | None = None):
-        self.pf, self.m, self.covariance, self.step_times = pf, m, covariance, step_times
+                 step_times: list | None = None, judge=None):
+        """``judge``: where given, ``judge(pf, ranges_m, odom_delta) -> probability`` after every update (a
+        calibrated confidence, mcl/confidence.Judge); it reads the filter and leaves it as it was."""
+        self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
+        self.confidence = float("nan")
         self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
         self.reduce_after_s = reduce_after_s
         self.odom_at_update = self.t_start = self.pose = None
@@ -90,7 +94,9 @@ class Localizer:
     def global_start(self) -> None:
         """Start again from particles spread over the map's free space (global localization)."""
         self.pf.init_uniform()
-        self.pose, self.odom_at_update = None, None
+        self.pose, self.odom_at_update, self.confidence = None, None, float("nan")
+        if self.judge is not None:
+            self.judge.reset()
 
     def teleported(self, odom) -> None:
         """The robot was carried (a jump the odometry did not see): go on from ``odom`` as if nothing moved."""
@@ -111,6 +117,9 @@ class Localizer:
             self.pose = self.pf.step(u, ranges_m)[0]
             if self.step_times is not None:
                 self.step_times.append(time.perf_counter() - t0)
+            if self.judge is not None:
+                delta = relative(self.odom_at_update[None], odom[None])[0]
+                self.confidence = float(self.judge(self.pf, ranges_m, delta))
             self.odom_at_update = odom
             if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
                 self.pf.reduce(m.reduce_to)
@@ -119,18 +128,20 @@ class Localizer:
                 self.cov = particle_covariance(self.pf.particles.numpy(), self.pf.log_w.numpy(), self.pose)
         pose = between_updates(self.pose, self.odom_at_update, odom)
         return Estimate(pose, weigh, self.cov if self.covariance and weigh else
-                        (np.full((3, 3), np.nan) if self.covariance else None))
+                        (np.full((3, 3), np.nan) if self.covariance else None), self.confidence)
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
-           step_times: list | None = None, covariances: list | None = None, progress: str | None = None) -> np.ndarray:
+           step_times: list | None = None, covariances: list | None = None, progress: str | None = None,
+           judge=None, confidences: list | None = None) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
     it is zero. ``watch(j, pf)``, when given, sees the filter after every scan (plots, animations).
     ``step_times``, when given, gets the wall time (s) of every filter step (each reads its estimate back, so
     the step is done when it returns). ``covariances``, when given, gets the particles' covariance [3, 3] at
-    every scan (NaN where the scan weighed nothing). ``progress``: a progress bar with that label, on a terminal."""
-    loc = Localizer(pf, m, reduce_after_s, covariance=covariances is not None, step_times=step_times)
+    every scan (NaN where the scan weighed nothing). ``progress``: a progress bar with that label, on a terminal.
+    ``judge`` and ``confidences``: the confidence after each update, appended per scan (the last update's)."""
+    loc = Localizer(pf, m, reduce_after_s, covariance=covariances is not None, step_times=step_times, judge=judge)
     est = np.empty((len(idx), 3))
     scans = enumerate(idx)
     if progress is not None:
@@ -144,6 +155,8 @@ def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None =
         est[j] = e.pose
         if covariances is not None:
             covariances.append(e.covariance)
+        if confidences is not None:
+            confidences.append(e.confidence)
         if watch is not None:
             watch(j, pf)
     return est
