@@ -40,11 +40,13 @@ _STARTED = []  # set once Hydra composed a config and handed it to run_entry
 
 def hydra_main(main) -> None:
     """A Hydra entry's ``main()``: Hydra's own mistakes (an unknown key, a missing ``+exp``, a bad override) exit
-    with status 2 like ours, where Hydra says 1; a run that started keeps its status (1: a bug's traceback)."""
+    with status 2 like ours, where Hydra says 1; a run that started keeps its status (1: a bug's traceback). A
+    sweep (``-m``) keeps Hydra's status: its jobs run in other processes, so a failed job cannot be told from a
+    mistake here."""
     try:
         main()
     except SystemExit as e:
-        if e.code == 1 and not _STARTED:
+        if e.code == 1 and not _STARTED and not {"-m", "--multirun"} & set(sys.argv[1:]):
             sys.exit(2)
         raise
 
