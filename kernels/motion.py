@@ -30,17 +30,20 @@ import warp as wp
 from irmcl_warp.kernels.registry import MOTION, pick_device
 
 
+def _wrap(a) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
 def odometry_step(odom_from, odom_to, min_trans_m: float = 0.01) -> tuple[float, float, float]:
     """(rot1, trans, rot2) between two odometry poses. As in AMCL: below ``min_trans_m`` the robot only
     turned (rot1 = 0; otherwise the direction of a tiny drift would set rot1 and its noise), and a step
     backwards is a negative translation rather than a half turn, a drive and a half turn back."""
-    wrap = lambda a: float((a + np.pi) % (2 * np.pi) - np.pi)
     dx, dy = odom_to[0] - odom_from[0], odom_to[1] - odom_from[1]
     trans = float(np.hypot(dx, dy))
-    rot1 = wrap(np.arctan2(dy, dx) - odom_from[2]) if trans >= min_trans_m else 0.0
+    rot1 = _wrap(np.arctan2(dy, dx) - odom_from[2]) if trans >= min_trans_m else 0.0
     if abs(rot1) > np.pi / 2:
-        rot1, trans = wrap(rot1 + np.pi), -trans
-    rot2 = wrap(odom_to[2] - odom_from[2] - rot1)
+        rot1, trans = _wrap(rot1 + np.pi), -trans
+    rot2 = _wrap(odom_to[2] - odom_from[2] - rot1)
     return rot1, trans, rot2
 
 

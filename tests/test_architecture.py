@@ -81,3 +81,11 @@ def test_run_folders_are_named_in_one_place():
             if FOLDER_LITERAL.search(line) or FOLDER_BUILT.search(line):
                 found.append(f"{path.relative_to(REPO)}:{n}: {line.strip()}")
     assert found == []
+
+
+def test_the_linter_finds_nothing():
+    """ruff's default rules (pyflakes and pycodestyle's errors: unused or undefined names, ambiguous names, ...)
+    over the repository, as pyproject.toml configures it."""
+    run = subprocess.run([sys.executable, "-m", "ruff", "check", "--output-format", "concise", str(REPO)], cwd=REPO,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-1000:]

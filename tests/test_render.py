@@ -154,12 +154,12 @@ def test_guided_rendering_equals_full_rendering_where_the_grid_is_right(rng, end
     grid = OccupancyGrid(o, ends, tc, DEV)
     for _ in range(4):  # a random point per cell: a few readings find every wall cell
         grid.update(Walls())
-    O, D = torch.from_numpy(o).to(DEV), torch.from_numpy(d).to(DEV)
+    o_t, d_t = torch.from_numpy(o).to(DEV), torch.from_numpy(d).to(DEV)
     z = sample_depths(n, 128, 0.02, 5.0, perturb=True, device=DEV)
-    keep = grid.keep(O[:, None] + D[:, None] * z[..., None], Walls())
+    keep = grid.keep(o_t[:, None] + d_t[:, None] * z[..., None], Walls())
     render = make_renderer("warp")
-    full, _, _ = render_rays(Walls(), render, O, D, z)
-    guided, _, _ = render_rays(Walls(), render, O, D, z, keep)
+    full, _, _ = render_rays(Walls(), render, o_t, d_t, z)
+    guided, _, _ = render_rays(Walls(), render, o_t, d_t, z, keep)
     assert keep.float().sum(1).mean() < (0.2 if end == "field" else 0.4) * z.shape[1]  # most samples skipped
     assert torch.allclose(guided, full, atol=atol), f"seed {rng.seed}: {(guided - full).abs().max()}"
     assert abs(grid.occupied_share() - 0.2) < 0.15  # two walls and their dilation, not the whole grid

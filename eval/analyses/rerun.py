@@ -13,7 +13,6 @@ silent new variant); a run made again is matched to its kept record by those set
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from omegaconf import OmegaConf

@@ -15,7 +15,6 @@ Absolute times count only from a GPU; on a CPU read the ratios.
 
 from __future__ import annotations
 
-import argparse
 import platform
 from pathlib import Path
 

@@ -20,7 +20,6 @@ import numpy as np
 
 from eval.results.queries import CONVERGED_M, converged, load_slam, median_span, released, released_errors, slam_errors
 from eval.results.records import RESULTS, checks, find, kept
-from irmcl_warp.io.atomic import atomic_write_bytes
 
 REPO = Path(__file__).resolve().parents[2]
 HALF_BEAM = {"data.angle_min_rad": -1.5751716}  # the released wrapper's beam layout on fr079

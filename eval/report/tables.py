@@ -4,12 +4,10 @@ by their settings (``localize_cell``, ``slam_variant``, ``off_defaults``), never
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 
-from eval.results.queries import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, converged, localize_cell, preset,
-                                  reference_variant, released_errors, slam_errors, slam_variant)  # noqa: F401
+from eval.results.queries import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, converged, localize_cell, reference_variant, released_errors, slam_errors, slam_variant)  # noqa: F401
 from eval.results.records import describe, off_defaults
 from irmcl_warp.config import GlobLocConfig
 from irmcl_warp.services.metrics import FULL_COVERAGE

@@ -68,7 +68,7 @@ def block_means(x: torch.Tensor, n: int) -> torch.Tensor:
     """[..., H, W] -> [..., n (x blocks), n (y blocks)] means over blocks with edges at k * size // n."""
     H, W = x.shape[-2:]
     ys, xs = [k * H // n for k in range(n + 1)], [k * W // n for k in range(n + 1)]
-    cols = [torch.stack([x[..., ys[l]:ys[l + 1], xs[k]:xs[k + 1]].mean((-2, -1)) for l in range(n)], -1)
+    cols = [torch.stack([x[..., ys[r]:ys[r + 1], xs[k]:xs[k + 1]].mean((-2, -1)) for r in range(n)], -1)
             for k in range(n)]
     return torch.stack(cols, -2)
 

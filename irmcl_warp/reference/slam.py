@@ -91,7 +91,7 @@ def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_
     """(score, log-likelihood) of one pose against one map (GMapping's matcher model); ``free_check=False``
     accepts an occupied cell whatever the cell before it holds (what the released code does in effect)."""
     lp = laser_pose(pose, T_base_laser)
-    s = l = 0.0
+    s = loglik = 0.0
     for b, (r, a) in enumerate(zip(ranges, angles)):
         if b % (lskip + 1) or not np.isfinite(r) or r <= 0 or r > usable:
             continue
@@ -111,10 +111,10 @@ def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_
                     best = d2 if best is None else min(best, d2)
         if best is not None:
             s += np.exp(-best / sigma)
-            l += -best / lsigma
+            loglik += -best / lsigma
         else:
-            l += null_likelihood / lsigma
-    return s, l
+            loglik += null_likelihood / lsigma
+    return s, loglik
 
 
 def motion_std(delta, srr=0.1, srt=0.2, str_=0.1, stt=0.2):
