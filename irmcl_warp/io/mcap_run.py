@@ -29,21 +29,12 @@ GRID, POSE_COV, POSE_ARRAY, POSE = ("nav_msgs/msg/OccupancyGrid", "geometry_msgs
 TOPICS = ("/map", "/scan", "/odom", "/tf", "/tf_static", "/amcl_pose", "/particlecloud", "/ground_truth")
 
 
-def occupancy_values(probability: np.ndarray, known: np.ndarray, free_below: float = 0.196,
-                     occupied_above: float = 0.65) -> np.ndarray:
-    """map_server's trinary reading of a grid as OccupancyGrid data (its default thresholds 0.196 and 0.65): 100
-    occupied, 0 free, -1 unknown; row 0 at the map's origin (the bottom row of the image)."""
-    out = np.full(probability.shape, -1, np.int8)
-    out[known & (probability < free_below)] = 0
-    out[known & (probability > occupied_above)] = 100
-    return out
-
-
-def write_run_mcap(path, *, log, idx: np.ndarray, est: np.ndarray, grid, covariances=None, particle_frames=(),
-                   ground_truth_in_map: np.ndarray | None = None, map_frame="map", odom_frame="odom",
+def write_run_mcap(path, *, log, idx: np.ndarray, est: np.ndarray, grid, map_data: np.ndarray, covariances=None,
+                   particle_frames=(), ground_truth_in_map: np.ndarray | None = None, map_frame="map", odom_frame="odom",
                    base_frame="base_link", laser_frame="laser") -> Path:
     """The run over the scans ``idx`` of ``log`` with its estimates ``est`` [len(idx), 3] (NaN: none yet) as an MCAP
-    at ``path`` (written whole, then renamed). ``grid``: the map (probability, known, origin_xy, resolution_m);
+    at ``path`` (written whole, then renamed). ``grid``: the map (shape, origin_xy, resolution_m), ``map_data``
+    its OccupancyGrid values [H, W] (mapping.mapio.occupancy_data);
     ``covariances``: [len(idx), 3, 3] or None (NaN rows: not an update); ``particle_frames``: (scan position j,
     particles [n, 3]) pairs; ``ground_truth_in_map`` [len(idx), 3] or None."""
     path = Path(path)
@@ -61,8 +52,8 @@ def write_run_mcap(path, *, log, idx: np.ndarray, est: np.ndarray, grid, covaria
             info = T["nav_msgs/msg/MapMetaData"](
                 map_load_time=m.header(t0, map_frame).stamp, resolution=float(grid.resolution_m), width=W, height=H,
                 origin=m.pose((grid.origin_xy[0], grid.origin_xy[1], 0.0)))
-            data = occupancy_values(np.asarray(grid.probability), np.asarray(grid.known, bool)).ravel()
-            writer.write(c["/map"], ns0, ser(T[GRID](header=m.header(t0, map_frame), info=info, data=data), GRID))
+            writer.write(c["/map"], ns0, ser(T[GRID](header=m.header(t0, map_frame), info=info,
+                                                    data=np.asarray(map_data, np.int8).ravel()), GRID))
             writer.write(c["/tf_static"], ns0, ser(m.tf(t0, base_frame, laser_frame, log.T_base_laser), TF))
             frames = dict(particle_frames)
             for j, i in enumerate(idx):

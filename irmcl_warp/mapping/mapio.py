@@ -29,6 +29,13 @@ def to_trinary(grid: OccupancyGrid) -> np.ndarray:
     return img[::-1]  # first row = top
 
 
+def occupancy_data(grid: OccupancyGrid) -> np.ndarray:
+    """The grid as ROS's nav_msgs/OccupancyGrid data [H, W] int8, read as the trinary map files are (to_trinary):
+    100 occupied, 0 free, -1 unknown; row 0 at the origin."""
+    image = to_trinary(grid)[::-1]
+    return np.where(image == 0, 100, np.where(image == 254, 0, -1)).astype(np.int8)
+
+
 def save_map(grid: OccupancyGrid, stem) -> dict[str, Path]:
     """Write ``stem.pgm``, ``stem.yaml``, ``stem.npz`` and ``stem.png``; returns their paths."""
     stem = Path(stem)

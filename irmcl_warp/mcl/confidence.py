@@ -331,15 +331,15 @@ def reliability(prob: np.ndarray, label: np.ndarray, bins: int = 10) -> list[dic
 
 class Judge:
     """A localizer's confidence after each update (track.Localizer's ``judge``): the features of a
-    ``FeatureTracker`` on the map, through a calibrated ``Confidence``. Reads the particles back (a systematic
-    sample of at most MAX_PARTICLES) and changes nothing in the filter."""
+    ``FeatureTracker`` on the map, through a calibrated ``Confidence``, from the filter's particles and weights
+    as read back after the update (a systematic sample of at most MAX_PARTICLES is used)."""
 
     def __init__(self, tracker: FeatureTracker, confidence: Confidence, angles_rad, T_base_laser):
         self.tracker, self.confidence = tracker, confidence
         self.angles, self.T = np.asarray(angles_rad, float), tuple(map(float, T_base_laser))
 
-    def __call__(self, pf, ranges_m, odom_delta) -> float:
-        f, _ = self.tracker(pf.particles.numpy(), pf.log_w.numpy(), ranges_m, self.angles, self.T, odom_delta)
+    def __call__(self, particles, log_w, ranges_m, odom_delta) -> float:
+        f, _ = self.tracker(particles, log_w, ranges_m, self.angles, self.T, odom_delta)
         return float(self.confidence(f))
 
     def reset(self) -> None:

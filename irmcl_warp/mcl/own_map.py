@@ -28,7 +28,7 @@ from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.mcap_run import write_run_mcap
 from irmcl_warp.io.plausibility import check_odometry
-from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mapping.mapio import load_map, occupancy_data
 from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement
 from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
@@ -159,8 +159,8 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt_in_map)
     animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
     # the run for Foxglove / RViz: replay/replay.mcap (a ROS 2 bag folder; io/mcap_run.py lists the topics)
-    write_run_mcap(out / "replay", log=log, idx=idx, est=est, grid=grid, covariances=np.array(covariances),
-                   particle_frames=cloud.items(), ground_truth_in_map=gt_in_map)
+    write_run_mcap(out / "replay", log=log, idx=idx, est=est, grid=grid, map_data=occupancy_data(grid),
+                   covariances=np.array(covariances), particle_frames=cloud.items(), ground_truth_in_map=gt_in_map)
     out = run.finish(metrics, device)
     c = metrics["confidence_at_end"]
     verdict = (f"{judged}" if c is None else f"localized, confidence {c:.2f}" if metrics["localized_at_end"] else

@@ -77,14 +77,13 @@ class Localizer:
 
     def __init__(self, pf, m, reduce_after_s: float | None = None, covariance: bool = False,
                  step_times: list | None = None, judge=None):
-        """``judge``: where given, ``judge(pf, ranges_m, odom_delta) -> probability`` after every update (a
-        calibrated confidence, mcl/confidence.Judge); it reads the filter and leaves it as it was."""
+        """``judge``: where given, ``judge(particles, log_w, ranges_m, odom_delta) -> probability`` after every
+        update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge)."""
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
         self.confidence = float("nan")
         self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
         self.reduce_after_s = reduce_after_s
         self.odom_at_update = self.t_start = self.pose = None
-        self.cov = np.full((3, 3), np.nan)
 
     def initial_pose(self, pose, std=(0.5, 0.5, 0.3)) -> None:
         """Start again around ``pose`` (RViz's "2D pose estimate"): the next scan weighs at once."""
@@ -112,23 +111,24 @@ class Localizer:
         m = self.m
         u = odometry_step(self.odom_at_update, odom)
         weigh = (self.pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad)
+        cov = np.full((3, 3), np.nan) if self.covariance else None
         if weigh:
             t0 = time.perf_counter()
             self.pose = self.pf.step(u, ranges_m)[0]
             if self.step_times is not None:
                 self.step_times.append(time.perf_counter() - t0)
+            cloud = None  # the particles and their weights, read back once for whoever needs them
             if self.judge is not None:
+                cloud = self.pf.particles.numpy(), self.pf.log_w.numpy()
                 delta = relative(self.odom_at_update[None], odom[None])[0]
-                self.confidence = float(self.judge(self.pf, ranges_m, delta))
+                self.confidence = float(self.judge(*cloud, ranges_m, delta))
             self.odom_at_update = odom
             if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
                 self.pf.reduce(m.reduce_to)
-                self.reduce_pending = False
+                self.reduce_pending, cloud = False, None
             if self.covariance:
-                self.cov = particle_covariance(self.pf.particles.numpy(), self.pf.log_w.numpy(), self.pose)
-        pose = between_updates(self.pose, self.odom_at_update, odom)
-        return Estimate(pose, weigh, self.cov if self.covariance and weigh else
-                        (np.full((3, 3), np.nan) if self.covariance else None), self.confidence)
+                cov = particle_covariance(*(cloud or (self.pf.particles.numpy(), self.pf.log_w.numpy())), self.pose)
+        return Estimate(between_updates(self.pose, self.odom_at_update, odom), weigh, cov, self.confidence)
 
 
 def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,

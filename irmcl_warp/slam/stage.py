@@ -29,7 +29,7 @@ from irmcl_warp.io.carmen import gfs_flaser_angles
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
-from irmcl_warp.mapping.grid import OccupancyGrid
+from irmcl_warp.mapping.grid import OccupancyGrid, laser_bounds
 from irmcl_warp.mapping.mapio import save_map
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
@@ -79,13 +79,10 @@ def maps_memory(log, odom, usable_m: float, resolution_m: float, particles: int)
     particle; its frame grows with up to a quarter of slack per side and holds the old and the grown frame at
     once while it grows (the peak). The odometry's box is no bound either way: a SLAM path spans about as much,
     less where the odometry drifted (MIT Killian's box is 2-3 times the building's)."""
-    ok = np.isfinite(log.ranges_m) & (log.ranges_m < usable_m)
-    r = np.where(ok, log.ranges_m, 0.0)
-    T = compose(odom, np.asarray(log.T_base_laser, float)[None])
-    a = T[:, 2:3] + log.info.angles_rad[None].astype(np.float64)
-    x, y = T[:, 0:1] + r * np.cos(a), T[:, 1:2] + r * np.sin(a)
-    x, y = np.concatenate([x[ok], T[:, 0]]), np.concatenate([y[ok], T[:, 1]])
-    W, H = int(np.ceil((np.ptp(x) + 2.0) / resolution_m)), int(np.ceil((np.ptp(y) + 2.0) / resolution_m))
+    with np.errstate(invalid="ignore"):
+        ended = np.where(log.ranges_m < usable_m, log.ranges_m, np.nan)  # beams that end on something
+    x0, y0, x1, y1 = laser_bounds(compose(odom, log.T_base_laser), ended, log.info.angles_rad, usable_m, margin_m=1.0)
+    W, H = int(np.ceil((x1 - x0) / resolution_m)), int(np.ceil((y1 - y0) / resolution_m))
     box = particles * W * H * 16
     return box, int(2 * 1.25 ** 2 * box), (W, H)
 
