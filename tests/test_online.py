@@ -18,6 +18,7 @@ from irmcl_warp.mcl.stage import run_localize
 from irmcl_warp.mcl.track import particle_covariance, window
 from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.sim import simulate
+from tests.devices import DEVICE
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -25,8 +26,8 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):
     d = tmp_path_factory.mktemp("online")
-    log, _ = simulate(OmegaConf.structured(SimConfig(width_m=14.0, height_m=10.0, duration_s=30.0)), "cpu")
-    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu"), d / "office")
+    log, _ = simulate(OmegaConf.structured(SimConfig(width_m=14.0, height_m=10.0, duration_s=30.0)), DEVICE)
+    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device=DEVICE), d / "office")
     return files["yaml"], write_bag(log, d / "drive.bag"), log.ground_truth
 
 
@@ -34,7 +35,7 @@ def _cfg(bag, map_yaml, *overrides, gates=("mcl.update_min_trans_m=0.2", "mcl.up
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         return compose("config", overrides=["data=bag", f"data.path={bag}", f"localize.map_path={map_yaml}",
-                                            "device=cpu", "mcl.weighting=likelihood_field", "localize.run_s=20",
+                                            f"device={DEVICE}", "mcl.weighting=likelihood_field", "localize.run_s=20",
                                             "localize.start_s=2", *gates, *overrides])
 
 
@@ -51,7 +52,7 @@ def test_one_scan_at_a_time_gives_the_offline_run_bit_for_bit(world, tmp_path, m
     log = load_stream(cfg)  # the log as the stage read it
     idx = window(log, cfg.localize.start_s, cfg.localize.run_s, "localize")
     loc = open_localizer(map_yaml, cfg.mcl, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg, log.info.range_max_m),
-                         device="cpu", initial_pose=cfg.localize.initial_pose, initial_std=list(cfg.localize.tracking_std),
+                         device=DEVICE, initial_pose=cfg.localize.initial_pose, initial_std=list(cfg.localize.tracking_std),
                          reduce_after_s=cfg.localize.reduce_after_s if start == "global" else None)
     est, updated, covs = [], [], []
     for i in idx:  # as a robot's driver would hand them over
@@ -108,6 +109,7 @@ def test_the_ros2_example_calls_the_localizer_as_it_is():
     inspect.signature(online.open_localizer).bind(*calls[0].args, **{k.arg: None for k in calls[0].keywords})
 
 
+@pytest.mark.cpu_only  # the example converts on the CPU (it names no device)
 def test_the_converter_template_turns_arrays_into_a_bag_we_read_back(tmp_path):
     """examples/convert_to_bag.py, the documented way to bring another format in, run as a user would."""
     import subprocess
@@ -167,7 +169,7 @@ def test_the_judge_changes_no_pose(world):
     m = compose_config(["mcl=amcl", "mcl.num_particles=3000"]).mcl
     runs_ = []
     for judged in (False, True):
-        pf, grid = filter_in_map(map_yaml, m, log.T_base_laser, log.info.angles_rad, 20.0, "cpu")
+        pf, grid = filter_in_map(map_yaml, m, log.T_base_laser, log.info.angles_rad, 20.0, DEVICE)
         pf.init_uniform()
         judge = Judge(FeatureTracker(ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy,
                                                    grid.resolution_m)),

@@ -594,7 +594,7 @@ def test_slam_maps_that_cannot_fit_are_refused_before_the_first_scan(tmp_path, m
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", "sim.duration_s=20", "device=cpu"])
+        cfg = compose("config", overrides=["+exp=gmapping_sim", "sim.duration_s=20", f"device={DEVICE}"])
     log = stage.load_stream(cfg)
     box, peak, (W, H) = stage.maps_memory(log, log.odom, 20.0, 0.05, 30)
     assert box == 30 * W * H * 16 and peak > 2 * box and W * 0.05 > 5 and H * 0.05 > 5
@@ -602,8 +602,8 @@ def test_slam_maps_that_cannot_fit_are_refused_before_the_first_scan(tmp_path, m
     started = []
     monkeypatch.setattr(stage.RBPF, "start", lambda *a, **k: started.append(1))
     with pytest.raises(ValueError, match=r"slam: 30 particle maps over the \d+ x \d+ cells .* need about .* GiB, .* free "
-                                         r"on cpu: set slam.resolution_m=") as refused:
-        stage.start_filter(cfg, log, "cpu")
+                                         rf"on {DEVICE}: set slam.resolution_m=") as refused:
+        stage.start_filter(cfg, log, DEVICE)
     assert not started
     res = float(re.search(r"slam.resolution_m=([\d.]+)", str(refused.value))[1])
     assert stage.maps_memory(log, log.odom, 20.0, res, 30)[0] < 0.9 * (box // 2)
