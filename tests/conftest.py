@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ from irmcl_warp.io import data_root
 if os.environ.get("IRMCL_DATA"):
     os.environ["IRMCL_DATA"] = str(Path(os.environ["IRMCL_DATA"]).resolve())
 HAVE_DATA = (data_root() / "README.md").is_file()
+# nog_table's tables are cached on disk (irmcl_warp/services/table_cache.py): tests keep theirs apart from a user's
+os.environ["IRMCL_CACHE_DIR"] = tempfile.mkdtemp(prefix="irmcl-test-cache-")
 
 
 def _cuda() -> bool:

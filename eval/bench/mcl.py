@@ -10,6 +10,7 @@ chunks of 500 particles; irmcl_warp/reference/weighting.py) on the same device, 
 * ``+b4``: four node loads in flight per beam before compositing (``mcl.march_batch``; same result);
 * ``+beam``: GPU threads ordered by beam, then particle (``mcl.march_order``);
 * ``warp+et+skip``: nodes below p_occ 0.01 read as empty and jumped over (``mcl.empty_below``);
+* ``likelihood_field``, ``beam_model``: AMCL's grid models on the NOG read as an occupancy grid (the baseline);
 * ``table``, ``table360``: ``mcl.weighting=nog_table``, the ``warp+et`` march run once from every NOG node at
   720 (360) headings, read per beam from that table (an approximation: each row also gives the table's build
   time and how far its ranges lie from the march's on the benchmark's particles after the steps);
@@ -38,6 +39,7 @@ from eval.bench.timing import record_path, repeated, time_per_call
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter
+from irmcl_warp.services import table_cache
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.reference.weighting import nog_log_weights_torch
 from irmcl_warp.kernels import pick_device
@@ -56,6 +58,8 @@ VARIANTS = {
     "warp+et+skip+beam": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
     "table": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=720),
     "table360": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=360),
+    "likelihood_field": dict(weighting="likelihood_field"),
+    "beam_model": dict(weighting="beam_model"),
 }
 DEFAULT_VARIANT = next((name for name, v in VARIANTS.items()
                         if all(getattr(MCLConfig, k) == value for k, value in v.items())), None)
@@ -126,8 +130,17 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
                  profile=False, around=None, cuda_trace=False) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
+    half = nog.resolution_m / 2  # the grid models read the NOG's nodes as cell centres
+    maps = WeightingMaps(nog=nog, occupancy=nog.occupancy, resolution_m=nog.resolution_m,
+                         origin_xy=(nog.origin_xy[0] - half, nog.origin_xy[1] - half))
+    cached = None
+    if cfg.weighting == "nog_table":  # was its table on disk already (irmcl_warp/services/table_cache.py)?
+        march = dict(num_angles=cfg.table_angles, num_samples=cfg.num_samples, near_m=cfg.near_m, far_m=far,
+                     t_min=cfg.t_min, empty_below=cfg.empty_below)
+        cached = table_cache.cache_dir() is not None and (
+            table_cache.cache_dir() / table_cache.table_name(nog, march, pick_device(device))).is_file()
     started = time.perf_counter()
-    pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, WeightingMaps(nog=nog))
+    pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, maps)
     _sync(device)
     build_s = time.perf_counter() - started
     if around is None:
@@ -154,7 +167,8 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
     row = {"method": f"{variant} {'graph' if pf.use_graph else 'eager'}", "variant": variant, "graph": pf.use_graph,
            "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
            "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
-           "weighting_ms": part_ms["weighting"], "parts_ms": part_ms, "build_s": build_s}
+           "weighting_ms": part_ms["weighting"], "parts_ms": part_ms, "build_s": build_s,
+           "table_from_cache": cached}
     if trace is not None:
         row["device_profile"] = trace
     if cfg.weighting == "nog_table":
@@ -243,7 +257,8 @@ def run_mcl_bench(a) -> list[dict]:
     for r in rows:
         if "table_vs_march_m" in r:
             e = r["table_vs_march_m"]
-            print(f"{r['method']} {r['particles']:,}: table built in {r['build_s']:.2f} s; |table - march| median "
+            how = "read from the disk cache" if r.get("table_from_cache") else "built"
+            print(f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; |table - march| median "
                   f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays")
     print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
         f"{k} {v:.3f}" for k, v in r["parts_ms"].items()) for r in rows if "parts_ms" in r))

@@ -21,7 +21,9 @@ import numpy as np
 
 from irmcl_warp.mcl.filter import ParticleFilter
 from irmcl_warp.nog import NOG
-from irmcl_warp.kernels import WEIGHTING
+from irmcl_warp.kernels import WEIGHTING, pick_device
+from irmcl_warp.kernels.weighting import NogTable
+from irmcl_warp.services.table_cache import cached_table
 
 FREE_BELOW_P = 0.35  # a known cell under this p_occ is free space for the particles' uniform start
 NOF_WEIGHTINGS = ("nog_raymarch", "nog_table", "nof_direct")  # the observation models that read the trained field
@@ -70,11 +72,15 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
 
             return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
         if w == "nog_table":
-            key = ("nog_table", mcl.table_angles, mcl.num_samples, mcl.near_m, far_m, mcl.t_min, mcl.empty_below, device)
-            made = WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), num_angles=mcl.table_angles, t_min=mcl.t_min,
-                                   empty_below=mcl.empty_below, table=maps.built.get(key), **shared)
-            maps.built = {key: made.table}  # one table at a time
-            return made
+            nog = _need(maps.nog, w, "a NOG")
+            march = dict(num_angles=mcl.table_angles, num_samples=mcl.num_samples, near_m=mcl.near_m, far_m=far_m,
+                         t_min=mcl.t_min, empty_below=mcl.empty_below)
+            dev = pick_device(device)
+            key = ("nog_table", *march.values(), dev)
+            if key not in maps.built:  # one table at a time in memory; on disk, one per map and settings
+                maps.built = {key: cached_table(nog, march, dev, lambda: NogTable.build(nog, device=dev, **march))}
+            return WEIGHTING.build(w, nog=nog, num_angles=mcl.table_angles, t_min=mcl.t_min,
+                                   empty_below=mcl.empty_below, table=maps.built[key], **shared)
         return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below,
                              batch=mcl.march_batch, beam_major=_march_order(mcl.march_order), **shared)
     grid = dict(occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
