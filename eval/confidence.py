@@ -36,8 +36,10 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
         doc = json.loads((Path(d) / "metrics.json").read_text())
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
-                raise ValueError(f"{d}: world {r['world']} is a {floors.split_of(r['world'])} world; this step reads "
-                                 f"{side} worlds only")
+                raise ValueError(
+                    f"{d}: world {r['world']} is a {floors.split_of(r['world'])} world; this step reads "
+                    f"{side} worlds only"
+                )
             z = np.load(Path(d) / f"{r['world']}-run{r['run']}.npz")
             upd = z["updated"] & np.all(np.isfinite(z["features"]), 1) & np.all(np.isfinite(z["estimate"]), 1)
             X.append(z["features"][upd])
@@ -49,10 +51,16 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
     if len(prov["weighting"]) != 1:
         raise ValueError(f"runs of several weightings ({sorted(prov['weighting'])}): one calibration is for one")
     if len(prov["particles"]) != 1:
-        raise ValueError(f"runs of several particle counts ({sorted(map(str, prov['particles']))}): the features "
-                         "depend on the count (a larger cloud keeps a wider spread); one calibration is for one")
-    prov = {"runs": prov["runs"], "worlds": sorted(prov["worlds"]), "weighting": prov["weighting"].pop(),
-            "particles": prov["particles"].pop()}
+        raise ValueError(
+            f"runs of several particle counts ({sorted(map(str, prov['particles']))}): the features "
+            "depend on the count (a larger cloud keeps a wider spread); one calibration is for one"
+        )
+    prov = {
+        "runs": prov["runs"],
+        "worlds": sorted(prov["worlds"]),
+        "weighting": prov["weighting"].pop(),
+        "particles": prov["particles"].pop(),
+    }
     return np.concatenate(X), np.concatenate(y), prov
 
 
@@ -60,13 +68,21 @@ def fit(args) -> Path:
     X, y, prov = samples(args.runs, "tuning")
     model = fit_logistic(X, y)
     out = Path(args.out) if args.out else CALIBRATION_DIR / f"{prov['weighting']}.json"
-    model.meta = {"source": f"eval.confidence fit on {', '.join(prov['runs'])}", "tuning_worlds": prov["worlds"],
-                  "weighting": prov["weighting"], "num_particles": prov["particles"], "updates": int(len(y)), "right_share": float(y.mean()),
-                  "tuning_auroc": auroc(model(X), y)}
+    model.meta = {
+        "source": f"eval.confidence fit on {', '.join(prov['runs'])}",
+        "tuning_worlds": prov["worlds"],
+        "weighting": prov["weighting"],
+        "num_particles": prov["particles"],
+        "updates": int(len(y)),
+        "right_share": float(y.mean()),
+        "tuning_auroc": auroc(model(X), y),
+    }
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, model.to_json())
-    print(f"fitted on {len(y)} updates of {len(prov['worlds'])} tuning worlds ({100 * y.mean():.0f} % right); "
-          f"AUROC on them {model.meta['tuning_auroc']:.3f} -> {out}")
+    print(
+        f"fitted on {len(y)} updates of {len(prov['worlds'])} tuning worlds ({100 * y.mean():.0f} % right); "
+        f"AUROC on them {model.meta['tuning_auroc']:.3f} -> {out}"
+    )
     return out
 
 
@@ -75,20 +91,33 @@ def judge(args) -> dict:
     cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
     model = Confidence.load(cal)
     p = model(X)
-    doc = {"weighting": prov["weighting"], "num_particles": prov["particles"], "test_worlds": prov["worlds"], "runs": prov["runs"],
-           "calibration": str(cal), "tuning_worlds": model.meta.get("tuning_worlds"), "updates": int(len(y)),
-           "right_share": float(y.mean()), "auroc": auroc(p, y), "reliability": reliability(p, y),
-           "auroc_top_weight": auroc(X[:, FEATURES.index("top_weight")], y),
-           "auroc_spread": auroc(-X[:, FEATURES.index("log_spread")], y)}
-    doc["max_calibration_gap"] = max(abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20)
+    doc = {
+        "weighting": prov["weighting"],
+        "num_particles": prov["particles"],
+        "test_worlds": prov["worlds"],
+        "runs": prov["runs"],
+        "calibration": str(cal),
+        "tuning_worlds": model.meta.get("tuning_worlds"),
+        "updates": int(len(y)),
+        "right_share": float(y.mean()),
+        "auroc": auroc(p, y),
+        "reliability": reliability(p, y),
+        "auroc_top_weight": auroc(X[:, FEATURES.index("top_weight")], y),
+        "auroc_spread": auroc(-X[:, FEATURES.index("log_spread")], y),
+    }
+    doc["max_calibration_gap"] = max(
+        abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20
+    )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = f"confidence-{prov['weighting']}-{prov['particles'] // 1000}k"
     write_json(out / f"{name}.json", doc)
     plot(out / f"{name}.png", doc)
-    print(f"{prov['weighting']} on {len(prov['worlds'])} test worlds, {len(y)} updates ({100 * y.mean():.0f} % right): "
-          f"AUROC {doc['auroc']:.3f} (top mode's weight alone {doc['auroc_top_weight']:.3f}, spread alone "
-          f"{doc['auroc_spread']:.3f}); largest calibration gap {doc['max_calibration_gap']:.2f}")
+    print(
+        f"{prov['weighting']} on {len(prov['worlds'])} test worlds, {len(y)} updates ({100 * y.mean():.0f} % right): "
+        f"AUROC {doc['auroc']:.3f} (top mode's weight alone {doc['auroc_top_weight']:.3f}, spread alone "
+        f"{doc['auroc_spread']:.3f}); largest calibration gap {doc['max_calibration_gap']:.2f}"
+    )
     return doc
 
 
@@ -100,8 +129,9 @@ def plot(path: Path, doc: dict) -> None:
     ax.plot([0, 1], [0, 1], "k:", lw=1, label="calibrated")
     ax.plot([b["predicted"] for b in rel], [b["observed"] for b in rel], "o-", label="confidence")
     for b in rel:
-        ax.annotate(str(b["count"]), (b["predicted"], b["observed"]), fontsize=6, xytext=(3, -8),
-                    textcoords="offset points")
+        ax.annotate(
+            str(b["count"]), (b["predicted"], b["observed"]), fontsize=6, xytext=(3, -8), textcoords="offset points"
+        )
     ax.set_xlabel("predicted probability of being right")
     ax.set_ylabel("share right (test worlds)")
     ax.set_title(f"{doc['weighting']}, {doc['num_particles'] // 1000}k: AUROC {doc['auroc']:.3f}")

@@ -14,8 +14,17 @@ import re
 
 from eval.report.facts import facts, write_facts
 from eval.report.reproduction import reproduction_markdown
-from eval.report.tables import (ablation_table, globloc_table, kidnap_table, localization_table, pipeline_table,
-                                released_table, slam_table, synthesis_table, worlds_table)
+from eval.report.tables import (
+    ablation_table,
+    globloc_table,
+    kidnap_table,
+    localization_table,
+    pipeline_table,
+    released_table,
+    slam_table,
+    synthesis_table,
+    worlds_table,
+)
 from eval.results.claims import Evidence, load_bench, verdicts
 from eval.results.queries import CONVERGED_M, released, synthesis_pairs
 from eval.results.records import OUTPUTS, REPO, load
@@ -27,38 +36,71 @@ def evidence(outputs=OUTPUTS) -> tuple[Evidence, list, list]:
     """(the records the tables and claims read, the pipeline records, the worlds records); ``outputs`` None: the
     kept ones only."""
     recs = load(outputs=outputs)
-    by = {s: [r for r in recs if r.stage == s] for s in ("train", "synthesis", "localize", "slam", "globloc", "pipeline",
-                                                        "worlds")}
-    return Evidence(synthesis_pairs(by["train"] + by["synthesis"]), by["localize"], by["slam"], by["globloc"],
-                    released(outputs=outputs), load_bench()), by["pipeline"], by["worlds"]
+    by = {
+        s: [r for r in recs if r.stage == s]
+        for s in ("train", "synthesis", "localize", "slam", "globloc", "pipeline", "worlds")
+    }
+    return (
+        Evidence(
+            synthesis_pairs(by["train"] + by["synthesis"]),
+            by["localize"],
+            by["slam"],
+            by["globloc"],
+            released(outputs=outputs),
+            load_bench(),
+        ),
+        by["pipeline"],
+        by["worlds"],
+    )
 
 
 def tables(ev: Evidence, pipe: list, worlds: list = ()) -> dict[str, tuple[str, str]]:
     out = {}
     if ev.nof:
-        out["nof"] = ("Scan synthesis (IR-MCL protocol; NOF rendered with 256 samples, grids by ray casting)",
-                      synthesis_table(ev.nof))
+        out["nof"] = (
+            "Scan synthesis (IR-MCL protocol; NOF rendered with 256 samples, grids by ray casting)",
+            synthesis_table(ev.nof),
+        )
     if ev.loc:
-        out["mcl"] = ("Localization (10 seeded starts per cell, 60 s each; means over the successful starts)",
-                      localization_table(ev.loc))
-        out["ablation"] = ("Ablations of IR-MCL's global localization, one setting at a time (10 starts of 60 s; ms per "
-                           "scan: the whole filter step, median over the starts)", ablation_table(ev.loc))
-        out["kidnap"] = ("Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)", kidnap_table(ev.loc))
+        out["mcl"] = (
+            "Localization (10 seeded starts per cell, 60 s each; means over the successful starts)",
+            localization_table(ev.loc),
+        )
+        out["ablation"] = (
+            "Ablations of IR-MCL's global localization, one setting at a time (10 starts of 60 s; ms per "
+            "scan: the whole filter step, median over the starts)",
+            ablation_table(ev.loc),
+        )
+        out["kidnap"] = (
+            "Kidnapped robot (pose tracking teleported mid-run, AMCL-style recovery on)",
+            kidnap_table(ev.loc),
+        )
     if ev.slam:
-        out["slam"] = (f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
-                       slam_table(ev.slam, ev.released))
-        out["released"] = ("GMapping against the released C++, same logs, 30 particles, seeds 0-9",
-                           released_table(ev.slam, ev.released))
+        out["slam"] = (
+            f"GMapping, relations metric (Kümmerle et al. 2009); converged = mean error < {CONVERGED_M} m",
+            slam_table(ev.slam, ev.released),
+        )
+        out["released"] = (
+            "GMapping against the released C++, same logs, 30 particles, seeds 0-9",
+            released_table(ev.slam, ev.released),
+        )
     if pipe:
-        out["pipeline"] = ("The pipeline, raw log to localized robot (global localization from a uniform start over the "
-                           "second log)", pipeline_table(pipe))
+        out["pipeline"] = (
+            "The pipeline, raw log to localized robot (global localization from a uniform start over the second log)",
+            pipeline_table(pipe),
+        )
     if ev.globloc:
-        out["globloc"] = ("Lidar + camera global localization (simulated worlds, identical sensor streams per method; "
-                          "localized = within 0.5 m and 15 deg to the end of the run or of the part before the kidnapping)",
-                          globloc_table(ev.globloc))
+        out["globloc"] = (
+            "Lidar + camera global localization (simulated worlds, identical sensor streams per method; "
+            "localized = within 0.5 m and 15 deg to the end of the run or of the part before the kidnapping)",
+            globloc_table(ev.globloc),
+        )
     if worlds:
-        out["worlds"] = ("Global localization from the first scan on held-out simulated floors (test split; settings and "
-                         "calibration chosen on the tuning split)", worlds_table(worlds))
+        out["worlds"] = (
+            "Global localization from the first scan on held-out simulated floors (test split; settings and "
+            "calibration chosen on the tuning split)",
+            worlds_table(worlds),
+        )
     return out
 
 
@@ -80,14 +122,20 @@ def documents(repo=REPO) -> dict:
         text = replace_block(text, name, table)
     judged = verdicts(ev)
     text = write_facts(text, facts(ev.slam, ev.released, ev.nof, pipe, judged))
-    return {repo / "README.md": text, repo / "docs" / "REPRODUCTION.md": reproduction_markdown(judged),
-            repo / "docs" / "fidelity.md": document()}
+    return {
+        repo / "README.md": text,
+        repo / "docs" / "REPRODUCTION.md": reproduction_markdown(judged),
+        repo / "docs" / "fidelity.md": document(),
+    }
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m eval.tables", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--write", action="store_true", help="write README.md's tables and facts, REPRODUCTION.md and "
-                                                         "fidelity.md (from the kept records)")
+    ap.add_argument(
+        "--write",
+        action="store_true",
+        help="write README.md's tables and facts, REPRODUCTION.md and fidelity.md (from the kept records)",
+    )
     a = ap.parse_args(argv)
     if a.write:
         for path, text in documents().items():

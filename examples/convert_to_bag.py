@@ -34,11 +34,22 @@ def load_your_log(path: str) -> dict:
 def to_log(a: dict, source: str) -> LaserLog:
     ranges = np.asarray(a["ranges"], np.float32)
     ranges = np.where(np.isfinite(ranges), ranges, np.nan).astype(np.float32)
-    info = LaserInfo(num_beams=ranges.shape[1], angle_min_rad=float(a["angle_min"]),
-                     angle_increment_rad=float(a["angle_increment"]), range_min_m=float(a["range_min"]),
-                     range_max_m=float(a["range_max"]), no_return_m=float(a["range_max"]))
-    return LaserLog(stamps=np.asarray(a["stamps"], np.float64), ranges_m=ranges, odom=np.asarray(a["odom"], np.float64),
-                    info=info, T_base_laser=np.asarray(a.get("T_base_laser", np.zeros(3)), np.float64), source=source)
+    info = LaserInfo(
+        num_beams=ranges.shape[1],
+        angle_min_rad=float(a["angle_min"]),
+        angle_increment_rad=float(a["angle_increment"]),
+        range_min_m=float(a["range_min"]),
+        range_max_m=float(a["range_max"]),
+        no_return_m=float(a["range_max"]),
+    )
+    return LaserLog(
+        stamps=np.asarray(a["stamps"], np.float64),
+        ranges_m=ranges,
+        odom=np.asarray(a["odom"], np.float64),
+        info=info,
+        T_base_laser=np.asarray(a.get("T_base_laser", np.zeros(3)), np.float64),
+        source=source,
+    )
 
 
 def main(argv: list[str]) -> None:

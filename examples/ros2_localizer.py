@@ -40,15 +40,31 @@ def set_yaw(q, yaw: float) -> None:
 class Localizer(Node):
     def __init__(self):
         super().__init__("irmcl_warp_localizer")
-        p = {name: self.declare_parameter(name, default).value for name, default in [
-            ("map", ""), ("weighting", "likelihood_field"), ("particles", 5000), ("device", "auto"),
-            ("laser_x", 0.0), ("laser_y", 0.0), ("laser_yaw", 0.0), ("update_min_d", 0.2), ("update_min_a", 0.5),
-            ("map_frame", "map"), ("odom_frame", "odom")]}
+        p = {
+            name: self.declare_parameter(name, default).value
+            for name, default in [
+                ("map", ""),
+                ("weighting", "likelihood_field"),
+                ("particles", 5000),
+                ("device", "auto"),
+                ("laser_x", 0.0),
+                ("laser_y", 0.0),
+                ("laser_yaw", 0.0),
+                ("update_min_d", 0.2),
+                ("update_min_a", 0.5),
+                ("map_frame", "map"),
+                ("odom_frame", "odom"),
+            ]
+        }
         if not p["map"]:
             raise SystemExit("set the map: --ros-args -p map:=/path/to/map.yaml")
         self.p = p
-        self.mcl = MCLConfig(weighting=p["weighting"], num_particles=int(p["particles"]),
-                             update_min_trans_m=float(p["update_min_d"]), update_min_rot_rad=float(p["update_min_a"]))
+        self.mcl = MCLConfig(
+            weighting=p["weighting"],
+            num_particles=int(p["particles"]),
+            update_min_trans_m=float(p["update_min_d"]),
+            update_min_rot_rad=float(p["update_min_a"]),
+        )
         self.loc = None  # built on the first scan, which gives the beams' angles and the far bound
         self.initial = None
         self.odom = None  # the latest odometry pose [x, y, yaw] in the odom frame
@@ -79,8 +95,15 @@ class Localizer(Node):
         if self.loc is None:
             angles = msg.angle_min + msg.angle_increment * np.arange(len(ranges))
             laser = (self.p["laser_x"], self.p["laser_y"], self.p["laser_yaw"])
-            self.loc = open_localizer(self.p["map"], self.mcl, laser, angles, float(msg.range_max),
-                                      device=self.p["device"], initial_pose=self.initial)
+            self.loc = open_localizer(
+                self.p["map"],
+                self.mcl,
+                laser,
+                angles,
+                float(msg.range_max),
+                device=self.p["device"],
+                initial_pose=self.initial,
+            )
         stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         est = self.loc.update(stamp, ranges, self.odom.copy())
         if not np.all(np.isfinite(est.pose)):

@@ -45,7 +45,9 @@ class DataConfig:
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
     repair_reversing: bool = False  # bags: drive backwards the odometry steps whose velocity is negative (fr079)
-    far_m: Optional[float] = None  # the sensor's far bound for every stage (rendering, MCL, SLAM); None = floor(range_max)
+    far_m: Optional[float] = (
+        None  # the sensor's far bound for every stage (rendering, MCL, SLAM); None = floor(range_max)
+    )
     split: str = "interleaved"  # interleaved (train/val/test) | block (train_block/val_block/test_block)
 
 
@@ -96,6 +98,7 @@ class RaycastConfig:
 @dataclass
 class ModelConfig:
     """The NOF (IR-MCL Sec. III-A): 8 layers of 256, batch norm + ReLU, input again after layer 4, L = 10."""
+
     num_freqs: int = 10
     width: int = 256
     depth: int = 8
@@ -105,6 +108,7 @@ class ModelConfig:
 @dataclass
 class RenderConfig:
     """Rendering ranges from the NOF (IR-MCL code: 256 samples, near 0.02 m, far = sensor range)."""
+
     name: str = "warp"  # warp | torch_ref
     num_samples: int = 256
     near_m: float = 0.02
@@ -116,6 +120,7 @@ class RenderConfig:
 @dataclass
 class TrainConfig:
     """The training recipe; presets in conf/train/ (paper = the authors' fr079 script)."""
+
     name: str = "paper"
     epochs: int = 32
     batch_rays: int = 1024
@@ -124,11 +129,17 @@ class TrainConfig:
     lr: float = 1e-4
     lr_milestones: List[int] = field(default_factory=lambda: [4, 8])
     lr_gamma: float = 0.5
-    lr_schedule: str = "multistep"  # multistep (the authors': x lr_gamma after each milestone epoch) | cosine (per step, below)
+    lr_schedule: str = (
+        "multistep"  # multistep (the authors': x lr_gamma after each milestone epoch) | cosine (per step, below)
+    )
     warmup_steps: int = 0  # cosine: lr rises linearly from 0 over these steps ...
     lr_final: float = 0.01  # ... then falls along a cosine to lr * lr_final at the last step of the last epoch
-    bn_recalibrate: int = 0  # before each validation, batch norm's running statistics recomputed over this many batches (0 = as trained)
-    ema_decay: Optional[float] = None  # evaluate and keep an exponential moving average of the weights (e.g. 0.999); None = the weights themselves
+    bn_recalibrate: int = (
+        0  # before each validation, batch norm's running statistics recomputed over this many batches (0 = as trained)
+    )
+    ema_decay: Optional[float] = (
+        None  # evaluate and keep an exponential moving average of the weights (e.g. 0.999); None = the weights themselves
+    )
     weight_decay: float = 1e-3
     loss: str = "smooth_l1"  # smooth_l1 (authors' code) | l1 (paper)
     lambda_opacity: float = 1e-5  # weight of the occupancy regulariser (authors' code)
@@ -137,15 +148,23 @@ class TrainConfig:
     max_time_s: Optional[float] = None  # stop training after this long (epochs still end cleanly)
     steps_per_epoch: Optional[int] = None  # None = one pass over the training rays
     val_scans: int = 100  # validation scans rendered after each epoch (evenly spread)
-    compile: bool = False  # torch.compile the network for the training pass (dynamic shapes; compiling counts as training time)
-    fused_adam: bool = False  # CUDA: Adam's update in one fused kernel (the same formula; ~1 ms less per step on an H100)
-    sampler: str = "uniform"  # uniform (every sample through the MLP, the authors') | occupancy (irmcl_warp/nof/occupancy.py)
+    compile: bool = (
+        False  # torch.compile the network for the training pass (dynamic shapes; compiling counts as training time)
+    )
+    fused_adam: bool = (
+        False  # CUDA: Adam's update in one fused kernel (the same formula; ~1 ms less per step on an H100)
+    )
+    sampler: str = (
+        "uniform"  # uniform (every sample through the MLP, the authors') | occupancy (irmcl_warp/nof/occupancy.py)
+    )
     grid_resolution_m: float = 0.1  # occupancy sampler: cell size of the grid of the field's p_occ
     grid_threshold: float = 0.01  # a cell may be occupied above this p_occ
     grid_decay: float = 0.8  # value <- max(decay * value, p_occ at a random point of the cell)
     grid_every: int = 16  # steps between grid updates (the first at step 0)
     grid_dilate: int = 1  # cells added around every occupied one
-    grid_end: str = "field"  # where a beam's samples end: field (its transmittance, read without gradient) | grid | none
+    grid_end: str = (
+        "field"  # where a beam's samples end: field (its transmittance, read without gradient) | grid | none
+    )
     grid_t_min: float = 1e-4  # ... once that transmittance is below this
     checkpoint_every_s: float = 120.0
     seed: int = 42
@@ -154,6 +173,7 @@ class TrainConfig:
 @dataclass
 class MCLConfig:
     """Monte Carlo localization; IR-MCL's values (Kuang et al. 2023, Sec. IV and their configs) cited."""
+
     weighting: str = "nog_raymarch"  # nog_raymarch | nog_table (the march read from a range table) | nof_direct | likelihood_field | beam_model
     num_particles: int = 100_000  # IR-MCL global localization
     num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
@@ -166,15 +186,20 @@ class MCLConfig:
     march_order: str = "beam"  # GPU threads by beam then particle (beam: 1.6x faster on an H100) | particle
     table_angles: int = 720  # nog_table: headings per NOG node in its range table (720: 0.5 deg apart)
     sigma_m: float = 0.5  # IR-MCL: likelihood exp(-0.5 D^2 / sigma^2), D the mean L1 beam error
-    motion: str = "odometry"  # odometry (Thrun / AMCL, noise mcl.alphas) | irmcl (IR-MCL's code, noise mcl.motion_noise)
+    motion: str = (
+        "odometry"  # odometry (Thrun / AMCL, noise mcl.alphas) | irmcl (IR-MCL's code, noise mcl.motion_noise)
+    )
     alphas: List[float] = field(default_factory=lambda: [0.05, 0.005, 0.05, 0.005])  # Thrun a1..a4
-    motion_noise: List[float] = field(default_factory=lambda: [0.01, 0.0005, 0.0002, 0.0005, 0.0001, 0.0001, 0.001,
-                                                                0.00001, 0.05])  # irmcl: C (variance = C |u|), the authors'
+    motion_noise: List[float] = field(
+        default_factory=lambda: [0.01, 0.0005, 0.0002, 0.0005, 0.0001, 0.0001, 0.001, 0.00001, 0.05]
+    )  # irmcl: C (variance = C |u|), the authors'
     estimate: str = "top_share"  # top_share (IR-MCL: weighted mean of the top 80 %) | best_cluster | mean
     estimate_share: float = 0.8
     cluster_cell_m: float = 0.5  # best_cluster: histogram cell (m) ...
     cluster_yaw_bins: int = 8  # ... and heading bins
-    reduce_to: int = 5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never; when: localize.reduce_after_s)
+    reduce_to: int = (
+        5000  # IR-MCL: keep the 5k heaviest particles once converged (0 = never; when: localize.reduce_after_s)
+    )
     update_min_trans_m: float = 0.0  # weigh and resample only after the odometry moved more than this ...
     update_min_rot_rad: float = 0.0  # ... or turned more than this (0/0: any motion, as IR-MCL's code)
     # (AMCL's update_min_d 0.2 m, update_min_a pi/6; ROS amcl wiki)
@@ -206,6 +231,7 @@ class MCLConfig:
 @dataclass
 class SlamConfig:
     """GMapping (Grisetti et al. T-RO 2007); defaults = the released code / ROS wrapper's, named as there."""
+
     # (string fields say builtins.str: the odometry noise field below is named `str`, as in GMapping)
     num_particles: int = 30
     proposal: builtins.str = "paper"  # paper (Gaussian fitted around the match) | gmapping_code (the match) | odometry
@@ -239,7 +265,9 @@ class SlamConfig:
     proposal_grid: int = 1  # paper proposal: (2g + 1)^3 poses around the match, spaced as below
     proposal_lstep: Optional[float] = None  # their spacing in x and y (m); None: lstep
     proposal_astep: Optional[float] = None  # and in theta (rad); None: astep
-    frame: builtins.str = "base"  # the poses the particles carry: base (the odometry's frame) | laser (the released code
+    frame: builtins.str = (
+        "base"  # the poses the particles carry: base (the odometry's frame) | laser (the released code
+    )
     # as its ROS wrapper feeds it: laser poses as odometry, so its motion noise, hill climbing and update distances
     # act on the laser; the same where the laser sits at the base)
     beam_angles: builtins.str = "log"  # log (the angles the log declares) | gfs (those the released code's own CARMEN
@@ -250,6 +278,7 @@ class SlamConfig:
 @dataclass
 class GlobLocConfig:
     """Lidar + camera global localization (Gist retrieval, ORB + PnP, Scan2Map, relocalization trigger)."""
+
     scenario: str = "random_starts"  # the output folder's name: globloc-<scenario>
     methods: List[str] = field(default_factory=lambda: ["lidar_mcl", "camera_only", "paper", "mcl_seeded"])
     runs: int = 10
@@ -294,6 +323,7 @@ class GlobLocConfig:
 class LocalizeConfig:
     """The localize stage: the benchmark protocol (IR-MCL Sec. IV: starts spread over a log with ground truth,
     scored), or with ``map_path`` a run of your own log in your own map (no ground truth needed)."""
+
     mode: str = "global"  # global (uniform over the free space) | tracking (from a noisy ground-truth pose)
     tracking_std: List[float] = field(default_factory=lambda: [0.5, 0.5, 0.3])  # tracking: initial spread (m, m, rad)
     num_starts: int = 10  # start times spread evenly over the sequence
@@ -311,6 +341,7 @@ class LocalizeConfig:
 class WorldsConfig:
     """Global localization on simulated floors nobody tuned on (issue 33; irmcl_warp/sim/floors.py): each world
     of the split mapped by a drive of its own, then ``runs`` other drives localized from their first scan."""
+
     split: str = "test"  # tuning | test (floors.SPLIT) | world names separated by "+" (office-7+loop-1003)
     runs: int = 10  # drives per world (path seeds 1..runs; the map's drive is seed 0)
     run_s: float = 60.0  # each drive localized for this long, from its first scan
@@ -332,6 +363,7 @@ class WorldsConfig:
 @dataclass
 class PipelineConfig:
     """The pipeline's second log, localized globally in the map and NOF made from the first (data.*)."""
+
     path: Optional[str] = None  # None: the simulator's second session (sim_path_seed below), or data.path again
     format: Optional[str] = None  # None = data.format
     ground_truth_path: Optional[str] = None  # poses to score against (same frame as data.ground_truth_path)
@@ -365,7 +397,9 @@ def register() -> None:
     cs.store(name="config_schema", node=Config)
 
 
-CONF_DIR = Path(__file__).resolve().parent / "conf"  # the experiment configs (pkg://irmcl_warp.conf: the top-level conf/)
+CONF_DIR = (
+    Path(__file__).resolve().parent / "conf"
+)  # the experiment configs (pkg://irmcl_warp.conf: the top-level conf/)
 CALIBRATION_DIR = Path(__file__).resolve().parent / "mcl" / "calibration"  # the localizers' confidence, one file
 # per observation model (eval.confidence fit on the tuning worlds)
 
@@ -392,60 +426,150 @@ class ConfigError(ValueError):
 # choices of the string settings (a typo is an error, not a silent fallback); the registries and strategy tables
 # that implement them sit above this module, so tests/test_config.py holds the two in agreement
 CHOICES = {
-    "data.format": ("sim", "carmen", "bag"), "data.ground_truth_fill": ("none", "odometry"), "data.beam_policy": ("error", "reject", "resample"),
-    "data.split": ("interleaved", "block"), "raycast.name": ("dda", "distance_field"), "render.name": ("warp", "torch_ref"),
-    "train.loss": ("smooth_l1", "l1"), "train.amp": ("off", "bf16"),
-    "train.sampler": ("uniform", "occupancy"), "train.grid_end": ("field", "grid", "none"), "mapping.kernel": ("logodds",),
+    "data.format": ("sim", "carmen", "bag"),
+    "data.ground_truth_fill": ("none", "odometry"),
+    "data.beam_policy": ("error", "reject", "resample"),
+    "data.split": ("interleaved", "block"),
+    "raycast.name": ("dda", "distance_field"),
+    "render.name": ("warp", "torch_ref"),
+    "train.loss": ("smooth_l1", "l1"),
+    "train.amp": ("off", "bf16"),
+    "train.sampler": ("uniform", "occupancy"),
+    "train.grid_end": ("field", "grid", "none"),
+    "mapping.kernel": ("logodds",),
     "mcl.weighting": ("nog_raymarch", "nog_table", "nof_direct", "likelihood_field", "beam_model"),
-    "mcl.estimate": ("top_share", "best_cluster", "mean"), "mcl.beam_pick": ("spread", "stride"),
-    "mcl.resample": ("low_variance", "multinomial"), "mcl.first_update": ("scan", "motion"),
-    "localize.mode": ("global", "tracking"), "slam.proposal": ("paper", "gmapping_code", "odometry"),
-    "slam.resample": ("selective", "always"), "slam.line": ("bresenham", "dda"), "slam.frame": ("base", "laser"),
+    "mcl.estimate": ("top_share", "best_cluster", "mean"),
+    "mcl.beam_pick": ("spread", "stride"),
+    "mcl.resample": ("low_variance", "multinomial"),
+    "mcl.first_update": ("scan", "motion"),
+    "localize.mode": ("global", "tracking"),
+    "slam.proposal": ("paper", "gmapping_code", "odometry"),
+    "slam.resample": ("selective", "always"),
+    "slam.line": ("bresenham", "dda"),
+    "slam.frame": ("base", "laser"),
     "slam.beam_angles": ("log", "gfs"),
-    "globloc.scan2map": ("paper", "likelihood_field"), "globloc.cluster_space": ("pose", "index"),
+    "globloc.scan2map": ("paper", "likelihood_field"),
+    "globloc.cluster_space": ("pose", "index"),
 }
 # numeric settings: (lowest, highest), None for no bound; a lowest written "> x" is exclusive
 RANGES = {
-    "data.far_m": ("> 0", None), "data.max_speed_mps": ("> 0", None), "data.max_step_m": ("> 0", None),
-    "data.no_return_m": ("> 0", None), "data.fov_rad": ("> 0", 6.2832),
-    "data.ground_truth_max_gap_s": ("> 0", None), "data.ground_truth_tolerance_s": (0, 1.0),
-    "sim.rate_hz": ("> 0", None), "sim.num_beams": (1, None), "sim.max_range_m": ("> 0", None),
-    "sim.speed_mps": ("> 0", None), "sim.width_m": ("> 0", None), "sim.height_m": ("> 0", None),
-    "sim.dropout_prob": (0, 1), "sim.range_noise_std_m": (0, None),
-    "mapping.resolution_m": ("> 0", None), "mapping.max_range_m": ("> 0", None),
-    "model.num_freqs": (1, None), "model.width": (1, None), "model.depth": (1, None), "model.skip_after": (0, None),
-    "render.num_samples": (2, None), "render.near_m": (0, None), "render.t_min": (0, 1), "render.chunk_rays": (1, None),
-    "train.epochs": (1, None), "train.batch_rays": (1, None), "train.num_samples": (2, None), "train.lr": ("> 0", None),
-    "train.weight_decay": (0, None), "train.steps_per_epoch": (1, None), "train.val_scans": (1, None),
-    "train.max_time_s": ("> 0", None), "train.checkpoint_every_s": ("> 0", None),
-    "train.grid_resolution_m": ("> 0", None), "train.grid_threshold": (0, 1), "train.grid_decay": (0, 1),
-    "train.grid_every": (1, None), "train.grid_dilate": (0, None), "train.grid_t_min": (0, 1),
-    "mcl.num_particles": (1, None), "mcl.num_beams": (1, None), "mcl.num_samples": (2, None), "mcl.near_m": (0, None),
-    "mcl.t_min": (0, 1), "mcl.empty_below": (0, 1), "mcl.table_angles": (4, None), "mcl.sigma_m": ("> 0", None), "mcl.estimate_share": ("> 0", 1),
-    "mcl.cluster_cell_m": ("> 0", None), "mcl.cluster_yaw_bins": (1, None), "mcl.reduce_to": (0, None),
-    "mcl.update_min_trans_m": (0, None), "mcl.update_min_rot_rad": (0, None), "mcl.resample_threshold": (0, 1),
-    "mcl.map_resolution_m": ("> 0", None), "mcl.recovery_alpha_slow": (0, 1), "mcl.recovery_alpha_fast": (0, 1),
-    "mcl.temper": ("> 0", 1), "mcl.z_hit": (0, 1), "mcl.z_short": (0, 1), "mcl.z_max": (0, 1), "mcl.z_rand": (0, 1),
-    "mcl.sigma_hit_m": ("> 0", None), "mcl.lambda_short": ("> 0", None), "mcl.field_max_dist_m": ("> 0", None),
-    "mcl.field_occ_threshold": ("> 0", 1), "mcl.beam_occ_threshold": ("> 0", 1),
-    "worlds.runs": (1, None), "worlds.run_s": ("> 0", None), "worlds.map_drive_m": ("> 0", None),
-    "worlds.kidnap_at_s": (0, None), "worlds.confident_above": (0, 1), "worlds.lost_below": (0, 1),
-    "worlds.lost_after_s": ("> 0", None), "worlds.search_rivals_every": (0, None),
-    "localize.num_starts": (1, None), "localize.run_s": ("> 0", None), "localize.kidnap_at_s": (0, None),
+    "data.far_m": ("> 0", None),
+    "data.max_speed_mps": ("> 0", None),
+    "data.max_step_m": ("> 0", None),
+    "data.no_return_m": ("> 0", None),
+    "data.fov_rad": ("> 0", 6.2832),
+    "data.ground_truth_max_gap_s": ("> 0", None),
+    "data.ground_truth_tolerance_s": (0, 1.0),
+    "sim.rate_hz": ("> 0", None),
+    "sim.num_beams": (1, None),
+    "sim.max_range_m": ("> 0", None),
+    "sim.speed_mps": ("> 0", None),
+    "sim.width_m": ("> 0", None),
+    "sim.height_m": ("> 0", None),
+    "sim.dropout_prob": (0, 1),
+    "sim.range_noise_std_m": (0, None),
+    "mapping.resolution_m": ("> 0", None),
+    "mapping.max_range_m": ("> 0", None),
+    "model.num_freqs": (1, None),
+    "model.width": (1, None),
+    "model.depth": (1, None),
+    "model.skip_after": (0, None),
+    "render.num_samples": (2, None),
+    "render.near_m": (0, None),
+    "render.t_min": (0, 1),
+    "render.chunk_rays": (1, None),
+    "train.epochs": (1, None),
+    "train.batch_rays": (1, None),
+    "train.num_samples": (2, None),
+    "train.lr": ("> 0", None),
+    "train.weight_decay": (0, None),
+    "train.steps_per_epoch": (1, None),
+    "train.val_scans": (1, None),
+    "train.max_time_s": ("> 0", None),
+    "train.checkpoint_every_s": ("> 0", None),
+    "train.grid_resolution_m": ("> 0", None),
+    "train.grid_threshold": (0, 1),
+    "train.grid_decay": (0, 1),
+    "train.grid_every": (1, None),
+    "train.grid_dilate": (0, None),
+    "train.grid_t_min": (0, 1),
+    "mcl.num_particles": (1, None),
+    "mcl.num_beams": (1, None),
+    "mcl.num_samples": (2, None),
+    "mcl.near_m": (0, None),
+    "mcl.t_min": (0, 1),
+    "mcl.empty_below": (0, 1),
+    "mcl.table_angles": (4, None),
+    "mcl.sigma_m": ("> 0", None),
+    "mcl.estimate_share": ("> 0", 1),
+    "mcl.cluster_cell_m": ("> 0", None),
+    "mcl.cluster_yaw_bins": (1, None),
+    "mcl.reduce_to": (0, None),
+    "mcl.update_min_trans_m": (0, None),
+    "mcl.update_min_rot_rad": (0, None),
+    "mcl.resample_threshold": (0, 1),
+    "mcl.map_resolution_m": ("> 0", None),
+    "mcl.recovery_alpha_slow": (0, 1),
+    "mcl.recovery_alpha_fast": (0, 1),
+    "mcl.temper": ("> 0", 1),
+    "mcl.z_hit": (0, 1),
+    "mcl.z_short": (0, 1),
+    "mcl.z_max": (0, 1),
+    "mcl.z_rand": (0, 1),
+    "mcl.sigma_hit_m": ("> 0", None),
+    "mcl.lambda_short": ("> 0", None),
+    "mcl.field_max_dist_m": ("> 0", None),
+    "mcl.field_occ_threshold": ("> 0", 1),
+    "mcl.beam_occ_threshold": ("> 0", 1),
+    "worlds.runs": (1, None),
+    "worlds.run_s": ("> 0", None),
+    "worlds.map_drive_m": ("> 0", None),
+    "worlds.kidnap_at_s": (0, None),
+    "worlds.confident_above": (0, 1),
+    "worlds.lost_below": (0, 1),
+    "worlds.lost_after_s": ("> 0", None),
+    "worlds.search_rivals_every": (0, None),
+    "localize.num_starts": (1, None),
+    "localize.run_s": ("> 0", None),
+    "localize.kidnap_at_s": (0, None),
     "localize.reduce_after_s": (0, None),
-    "slam.num_particles": (1, None), "slam.resample_threshold": (0, 1), "slam.sigma": ("> 0", None),
-    "slam.kernel_size": (0, None), "slam.lstep": ("> 0", None), "slam.astep": ("> 0", None), "slam.iterations": (0, None),
-    "slam.lsigma": ("> 0", None), "slam.ogain": ("> 0", None), "slam.lskip": (0, None), "slam.fullness": (0, 1),
-    "slam.srr": (0, None), "slam.srt": (0, None), "slam.str": (0, None), "slam.stt": (0, None),
-    "slam.linear_update": (0, None), "slam.angular_update": (0, None), "slam.temporal_update": (None, None),
+    "slam.num_particles": (1, None),
+    "slam.resample_threshold": (0, 1),
+    "slam.sigma": ("> 0", None),
+    "slam.kernel_size": (0, None),
+    "slam.lstep": ("> 0", None),
+    "slam.astep": ("> 0", None),
+    "slam.iterations": (0, None),
+    "slam.lsigma": ("> 0", None),
+    "slam.ogain": ("> 0", None),
+    "slam.lskip": (0, None),
+    "slam.fullness": (0, 1),
+    "slam.srr": (0, None),
+    "slam.srt": (0, None),
+    "slam.str": (0, None),
+    "slam.stt": (0, None),
+    "slam.linear_update": (0, None),
+    "slam.angular_update": (0, None),
+    "slam.temporal_update": (None, None),
     "slam.resolution_m": ("> 0", None),
-    "slam.map_margin_m": (0, None), "slam.proposal_grid": (0, None), "slam.proposal_lstep": ("> 0", None),
+    "slam.map_margin_m": (0, None),
+    "slam.proposal_grid": (0, None),
+    "slam.proposal_lstep": ("> 0", None),
     "slam.proposal_astep": ("> 0", None),
-    "globloc.num_particles": (1, None), "globloc.beams": (1, None), "globloc.runs": (1, None),
-    "globloc.run_s": ("> 0", None), "globloc.kidnap_at_s": (0, None), "globloc.top_n": (1, None),
-    "globloc.clusters": (1, None), "globloc.pnp_per_cluster": (1, None), "globloc.trigger_confirm_frames": (1, None),
-    "globloc.map_resolution_m": ("> 0", None), "globloc.seed_share": (0, 1), "globloc.camera_every_s": ("> 0", None),
-    "pipeline.start_s": (0, None), "pipeline.run_s": ("> 0", None),
+    "globloc.num_particles": (1, None),
+    "globloc.beams": (1, None),
+    "globloc.runs": (1, None),
+    "globloc.run_s": ("> 0", None),
+    "globloc.kidnap_at_s": (0, None),
+    "globloc.top_n": (1, None),
+    "globloc.clusters": (1, None),
+    "globloc.pnp_per_cluster": (1, None),
+    "globloc.trigger_confirm_frames": (1, None),
+    "globloc.map_resolution_m": ("> 0", None),
+    "globloc.seed_share": (0, 1),
+    "globloc.camera_every_s": ("> 0", None),
+    "pipeline.start_s": (0, None),
+    "pipeline.run_s": ("> 0", None),
 }
 
 
@@ -469,13 +593,15 @@ def validate(cfg) -> None:
     for key, section in c.items():
         if key not in schema:
             raise ConfigError(f"{key}: no such setting (sections: {', '.join(sorted(schema))})")
-        if isinstance(section, dict) and dataclasses.is_dataclass(schema[key].default_factory()
-                                                                  if schema[key].default_factory is not dataclasses.MISSING
-                                                                  else None):
+        if isinstance(section, dict) and dataclasses.is_dataclass(
+            schema[key].default_factory() if schema[key].default_factory is not dataclasses.MISSING else None
+        ):
             declared = {f.name for f in dataclasses.fields(schema[key].default_factory())}
             extra = sorted(set(section) - declared)
             if extra:
-                raise ConfigError(f"{key}.{extra[0]}: no such setting in {key} (declared: {', '.join(sorted(declared))})")
+                raise ConfigError(
+                    f"{key}.{extra[0]}: no such setting in {key} (declared: {', '.join(sorted(declared))})"
+                )
     for key, choices in CHOICES.items():
         sec, name = key.split(".")
         v = c.get(sec, {}).get(name)
@@ -501,8 +627,10 @@ def settings_warnings(cfg) -> list[str]:
     out = []
     n = cfg.mcl.num_particles
     if n < MIN_MEANINGFUL_PARTICLES:
-        out.append(f"mcl.num_particles={n}: a cloud this small cannot tell its own spread or find a global start "
-                   f"(below {MIN_MEANINGFUL_PARTICLES} its spread and convergence mean little)")
+        out.append(
+            f"mcl.num_particles={n}: a cloud this small cannot tell its own spread or find a global start "
+            f"(below {MIN_MEANINGFUL_PARTICLES} its spread and convergence mean little)"
+        )
     far = cfg.data.far_m
     if far is not None and far < MIN_MEANINGFUL_FAR_M:
         out.append(f"data.far_m={far}: every beam longer than {far} m is dropped, which in a building is nearly all")

@@ -90,7 +90,7 @@ def _v_terms(theta):
     theta = np.asarray(theta, dtype=np.float64)
     small = np.abs(theta) < 1e-6
     t = np.where(small, 1.0, theta)
-    A = np.where(small, 1.0 - theta ** 2 / 6.0, np.sin(t) / t)
+    A = np.where(small, 1.0 - theta**2 / 6.0, np.sin(t) / t)
     B = np.where(small, theta / 2.0, (1.0 - np.cos(t)) / t)
     return A, B
 

@@ -31,13 +31,20 @@ def path_length_m(poses: np.ndarray) -> float:
 def summarize(log: LaserLog) -> dict:
     i = log.info
     return {
-        "source": log.source, "scans": len(log), "beams": i.num_beams, "fov_deg": float(np.degrees(i.fov_rad)),
-        "angle_increment_deg": float(np.degrees(i.angle_increment_rad)), "range_max_m": i.range_max_m,
-        "no_return_m": i.no_return_m, "valid_beam_share": float(log.valid.mean()),
-        "duration_s": float(log.stamps.max() - log.stamps.min()), "odometry_path_m": path_length_m(log.odom),
+        "source": log.source,
+        "scans": len(log),
+        "beams": i.num_beams,
+        "fov_deg": float(np.degrees(i.fov_rad)),
+        "angle_increment_deg": float(np.degrees(i.angle_increment_rad)),
+        "range_max_m": i.range_max_m,
+        "no_return_m": i.no_return_m,
+        "valid_beam_share": float(log.valid.mean()),
+        "duration_s": float(log.stamps.max() - log.stamps.min()),
+        "odometry_path_m": path_length_m(log.odom),
         "ground_truth_poses": log.num_ground_truth,
         "ground_truth_path_m": path_length_m(log.ground_truth) if log.ground_truth is not None else 0.0,
-        "T_base_laser": [float(v) for v in log.T_base_laser], "defects": dict(log.defects.counts),
+        "T_base_laser": [float(v) for v in log.T_base_laser],
+        "defects": dict(log.defects.counts),
     }
 
 
@@ -55,23 +62,42 @@ def inspect_log(run: runs.Run) -> Path:
     summary = summarize(log)
     poses, label = (log.ground_truth, "ground truth") if log.num_ground_truth else (log.odom, "odometry")
     m = cfg.mapping
-    grid = build_map(log, poses, resolution_m=m.resolution_m, max_range_m=m.max_range_m, l_occ=m.l_occ,
-                     l_free=m.l_free, l_min=m.l_min, l_max=m.l_max, kernel=m.kernel, device=device)
+    grid = build_map(
+        log,
+        poses,
+        resolution_m=m.resolution_m,
+        max_range_m=m.max_range_m,
+        l_occ=m.l_occ,
+        l_free=m.l_free,
+        l_min=m.l_min,
+        l_max=m.l_max,
+        kernel=m.kernel,
+        device=device,
+    )
     save_map(grid, out / "map")
-    summary["map"] = {"poses": label, "cells": list(grid.shape), "resolution_m": grid.resolution_m,
-                      "origin_xy": list(grid.origin_xy)}
+    summary["map"] = {
+        "poses": label,
+        "cells": list(grid.shape),
+        "resolution_m": grid.resolution_m,
+        "origin_xy": list(grid.origin_xy),
+    }
     if cfg.data.format == "sim":
         write_bag(log, out / "sim.bag")
     write_json(out / "summary.json", summary)
     path = run.finish(None, device)
-    print(f"{cfg.data.name}: {summary['scans']} scans of {summary['beams']} beams over {summary['fov_deg']:.1f} deg, "
-          f"{summary['duration_s']:.0f} s, {summary['ground_truth_poses']} ground-truth poses")
-    print(f"  odometry path {summary['odometry_path_m']:.1f} m, ground-truth path {summary['ground_truth_path_m']:.1f} m, "
-          f"valid beams {100 * summary['valid_beam_share']:.1f} %, no return at {summary['no_return_m']:.2f} m")
+    print(
+        f"{cfg.data.name}: {summary['scans']} scans of {summary['beams']} beams over {summary['fov_deg']:.1f} deg, "
+        f"{summary['duration_s']:.0f} s, {summary['ground_truth_poses']} ground-truth poses"
+    )
+    print(
+        f"  odometry path {summary['odometry_path_m']:.1f} m, ground-truth path {summary['ground_truth_path_m']:.1f} m, "
+        f"valid beams {100 * summary['valid_beam_share']:.1f} %, no return at {summary['no_return_m']:.2f} m"
+    )
     for line in log.defects.lines() or ["no defects found"]:
         print(f"  defect: {line}" if log.defects else f"  {line}")
     print(f"  map from {label}: {grid.shape[1]}x{grid.shape[0]} cells -> {path / 'map.png'}")
     return path
+
 
 register()
 

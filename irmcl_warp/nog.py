@@ -33,15 +33,17 @@ class NOG:
 
     def save(self, path: Path) -> None:
         buf = io.BytesIO()
-        np.savez_compressed(buf, occupancy=self.occupancy, origin_xy=np.array(self.origin_xy),
-                            resolution_m=np.array(self.resolution_m))
+        np.savez_compressed(
+            buf, occupancy=self.occupancy, origin_xy=np.array(self.origin_xy), resolution_m=np.array(self.resolution_m)
+        )
         atomic_write_bytes(Path(path), buf.getvalue())
 
     @classmethod
     def load(cls, path: Path) -> "NOG":
         with np.load(path) as z:
-            return cls(z["occupancy"].astype(np.float32), tuple(float(v) for v in z["origin_xy"]),
-                       float(z["resolution_m"]))
+            return cls(
+                z["occupancy"].astype(np.float32), tuple(float(v) for v in z["origin_xy"]), float(z["resolution_m"])
+            )
 
 
 @torch.no_grad()
@@ -58,5 +60,5 @@ def evaluate_grid(model, bounds, resolution_m: float, device="cpu", chunk: int =
     xy = np.stack([xmin + ix.ravel() * resolution_m, ymin + iy.ravel() * resolution_m], -1).astype(np.float32)
     out = np.empty(len(xy), np.float32)
     for s in range(0, len(xy), chunk):
-        out[s:s + chunk] = model(torch.from_numpy(xy[s:s + chunk]).to(device)).float().cpu().numpy()
+        out[s : s + chunk] = model(torch.from_numpy(xy[s : s + chunk]).to(device)).float().cpu().numpy()
     return NOG(out.reshape(H, W), (float(xmin), float(ymin)), float(resolution_m))

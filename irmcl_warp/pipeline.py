@@ -88,9 +88,16 @@ def second_log(cfg):
     mapping log itself (``cfg`` without training poses, as run_pipeline holds it)."""
     lc = cfg.pipeline
     if lc.path is not None:
-        c = with_overrides(cfg, **{"data.path": lc.path, "data.format": lc.format or cfg.data.format,
-                                   "data.ground_truth_path": lc.ground_truth_path, "data.relations_path": None,
-                                   "data.splits_path": None})
+        c = with_overrides(
+            cfg,
+            **{
+                "data.path": lc.path,
+                "data.format": lc.format or cfg.data.format,
+                "data.ground_truth_path": lc.ground_truth_path,
+                "data.relations_path": None,
+                "data.splits_path": None,
+            },
+        )
         return load_log(c), f"{lc.path}"
     if cfg.data.format == "sim":
         c = with_overrides(cfg, **{"sim.path_seed": lc.sim_path_seed})
@@ -105,8 +112,15 @@ def localize_second_log(cfg, log, nog: NOG, slam_map, device: str) -> tuple[np.n
     check_odometry(log.source, log.odom[idx])
     view = free_space_view(slam_map.probability, slam_map.origin_xy, slam_map.resolution_m, slam_map.known)
     m = OmegaConf.merge(cfg.mcl, {"weighting": "nog_raymarch"})  # the pipeline localizes with the NOG it baked
-    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg, log.info.range_max_m), device,
-                    WeightingMaps(nog=nog))
+    pf = build_filter(
+        m,
+        view,
+        log.T_base_laser,
+        log.info.angles_rad,
+        far_bound_m(cfg, log.info.range_max_m),
+        device,
+        WeightingMaps(nog=nog),
+    )
     pf.rng = np.random.default_rng(m.seed)
     pf.init_uniform()
     est = follow(pf, log, idx, m, cfg.localize.reduce_after_s)
@@ -121,12 +135,22 @@ def stage_summary(out: Path) -> dict:
     if "processed_scans" in m:  # slam
         traj, odo = m.get("trajectory") or {}, m.get("trajectory_odometry") or {}
         rel = m.get("relations")
-        return {"run": out.name, "scans": m["scans"], "processed_scans": m["processed_scans"],
-                "resamplings": m["resamplings"], "ate_rmse_m": traj.get("ate_rmse_m"),
-                "odometry_ate_rmse_m": odo.get("ate_rmse_m"), "wall_time_s": m["wall_time_s"],
-                "relations_m": rel["trans_abs_mean_m"] if isinstance(rel, dict) else None}
-    return {"run": out.name, "val_mae_m": m["val"]["mae_m"], "train_time_s": m["train_time_s"],
-            "epochs": m["epochs_done"]}
+        return {
+            "run": out.name,
+            "scans": m["scans"],
+            "processed_scans": m["processed_scans"],
+            "resamplings": m["resamplings"],
+            "ate_rmse_m": traj.get("ate_rmse_m"),
+            "odometry_ate_rmse_m": odo.get("ate_rmse_m"),
+            "wall_time_s": m["wall_time_s"],
+            "relations_m": rel["trans_abs_mean_m"] if isinstance(rel, dict) else None,
+        }
+    return {
+        "run": out.name,
+        "val_mae_m": m["val"]["mae_m"],
+        "train_time_s": m["train_time_s"],
+        "epochs": m["epochs_done"],
+    }
 
 
 def run_pipeline(cfg) -> Path:
@@ -144,7 +168,7 @@ def training_poses(cfg, slam_dir: Path, log) -> Path:
     every = cfg.pipeline.train_every_scan
     scans, poses = slam_poses(slam_dir, log, every)
     slam_id = json.loads((slam_dir / "manifest.json").read_text())["id"]
-    path = runs.cache_dir(cfg, "slam_poses") / f"{slam_id[:runs.ID_CHARS]}-{'every' if every else 'processed'}.tum"
+    path = runs.cache_dir(cfg, "slam_poses") / f"{slam_id[: runs.ID_CHARS]}-{'every' if every else 'processed'}.tum"
     if not path.is_file():
         write_tum(path, log.stamps[scans], poses)
     return path
@@ -166,9 +190,13 @@ def pipeline(run: runs.Run) -> Path:
     t0 = time.time()
     far = far_bound_m(cfg, log.info.range_max_m)
     T_map_laser = compose(poses, log.T_base_laser)
-    nog = bake_nog(train_out / "nof.pt", laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
-                   cfg.mcl.map_resolution_m, cache_dir=runs.cache_dir(cfg, "nog"),
-                   device="cuda" if device.startswith("cuda") else "cpu")
+    nog = bake_nog(
+        train_out / "nof.pt",
+        laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
+        cfg.mcl.map_resolution_m,
+        cache_dir=runs.cache_dir(cfg, "nog"),
+        device="cuda" if device.startswith("cuda") else "cpu",
+    )
     timing["nog"] = {"s": time.time() - t0, "skipped": False}
     # 5. global localization of the second log
     t0 = time.time()
@@ -177,9 +205,16 @@ def pipeline(run: runs.Run) -> Path:
     idx, est, particles = localize_second_log(cfg, log2, nog, slam_map, device)
     timing["localize"] = {"s": time.time() - t0, "skipped": False, "scans": int(len(idx))}
     write_tum(out / "localization.tum", log2.stamps[idx], est)
-    metrics = {"mapping_log": cfg.data.path or cfg.data.name, "localized_log": what, "device": device,
-               "training_scans": int(len(scans)), "localized_scans": int(len(idx)), "timing": timing,
-               "slam": stage_summary(slam_dir), "nof": stage_summary(train_out)}
+    metrics = {
+        "mapping_log": cfg.data.path or cfg.data.name,
+        "localized_log": what,
+        "device": device,
+        "training_scans": int(len(scans)),
+        "localized_scans": int(len(idx)),
+        "timing": timing,
+        "slam": stage_summary(slam_dir),
+        "nof": stage_summary(train_out),
+    }
     gt_map, T_gt_map = None, None
     if log.ground_truth is not None and log2.ground_truth is not None:
         T_gt_map = align_rigid(poses, log.ground_truth[scans])  # from the mapping log only
@@ -192,11 +227,18 @@ def pipeline(run: runs.Run) -> Path:
     upstream = {"slam": {"path": str(slam_dir)}, "train": {"path": str(train_out)}}
     out = run.finish(metrics, device, extra={"stages": upstream})
     loc = metrics.get("localization")
-    print(f"pipeline: NOF trained on {len(scans)} SLAM-posed scans, {len(idx)} scans localized"
-          + (f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {_cm(loc['location_rmse_cm'])}"
-             if loc and loc["converged"] else "; did not converge" if loc else "; no ground truth to score")
-          + (f"\n{metrics['failure']}" if metrics.get("failure") else "")
-          + f" -> {out / 'report.md'}")
+    print(
+        f"pipeline: NOF trained on {len(scans)} SLAM-posed scans, {len(idx)} scans localized"
+        + (
+            f"; converged after {loc['time_to_converge_s']:.1f} s, RMSE {_cm(loc['location_rmse_cm'])}"
+            if loc and loc["converged"]
+            else "; did not converge"
+            if loc
+            else "; no ground truth to score"
+        )
+        + (f"\n{metrics['failure']}" if metrics.get("failure") else "")
+        + f" -> {out / 'report.md'}"
+    )
     return out
 
 

@@ -64,11 +64,16 @@ def failure_note(stamps, est, gt_map, loc: dict) -> str | None:
     err[ok] = np.hypot(*(est[ok, :2] - gt_map[ok, :2]).T)
     off = np.flatnonzero(err > 0.3)
     last = off[-1] if len(off) else int(np.nanargmax(err))
-    how = (f"converged after {loc['time_to_converge_s']:.1f} s but did not stay within 0.3 m" if loc["converged"]
-           else "never converged")
-    return (f"Localization FAILED: it {how}; {err[last]:.2f} m off at {t[last]:.1f} s (estimate "
-            f"({est[last, 0]:.2f}, {est[last, 1]:.2f}) m, truth ({gt_map[last, 0]:.2f}, {gt_map[last, 1]:.2f}) m), "
-            f"{err[ok][-1]:.2f} m off at the end ({t[ok][-1]:.1f} s).")
+    how = (
+        f"converged after {loc['time_to_converge_s']:.1f} s but did not stay within 0.3 m"
+        if loc["converged"]
+        else "never converged"
+    )
+    return (
+        f"Localization FAILED: it {how}; {err[last]:.2f} m off at {t[last]:.1f} s (estimate "
+        f"({est[last, 0]:.2f}, {est[last, 1]:.2f}) m, truth ({gt_map[last, 0]:.2f}, {gt_map[last, 1]:.2f}) m), "
+        f"{err[ok][-1]:.2f} m off at the end ({t[ok][-1]:.1f} s)."
+    )
 
 
 def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, est, gt_map, particles) -> Path:
@@ -78,21 +83,38 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
     if gt_map is not None:
         plot_error(out / "error.png", stamps, est, gt_map, loc["time_to_converge_s"])
     slam = metrics["slam"]
-    lines = [f"# Pipeline report: {cfg.exp}", "",
-             f"- mapping log: `{metrics['mapping_log']}`; localized: {metrics['localized_log']}",
-             f"- device: {metrics['device']}; GMapping with {cfg.slam.num_particles} particles, NOF preset "
-             f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})", "",
-             "## Stages", "", "| stage | time (s) | output |", "|---|---|---|"]
-    where = {"slam": f"{slam['run']}/", "train": f"{metrics['nof']['run']}/", "nog": "nog/",
-             "localize": "localization.tum"}
+    lines = [
+        f"# Pipeline report: {cfg.exp}",
+        "",
+        f"- mapping log: `{metrics['mapping_log']}`; localized: {metrics['localized_log']}",
+        f"- device: {metrics['device']}; GMapping with {cfg.slam.num_particles} particles, NOF preset "
+        f"`{cfg.train.name}`, MCL with {cfg.mcl.num_particles} particles ({cfg.mcl.weighting})",
+        "",
+        "## Stages",
+        "",
+        "| stage | time (s) | output |",
+        "|---|---|---|",
+    ]
+    where = {
+        "slam": f"{slam['run']}/",
+        "train": f"{metrics['nof']['run']}/",
+        "nog": "nog/",
+        "localize": "localization.tum",
+    }
     for name, t in metrics["timing"].items():
         took = "skipped (up to date)" if t["skipped"] else f"{t['s']:.1f}"
         lines.append(f"| {name} | {took} | `{where.get(name, '')}` |")
-    lines += ["", "## SLAM", "", f"{slam['processed_scans']} of {slam['scans']} scans processed, "
-              f"{slam['resamplings']} resamplings."]
+    lines += [
+        "",
+        "## SLAM",
+        "",
+        f"{slam['processed_scans']} of {slam['scans']} scans processed, {slam['resamplings']} resamplings.",
+    ]
     if slam["ate_rmse_m"] is not None:
-        lines.append(f"Trajectory error against the mapping log's ground truth after a rigid alignment: "
-                     f"{slam['ate_rmse_m']:.3f} m RMSE (odometry {slam['odometry_ate_rmse_m']:.3f} m).")
+        lines.append(
+            f"Trajectory error against the mapping log's ground truth after a rigid alignment: "
+            f"{slam['ate_rmse_m']:.3f} m RMSE (odometry {slam['odometry_ate_rmse_m']:.3f} m)."
+        )
     if slam["relations_m"] is not None:
         lines.append(f"Relations metric: {slam['relations_m']:.3f} m.")
     lines += ["", "## Localization (global, from a uniform start)", ""]
@@ -101,13 +123,16 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
     if loc is None:
         lines.append("The localized log has no ground truth: the estimate is in map.png, not scored.")
     else:
-        lines += [f"- converged: {'after ' + _fmt(loc['time_to_converge_s'], ' s', 1) if loc['converged'] else 'no'}",
-                  f"- location RMSE after convergence: {_fmt(loc['location_rmse_cm'], ' cm', 1)}, yaw RMSE "
-                  f"{_fmt(loc['yaw_rmse_deg'], ' deg')}",
-                  f"- success (IR-MCL: converged within 60 s, RMSE < 0.3 m): {loc['success']}",
-                  "- scored in the SLAM map frame: the ground truth is moved there by the rigid alignment of the "
-                  f"mapping log's SLAM trajectory to its ground truth ({np.round(metrics['T_groundtruth_map'], 3).tolist()})",
-                  "", "![position error](error.png)"]
+        lines += [
+            f"- converged: {'after ' + _fmt(loc['time_to_converge_s'], ' s', 1) if loc['converged'] else 'no'}",
+            f"- location RMSE after convergence: {_fmt(loc['location_rmse_cm'], ' cm', 1)}, yaw RMSE "
+            f"{_fmt(loc['yaw_rmse_deg'], ' deg')}",
+            f"- success (IR-MCL: converged within 60 s, RMSE < 0.3 m): {loc['success']}",
+            "- scored in the SLAM map frame: the ground truth is moved there by the rigid alignment of the "
+            f"mapping log's SLAM trajectory to its ground truth ({np.round(metrics['T_groundtruth_map'], 3).tolist()})",
+            "",
+            "![position error](error.png)",
+        ]
     lines += ["", "![map, trajectories and final particles](map.png)", ""]
     path = out / "report.md"
     atomic_write_bytes(path, "\n".join(lines).encode())

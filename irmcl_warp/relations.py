@@ -38,8 +38,10 @@ def run_relations(cfg):
             print(shout, file=sys.stderr)
     print(f"{'poses':<14}{'used':>6}{'trans m':>10}{'± std':>8}{'rot deg':>9}{'± std':>8}")
     for name, m in metrics.items():
-        print(f"{name:<14}{m['relations_used']:>6}{m['trans_abs_mean_m']:>10.3f}{m['trans_abs_std_m']:>8.3f}"
-              f"{m['rot_abs_mean_deg']:>9.2f}{m['rot_abs_std_deg']:>8.2f}")
+        print(
+            f"{name:<14}{m['relations_used']:>6}{m['trans_abs_mean_m']:>10.3f}{m['trans_abs_std_m']:>8.3f}"
+            f"{m['rot_abs_mean_deg']:>9.2f}{m['rot_abs_std_deg']:>8.2f}"
+        )
     return out
 
 

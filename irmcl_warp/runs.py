@@ -55,6 +55,7 @@ NOF_WEIGHTINGS = ("nog_raymarch", "nog_table", "nof_direct")  # observation mode
 
 # --- what each stage reads ------------------------------------------------------------------------------
 
+
 def _sim(cfg) -> tuple[str, ...]:
     """The simulator's settings matter to a run only when the log is simulated."""
     return ("sim",) if cfg.data.format == "sim" else ()
@@ -80,7 +81,9 @@ def _localize_label(cfg) -> str:
 
 def _pipeline_label(cfg) -> str:
     second = cfg.data.format == "sim" and cfg.pipeline.path is None
-    return "{data.name}" + ("-path{pipeline.sim_path_seed}" if second else "-{pipeline.path}" if cfg.pipeline.path else "")
+    return "{data.name}" + (
+        "-path{pipeline.sim_path_seed}" if second else "-{pipeline.path}" if cfg.pipeline.path else ""
+    )
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,7 @@ class Stage:
     """What a stage reads (config sections or ``section.key``), the label its folders carry (a format over
     settings, or a function of the config giving one), the stages whose finished runs it consumes, and
     whether an interrupted run of the same id is continued rather than started again."""
+
     reads: Callable[..., tuple[str, ...]]
     label: str | Callable[..., str]
     upstream: Callable[..., tuple[str, ...]] = lambda cfg: ()
@@ -98,28 +102,62 @@ class Stage:
 STAGES: dict[str, Stage] = {
     "inspect": Stage(lambda c: ("data", *_sim(c), "mapping", "device"), "{data.name}"),
     "relations": Stage(lambda c: ("data", *_sim(c)), "{data.name}"),
-    "slam": Stage(lambda c: ("data", *_sim(c), "slam", "device"),
-                  "{slam.proposal}-{slam.resample}-{slam.num_particles}p-seed{slam.seed}"),
-    "train": Stage(lambda c: ("data", *_sim(c), "model", "render", "train", "device"), "{train.name}",
-                   resumable=True, command="python -m irmcl_warp.train +exp={exp} train={train.name}"),
+    "slam": Stage(
+        lambda c: ("data", *_sim(c), "slam", "device"),
+        "{slam.proposal}-{slam.resample}-{slam.num_particles}p-seed{slam.seed}",
+    ),
+    "train": Stage(
+        lambda c: ("data", *_sim(c), "model", "render", "train", "device"),
+        "{train.name}",
+        resumable=True,
+        command="python -m irmcl_warp.train +exp={exp} train={train.name}",
+    ),
     # the NOF of the finished training run with these settings beside grids (mapping, raycast)
-    "synthesis": Stage(lambda c: ("data", *_sim(c), "render", "mapping", "raycast", "device", "train.name"),
-                       "{train.name}", lambda c: ("train",)),
+    "synthesis": Stage(
+        lambda c: ("data", *_sim(c), "render", "mapping", "raycast", "device", "train.name"),
+        "{train.name}",
+        lambda c: ("train",),
+    ),
     "localize": Stage(_localize_reads, _localize_label, _localize_upstream),
     "globloc": Stage(lambda c: ("sim", "globloc", "mcl", "device"), "{globloc.scenario}"),
     "worlds": Stage(lambda c: ("sim", "worlds", "mcl", "device"), "{worlds.split}-{mcl.weighting}-{mcl.num_particles}"),
     # the pipeline runs slam and train itself; its own run reads what those and its localization read
-    "pipeline": Stage(lambda c: ("data", *_sim(c), "slam", "model", "render", "train", "mcl", "localize.reduce_after_s",
-                                 "pipeline", "device"), _pipeline_label),
+    "pipeline": Stage(
+        lambda c: (
+            "data",
+            *_sim(c),
+            "slam",
+            "model",
+            "render",
+            "train",
+            "mcl",
+            "localize.reduce_after_s",
+            "pipeline",
+            "device",
+        ),
+        _pipeline_label,
+    ),
 }
 
 # settings that name files: a run depends on their content, not on where they lie
-FILE_KEYS = ("data.path", "data.laser_frame_path", "data.ground_truth_path", "data.relations_path",
-             "data.relation_stamps_path", "data.splits_path", "data.train_poses_path", "localize.map_path",
-             "localize.nof_path", "pipeline.path", "pipeline.ground_truth_path", "worlds.calibration")
+FILE_KEYS = (
+    "data.path",
+    "data.laser_frame_path",
+    "data.ground_truth_path",
+    "data.relations_path",
+    "data.relation_stamps_path",
+    "data.splits_path",
+    "data.train_poses_path",
+    "localize.map_path",
+    "localize.nof_path",
+    "pipeline.path",
+    "pipeline.ground_truth_path",
+    "worlds.calibration",
+)
 
 
 # --- digests --------------------------------------------------------------------------------------------
+
 
 def file_digest(path, chunk=1 << 20) -> str:
     h = hashlib.sha256()
@@ -159,6 +197,7 @@ def map_files(map_file: Path) -> list[Path]:
 
 
 # --- the settings a stage reads -------------------------------------------------------------------------
+
 
 def _get(container: dict, dotted: str):
     node = container
@@ -251,6 +290,7 @@ def settings_by_stage(config: dict, stage: str) -> dict:
 
 # --- identity -------------------------------------------------------------------------------------------
 
+
 @dataclass
 class Identity:
     stage: str
@@ -299,25 +339,36 @@ def identify(cfg, stage: str) -> Identity:
     if stage not in STAGES:
         raise ValueError(f"no stage {stage!r}; stages: {', '.join(STAGES)}")
     settings = read_settings(cfg, stage)
-    inputs = {k: [{"path": str(p), "sha256": content_digest(p)} for p in paths]
-              for k, paths in input_files(settings).items()}
+    inputs = {
+        k: [{"path": str(p), "sha256": content_digest(p)} for p in paths] for k, paths in input_files(settings).items()
+    }
     upstream = {s: identify(cfg, s) for s in STAGES[stage].upstream(cfg)}
     # the id: the settings without the file names (their content stands for them), the inputs' content, the
     # upstream ids; exp only places the folder
     named = json.loads(json.dumps({k: v for k, v in settings.items() if k != "exp"}))  # a copy: settings stay whole
     for key in inputs:
         _set(named, key, None)
-    run_id = digest({"stage": stage, "settings": named, "inputs": {k: [f["sha256"] for f in v] for k, v in inputs.items()},
-                     "upstream": {s: u.id for s, u in upstream.items()}})
+    run_id = digest(
+        {
+            "stage": stage,
+            "settings": named,
+            "inputs": {k: [f["sha256"] for f in v] for k, v in inputs.items()},
+            "upstream": {s: u.id for s, u in upstream.items()},
+        }
+    )
     return Identity(stage, str(settings["exp"]), settings, inputs, upstream, run_id, label_of(stage, cfg))
 
 
 # --- finished runs ---------------------------------------------------------------------------------------
 
+
 def output_digests(out: Path) -> dict[str, str]:
     """sha256 of every file under ``out`` except manifest.json, by relative path."""
-    return {str(p.relative_to(out)): file_digest(p) for p in sorted(Path(out).rglob("*"))
-            if p.is_file() and p.name != "manifest.json"}
+    return {
+        str(p.relative_to(out)): file_digest(p)
+        for p in sorted(Path(out).rglob("*"))
+        if p.is_file() and p.name != "manifest.json"
+    }
 
 
 def intact(folder: Path, run_id: str | None = None) -> tuple[bool, str]:
@@ -361,21 +412,35 @@ def require(ident: Identity, root=OUTPUTS) -> Path:
     if ok:
         return folder
     partial = folder.with_name(f".{folder.name}.partial")
-    state = (f"a {ident.stage} run of these settings was interrupted ({partial}); finish it" if partial.exists()
-             else f"no finished {ident.stage} run of these settings ({why}); make it")
+    state = (
+        f"a {ident.stage} run of these settings was interrupted ({partial}); finish it"
+        if partial.exists()
+        else f"no finished {ident.stage} run of these settings ({why}); make it"
+    )
     template = STAGES[ident.stage].command
-    command = re.sub(r"\{([a-z_.]+)\}", lambda m: str(_get(ident.settings, m.group(1))), template) if template else \
-        f"the {ident.stage} stage"
+    command = (
+        re.sub(r"\{([a-z_.]+)\}", lambda m: str(_get(ident.settings, m.group(1))), template)
+        if template
+        else f"the {ident.stage} stage"
+    )
     raise FileNotFoundError(f"{folder}: {state}: {command} (with the same settings)")
 
 
 # --- running ---------------------------------------------------------------------------------------------
 
+
 def _git_sha() -> str:
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
-                               text=True, check=True).stdout.strip()
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
         return sha + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
@@ -394,6 +459,7 @@ def package_version() -> str:
 class Run:
     """An open run: ``cfg`` (the settings it may read), ``dir`` (where it writes; swapped into ``path`` by
     ``finish``), ``upstream`` ({stage: folder of the finished run it consumes})."""
+
     ident: Identity
     cfg: object
     path: Path  # the finished run's folder
@@ -410,12 +476,21 @@ class Run:
             write_json(self.dir / "metrics.json", metrics)
         atomic_write_bytes(self.dir / "config.yaml", OmegaConf.to_yaml(restricted(self.ident.settings)).encode())
         manifest = {
-            "id": self.ident.id, "stage": self.ident.stage, "exp": self.ident.exp, "label": self.ident.label,
-            "package": {"name": "irmcl-warp", "version": package_version()}, "git_sha": _git_sha(),
-            "python": platform.python_version(), "versions": _versions(), "device": device,
-            "wall_time_s": time.time() - self.started, "inputs": self.ident.inputs,
+            "id": self.ident.id,
+            "stage": self.ident.stage,
+            "exp": self.ident.exp,
+            "label": self.ident.label,
+            "package": {"name": "irmcl-warp", "version": package_version()},
+            "git_sha": _git_sha(),
+            "python": platform.python_version(),
+            "versions": _versions(),
+            "device": device,
+            "wall_time_s": time.time() - self.started,
+            "inputs": self.ident.inputs,
             "upstream": {s: {"id": u.id, "run": f"{u.exp}/{u.stage}/{u.name}"} for s, u in self.ident.upstream.items()},
-            **(extra or {}), "outputs": output_digests(self.dir)}
+            **(extra or {}),
+            "outputs": output_digests(self.dir),
+        }
         write_json(self.dir / "manifest.json", manifest)
         _swap(self.dir, self.path)
         self.dir, self.done = self.path, True
@@ -432,8 +507,9 @@ def amend(folder: Path, metrics: dict, why: str) -> None:
     write_json(folder / "metrics.json", metrics)
     manifest = json.loads((folder / "manifest.json").read_text())
     manifest["outputs"]["metrics.json"] = file_digest(folder / "metrics.json")
-    manifest.setdefault("amended", []).append({"file": "metrics.json", "why": why, "when": time.time(),
-                                               "git_sha": _git_sha()})
+    manifest.setdefault("amended", []).append(
+        {"file": "metrics.json", "why": why, "when": time.time(), "git_sha": _git_sha()}
+    )
     write_json(folder / "manifest.json", manifest)
 
 
@@ -519,12 +595,22 @@ def tool_runs(tool: str, exp: str = "*", root=OUTPUTS) -> list[Path]:
 
 # --- records ---------------------------------------------------------------------------------------------
 
+
 class Record(dict):
     """A run's metrics.json, with ``stage``, ``exp``, ``id``, ``config`` (the settings it read), ``path``
     (its folder, None for a kept record) and ``source`` ("outputs" or "results")."""
 
-    def __init__(self, metrics: dict, stage: str, exp: str, run_id: str, config: dict, path: Path | None = None,
-                 source: str = "outputs", label: str = ""):
+    def __init__(
+        self,
+        metrics: dict,
+        stage: str,
+        exp: str,
+        run_id: str,
+        config: dict,
+        path: Path | None = None,
+        source: str = "outputs",
+        label: str = "",
+    ):
         super().__init__(metrics)
         self.stage, self.exp, self.id, self.config, self.path, self.source = stage, exp, run_id, config, path, source
         self.label = label
@@ -553,8 +639,16 @@ def read_record(folder: Path) -> Record:
     manifest = json.loads((folder / "manifest.json").read_text())
     config = OmegaConf.to_container(OmegaConf.load(folder / "config.yaml"))
     metrics = json.loads((folder / "metrics.json").read_text()) if (folder / "metrics.json").is_file() else {}
-    return Record(metrics, manifest["stage"], manifest["exp"], manifest["id"], config, folder, "outputs",
-                  manifest.get("label", ""))
+    return Record(
+        metrics,
+        manifest["stage"],
+        manifest["exp"],
+        manifest["id"],
+        config,
+        folder,
+        "outputs",
+        manifest.get("label", ""),
+    )
 
 
 def records(stage: str | None = None, exp: str | None = None, root=OUTPUTS) -> list[Record]:
@@ -567,7 +661,9 @@ def records(stage: str | None = None, exp: str | None = None, root=OUTPUTS) -> l
         try:
             out.append(read_record(m.parent))
         except Exception as e:  # a file cut short or edited by hand (JSON, YAML): say which run, not a parser's trace
-            raise ValueError(f"{m.parent}: unreadable run record ({e}); remove the folder or run its stage again") from e
+            raise ValueError(
+                f"{m.parent}: unreadable run record ({e}); remove the folder or run its stage again"
+            ) from e
     return out
 
 
@@ -583,6 +679,9 @@ def matches(record: Record, **where) -> bool:
 
 def find(stage: str, exp: str | None = None, root=OUTPUTS, among: list[Record] | None = None, **where) -> list[Record]:
     """The records of ``stage`` (of ``exp``) whose settings have the values ``where`` names."""
-    pool = records(stage, exp, root) if among is None else [r for r in among if r.stage == stage
-                                                            and (exp is None or r.exp == exp)]
+    pool = (
+        records(stage, exp, root)
+        if among is None
+        else [r for r in among if r.stage == stage and (exp is None or r.exp == exp)]
+    )
     return [r for r in pool if matches(r, **where)]

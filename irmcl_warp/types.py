@@ -106,8 +106,16 @@ class LaserLog:
     def subset(self, index) -> "LaserLog":
         """The scans at ``index`` (mask or indices), keeping info, extrinsic and defects."""
         gt = None if self.ground_truth is None else self.ground_truth[index]
-        return LaserLog(self.stamps[index], self.ranges_m[index], self.odom[index], self.info,
-                        self.T_base_laser, gt, self.source, self.defects)
+        return LaserLog(
+            self.stamps[index],
+            self.ranges_m[index],
+            self.odom[index],
+            self.info,
+            self.T_base_laser,
+            gt,
+            self.source,
+            self.defects,
+        )
 
 
 def match_stamps(stamps, query, tol_s: float = 1e-4) -> np.ndarray:

@@ -26,7 +26,6 @@ from irmcl_warp.kernels.registry import SIM, pick_device
 from irmcl_warp.kernels.sim import NO_HIT, ray_segment
 
 
-
 @wp.func
 def hash3(a: int, b: int, c: int) -> float:
     """A deterministic value in [0, 1) from three integers (integer mixing, no state)."""
@@ -37,11 +36,20 @@ def hash3(a: int, b: int, c: int) -> float:
 
 
 @wp.kernel
-def columns_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.float32),
-                   cam_poses: wp.array(dtype=wp.vec3), fx: float, cx: float, wall_height: float,
-                   near_t: wp.array2d(dtype=wp.float32), near_k: wp.array2d(dtype=wp.int32),
-                   near_u: wp.array2d(dtype=wp.float32), wall_t: wp.array2d(dtype=wp.float32),
-                   wall_k: wp.array2d(dtype=wp.int32), wall_u: wp.array2d(dtype=wp.float32)):
+def columns_kernel(
+    segments: wp.array(dtype=wp.vec4),
+    heights: wp.array(dtype=wp.float32),
+    cam_poses: wp.array(dtype=wp.vec3),
+    fx: float,
+    cx: float,
+    wall_height: float,
+    near_t: wp.array2d(dtype=wp.float32),
+    near_k: wp.array2d(dtype=wp.int32),
+    near_u: wp.array2d(dtype=wp.float32),
+    wall_t: wp.array2d(dtype=wp.float32),
+    wall_k: wp.array2d(dtype=wp.int32),
+    wall_u: wp.array2d(dtype=wp.float32),
+):
     f, col = wp.tid()
     pose = cam_poses[f]
     a = pose[2] + wp.atan((cx - (float(col) + 0.5)) / fx)  # image x grows to the right = clockwise
@@ -73,8 +81,17 @@ def columns_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp
 
 
 @wp.func
-def paint(segments: wp.array(dtype=wp.vec4), colours: wp.array(dtype=wp.vec3), posters: wp.array(dtype=wp.vec2),
-          poster: wp.vec3, cells: wp.vec2, k: int, u: float, z: float, light: wp.vec2) -> wp.vec3:
+def paint(
+    segments: wp.array(dtype=wp.vec4),
+    colours: wp.array(dtype=wp.vec3),
+    posters: wp.array(dtype=wp.vec2),
+    poster: wp.vec3,
+    cells: wp.vec2,
+    k: int,
+    u: float,
+    z: float,
+    light: wp.vec2,
+) -> wp.vec3:
     """Colour of segment k at (u along it, z above the floor), shaded by the angle to the light; ``poster``:
     a poster's (width, height, height of its lower edge) in m, ``cells``: its pattern's cells across and up."""
     c = colours[k]
@@ -96,15 +113,33 @@ def paint(segments: wp.array(dtype=wp.vec4), colours: wp.array(dtype=wp.vec3), p
 
 
 @wp.kernel
-def pixels_kernel(segments: wp.array(dtype=wp.vec4), heights: wp.array(dtype=wp.float32),
-                  colours: wp.array(dtype=wp.vec3), posters: wp.array(dtype=wp.vec2), poster: wp.vec3,
-                  cells: wp.vec2, cam_poses: wp.array(dtype=wp.vec3), fx: float, fy: float, cx: float, cy: float,
-                  cam_height: float, wall_height: float, near_t: wp.array2d(dtype=wp.float32),
-                  near_k: wp.array2d(dtype=wp.int32), near_u: wp.array2d(dtype=wp.float32),
-                  wall_t: wp.array2d(dtype=wp.float32), wall_k: wp.array2d(dtype=wp.int32),
-                  wall_u: wp.array2d(dtype=wp.float32), exposure: wp.array(dtype=wp.float32),
-                  tint: wp.array(dtype=wp.vec3), noise_std: float, seed: int,
-                  rgb: wp.array4d(dtype=wp.float32), depth: wp.array3d(dtype=wp.float32)):
+def pixels_kernel(
+    segments: wp.array(dtype=wp.vec4),
+    heights: wp.array(dtype=wp.float32),
+    colours: wp.array(dtype=wp.vec3),
+    posters: wp.array(dtype=wp.vec2),
+    poster: wp.vec3,
+    cells: wp.vec2,
+    cam_poses: wp.array(dtype=wp.vec3),
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    cam_height: float,
+    wall_height: float,
+    near_t: wp.array2d(dtype=wp.float32),
+    near_k: wp.array2d(dtype=wp.int32),
+    near_u: wp.array2d(dtype=wp.float32),
+    wall_t: wp.array2d(dtype=wp.float32),
+    wall_k: wp.array2d(dtype=wp.int32),
+    wall_u: wp.array2d(dtype=wp.float32),
+    exposure: wp.array(dtype=wp.float32),
+    tint: wp.array(dtype=wp.vec3),
+    noise_std: float,
+    seed: int,
+    rgb: wp.array4d(dtype=wp.float32),
+    depth: wp.array3d(dtype=wp.float32),
+):
     f, row, col = wp.tid()
     pose = cam_poses[f]
     xc = ((float(col) + 0.5) - cx) / fx
@@ -161,9 +196,21 @@ class SegmentCamera:
     (poster id or -1, u of its centre along the segment); every poster measures ``poster_m`` (width, height,
     height of its lower edge) and its pattern ``poster_cells`` (across, up): the world's (irmcl_warp/sim/camera.py)."""
 
-    def __init__(self, segments, heights, colours, posters, poster_m, poster_cells, width: int = 320, height: int = 240,
-                 hfov_rad: float = np.radians(58.0), cam_height_m: float = 1.0, wall_height_m: float = 2.5,
-                 device: str = "auto"):
+    def __init__(
+        self,
+        segments,
+        heights,
+        colours,
+        posters,
+        poster_m,
+        poster_cells,
+        width: int = 320,
+        height: int = 240,
+        hfov_rad: float = np.radians(58.0),
+        cam_height_m: float = 1.0,
+        wall_height_m: float = 2.5,
+        device: str = "auto",
+    ):
         self.device = pick_device(device)
         d = self.device
         self.segments = wp.array(np.asarray(segments, np.float32), dtype=wp.vec4, device=d)
@@ -181,8 +228,15 @@ class SegmentCamera:
         """OpenCV intrinsics: OpenCV puts pixel i's centre at coordinate i, the kernel casts through i + 0.5."""
         return np.array([[self.fx, 0, self.cx - 0.5], [0, self.fy, self.cy - 0.5], [0, 0, 1.0]])
 
-    def render(self, cam_poses, exposure=1.0, tint=(1.0, 1.0, 1.0), noise_std: float = 0.0, seed: int = 0,
-               on_device: bool = False):
+    def render(
+        self,
+        cam_poses,
+        exposure=1.0,
+        tint=(1.0, 1.0, 1.0),
+        noise_std: float = 0.0,
+        seed: int = 0,
+        on_device: bool = False,
+    ):
         """(rgb [F, H, W, 3], depth [F, H, W]); exposure [F] or scalar, tint [F, 3] or [3]; noise in 0..1 units.
         numpy arrays, or the Warp arrays on the device with ``on_device``."""
         d = self.device
@@ -192,16 +246,41 @@ class SegmentCamera:
         tint_ = np.broadcast_to(np.asarray(tint, np.float32), (F, 3)).copy()
         wp_poses = wp.array(poses, dtype=wp.vec3, device=d)
         cols = [wp.zeros((F, self.W), dtype=t, device=d) for t in (wp.float32, wp.int32, wp.float32) * 2]
-        wp.launch(columns_kernel, (F, self.W), [self.segments, self.heights, wp_poses, float(self.fx), float(self.cx),
-                                                self.wall_height, *cols], device=d)
+        wp.launch(
+            columns_kernel,
+            (F, self.W),
+            [self.segments, self.heights, wp_poses, float(self.fx), float(self.cx), self.wall_height, *cols],
+            device=d,
+        )
         rgb = wp.zeros((F, self.H, self.W, 3), dtype=wp.float32, device=d)
         depth = wp.zeros((F, self.H, self.W), dtype=wp.float32, device=d)
-        wp.launch(pixels_kernel, (F, self.H, self.W),
-                  [self.segments, self.heights, self.colours, self.posters, self.poster, self.cells, wp_poses,
-                   float(self.fx), float(self.fy),
-                   float(self.cx), float(self.cy), self.cam_height, self.wall_height, *cols,
-                   wp.array(exp_, dtype=wp.float32, device=d), wp.array(tint_, dtype=wp.vec3, device=d),
-                   float(noise_std), int(seed), rgb, depth], device=d)
+        wp.launch(
+            pixels_kernel,
+            (F, self.H, self.W),
+            [
+                self.segments,
+                self.heights,
+                self.colours,
+                self.posters,
+                self.poster,
+                self.cells,
+                wp_poses,
+                float(self.fx),
+                float(self.fy),
+                float(self.cx),
+                float(self.cy),
+                self.cam_height,
+                self.wall_height,
+                *cols,
+                wp.array(exp_, dtype=wp.float32, device=d),
+                wp.array(tint_, dtype=wp.vec3, device=d),
+                float(noise_std),
+                int(seed),
+                rgb,
+                depth,
+            ],
+            device=d,
+        )
         return (rgb, depth) if on_device else (rgb.numpy(), depth.numpy())
 
 

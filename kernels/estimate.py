@@ -23,8 +23,9 @@ from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction,
 
 
 @wp.kernel
-def rank_keys_kernel(log_w: wp.array(dtype=wp.float32), keys: wp.array(dtype=wp.float32),
-                     values: wp.array(dtype=wp.int32)):
+def rank_keys_kernel(
+    log_w: wp.array(dtype=wp.float32), keys: wp.array(dtype=wp.float32), values: wp.array(dtype=wp.int32)
+):
     i = wp.tid()
     keys[i] = -log_w[i]  # ascending sort: the heaviest particle first
     values[i] = i
@@ -53,9 +54,15 @@ def leave_moments(partials: wp.array2d(dtype=wp.float32), t: int, acc: vec5):
 
 
 @wp.kernel
-def top_sums_kernel(order: wp.array(dtype=wp.int32), sorted_keys: wp.array(dtype=wp.float32),
-                    log_w: wp.array(dtype=wp.float32), particles: wp.array(dtype=wp.vec3),
-                    partials: wp.array2d(dtype=wp.float32), k: int, stride: int):
+def top_sums_kernel(
+    order: wp.array(dtype=wp.int32),
+    sorted_keys: wp.array(dtype=wp.float32),
+    log_w: wp.array(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    partials: wp.array2d(dtype=wp.float32),
+    k: int,
+    stride: int,
+):
     """Sums over the first k ranks; sorted_keys[0] = -(largest log-weight) makes the exp stable."""
     acc = vec5()
     for r in range(wp.tid(), k, stride):
@@ -84,8 +91,12 @@ class TopShareMean:
         """Rank and sum on the device, nothing read back (the filter reads once per step)."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
-        threads = launch_reduction(top_sums_kernel, self.k, [self.values, self.keys, log_w, particles,
-                                                             self.partial.partials, self.k], self.device)
+        threads = launch_reduction(
+            top_sums_kernel,
+            self.k,
+            [self.values, self.keys, log_w, particles, self.partial.partials, self.k],
+            self.device,
+        )
         self.partial.finish(threads, self.sums)
 
     def result(self, sums: np.ndarray | None = None) -> np.ndarray:
@@ -99,9 +110,17 @@ def make_top_share(**settings) -> TopShareMean:
 
 
 @wp.kernel
-def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
-                     top: wp.array(dtype=wp.float32), lo: wp.vec2, cell: float, nx: int, ny: int, nyaw: int,
-                     hist: wp.array(dtype=wp.float32)):
+def histogram_kernel(
+    particles: wp.array(dtype=wp.vec3),
+    log_w: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    lo: wp.vec2,
+    cell: float,
+    nx: int,
+    ny: int,
+    nyaw: int,
+    hist: wp.array(dtype=wp.float32),
+):
     i = wp.tid()
     p = particles[i]
     ix = wp.clamp(int(wp.floor((p[0] - lo[0]) / cell)), 0, nx - 1)
@@ -112,9 +131,16 @@ def histogram_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=w
 
 
 @wp.kernel
-def cluster_sums_kernel(particles: wp.array(dtype=wp.vec3), log_w: wp.array(dtype=wp.float32),
-                        top: wp.array(dtype=wp.float32), centre: wp.vec3, radius: float, yaw_radius: float,
-                        partials: wp.array2d(dtype=wp.float32), stride: int):
+def cluster_sums_kernel(
+    particles: wp.array(dtype=wp.vec3),
+    log_w: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    centre: wp.vec3,
+    radius: float,
+    yaw_radius: float,
+    partials: wp.array2d(dtype=wp.float32),
+    stride: int,
+):
     acc = vec5()
     for i in range(wp.tid(), particles.shape[0], stride):
         p = particles[i]
@@ -138,7 +164,9 @@ class BestCluster:
     def __init__(self, num_particles: int, bounds, cell_m: float = 0.5, yaw_bins: int = 8, device: str = "auto"):
         xmin, ymin, xmax, ymax = map(float, bounds)
         if not (xmax > xmin and ymax > ymin and cell_m > 0 and yaw_bins >= 1):
-            raise ValueError(f"best_cluster: bounds {bounds}, cell {cell_m} m, {yaw_bins} yaw bins do not make a histogram")
+            raise ValueError(
+                f"best_cluster: bounds {bounds}, cell {cell_m} m, {yaw_bins} yaw bins do not make a histogram"
+            )
         self.device = pick_device(device)
         self.lo, self.cell, self.nyaw = wp.vec2(xmin, ymin), float(cell_m), int(yaw_bins)
         self.nx, self.ny = int(np.ceil((xmax - xmin) / cell_m)) + 1, int(np.ceil((ymax - ymin) / cell_m)) + 1
@@ -152,14 +180,23 @@ class BestCluster:
         self.top.fill_(-3.0e38)
         self.hist.zero_()
         launch_reduction(max_kernel, n, [log_w, self.top], d)
-        wp.launch(histogram_kernel, n, [particles, log_w, self.top, self.lo, self.cell, self.nx, self.ny, self.nyaw,
-                                        self.hist], device=d)
+        wp.launch(
+            histogram_kernel,
+            n,
+            [particles, log_w, self.top, self.lo, self.cell, self.nx, self.ny, self.nyaw, self.hist],
+            device=d,
+        )
         ia, iy, ix = heaviest_bin(self.hist.numpy().reshape(self.nyaw, self.ny, self.nx))
         bin_yaw = 2 * np.pi / self.nyaw
-        centre = wp.vec3(self.lo[0] + (ix + 0.5) * self.cell, self.lo[1] + (iy + 0.5) * self.cell,
-                         -np.pi + (ia + 0.5) * bin_yaw)
-        threads = launch_reduction(cluster_sums_kernel, n, [particles, log_w, self.top, centre, 1.5 * self.cell,
-                                                            1.5 * bin_yaw, self.partial.partials], d)
+        centre = wp.vec3(
+            self.lo[0] + (ix + 0.5) * self.cell, self.lo[1] + (iy + 0.5) * self.cell, -np.pi + (ia + 0.5) * bin_yaw
+        )
+        threads = launch_reduction(
+            cluster_sums_kernel,
+            n,
+            [particles, log_w, self.top, centre, 1.5 * self.cell, 1.5 * bin_yaw, self.partial.partials],
+            d,
+        )
         self.partial.finish(threads, self.sums)
         return self.result()
 

@@ -45,5 +45,13 @@ def walk_start(g: wp.vec2, d: wp.vec2):
     t_max_y) and the parameter between boundaries per axis (dx, dy)."""
     ix = int(wp.floor(g[0]))
     iy = int(wp.floor(g[1]))
-    return (ix, iy, step_sign(d[0]), step_sign(d[1]), first_boundary(g[0], d[0], ix), first_boundary(g[1], d[1], iy),
-            inv_abs(d[0]), inv_abs(d[1]))
+    return (
+        ix,
+        iy,
+        step_sign(d[0]),
+        step_sign(d[1]),
+        first_boundary(g[0], d[0], ix),
+        first_boundary(g[1], d[1], iy),
+        inv_abs(d[0]),
+        inv_abs(d[1]),
+    )

@@ -26,9 +26,15 @@ def count(counts: wp.array3d(dtype=wp.int32), which: int, ix: int, iy: int):
 
 
 @wp.kernel
-def integrate_kernel(counts: wp.array3d(dtype=wp.int32), origin: wp.vec2, res: float,
-                     poses: wp.array(dtype=wp.vec3), ranges: wp.array2d(dtype=wp.float32),
-                     angles: wp.array(dtype=wp.float32), max_range: float):
+def integrate_kernel(
+    counts: wp.array3d(dtype=wp.int32),
+    origin: wp.vec2,
+    res: float,
+    poses: wp.array(dtype=wp.vec3),
+    ranges: wp.array2d(dtype=wp.float32),
+    angles: wp.array(dtype=wp.float32),
+    max_range: float,
+):
     s, b = wp.tid()
     r = ranges[s, b]
     if not (r == r):  # NaN: no return
@@ -57,8 +63,14 @@ def integrate_kernel(counts: wp.array3d(dtype=wp.int32), origin: wp.vec2, res: f
 
 
 @wp.kernel
-def apply_kernel(logodds: wp.array2d(dtype=wp.float32), counts: wp.array3d(dtype=wp.int32), l_occ: float,
-                 l_free: float, lo: float, hi: float):
+def apply_kernel(
+    logodds: wp.array2d(dtype=wp.float32),
+    counts: wp.array3d(dtype=wp.int32),
+    l_occ: float,
+    l_free: float,
+    lo: float,
+    hi: float,
+):
     """logodds += hits * l_occ + passes * l_free, clamped; the counts are reset for the next batch."""
     i, j = wp.tid()
     update = float(counts[0, i, j]) * l_occ + float(counts[1, i, j]) * l_free
@@ -77,10 +89,18 @@ class LogOddsIntegrator:
         dev = logodds.device
         if self.counts is None or self.counts.shape[1:] != logodds.shape or self.counts.device != dev:
             self.counts = wp.zeros((2, *logodds.shape), dtype=wp.int32, device=dev)
-        wp.launch(integrate_kernel, ranges.shape, [self.counts, wp.vec2(*map(float, origin_xy)), float(res), poses,
-                                                   ranges, angles, self.max_range], device=dev)
-        wp.launch(apply_kernel, logodds.shape, [logodds, self.counts, self.l_occ, self.l_free, self.l_min, self.l_max],
-                  device=dev)
+        wp.launch(
+            integrate_kernel,
+            ranges.shape,
+            [self.counts, wp.vec2(*map(float, origin_xy)), float(res), poses, ranges, angles, self.max_range],
+            device=dev,
+        )
+        wp.launch(
+            apply_kernel,
+            logodds.shape,
+            [logodds, self.counts, self.l_occ, self.l_free, self.l_min, self.l_max],
+            device=dev,
+        )
 
 
 @MAPPING.register("logodds")

@@ -137,7 +137,9 @@ class IrmclMotion(Motion):
 
     def __init__(self, noise=IRMCL_NOISE, device: str = "auto"):
         if len(noise) != 9 or min(noise) < 0:
-            raise ValueError(f"motion irmcl: expected 9 non-negative noise coefficients (C row by row), got {list(noise)}")
+            raise ValueError(
+                f"motion irmcl: expected 9 non-negative noise coefficients (C row by row), got {list(noise)}"
+            )
         super().__init__(make_irmcl_kernel(noise), device)
 
 

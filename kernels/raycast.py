@@ -20,8 +20,15 @@ from irmcl_warp.kernels.grid import inside, walk_start
 
 
 @wp.func
-def dda_range(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2,
-              max_range: float, occ_threshold: float) -> float:
+def dda_range(
+    occ: wp.array2d(dtype=wp.float32),
+    origin: wp.vec2,
+    res: float,
+    start: wp.vec2,
+    d: wp.vec2,
+    max_range: float,
+    occ_threshold: float,
+) -> float:
     g = (start - origin) / res
     ix, iy, sx, sy, t_max_x, t_max_y, dx, dy = walk_start(g, d)
     t = float(0.0)
@@ -45,8 +52,9 @@ def dda_range(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, st
 
 
 @wp.func
-def field_range(dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2,
-                max_range: float) -> float:
+def field_range(
+    dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2, max_range: float
+) -> float:
     t = float(0.0)
     min_step = 0.5 * res
     margin = 1.4142135 * res  # point-to-cell-centre plus cell half-diagonal, both at most res/sqrt(2)
@@ -67,19 +75,34 @@ def field_range(dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float,
 
 
 @wp.kernel
-def dda_kernel(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, poses: wp.array(dtype=wp.vec3),
-               angles: wp.array(dtype=wp.float32), max_range: float, occ_threshold: float,
-               out: wp.array2d(dtype=wp.float32)):
+def dda_kernel(
+    occ: wp.array2d(dtype=wp.float32),
+    origin: wp.vec2,
+    res: float,
+    poses: wp.array(dtype=wp.vec3),
+    angles: wp.array(dtype=wp.float32),
+    max_range: float,
+    occ_threshold: float,
+    out: wp.array2d(dtype=wp.float32),
+):
     p, b = wp.tid()
     pose = poses[p]
     a = pose[2] + angles[b]
-    out[p, b] = dda_range(occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), max_range,
-                          occ_threshold)
+    out[p, b] = dda_range(
+        occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), max_range, occ_threshold
+    )
 
 
 @wp.kernel
-def field_kernel(dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, poses: wp.array(dtype=wp.vec3),
-                 angles: wp.array(dtype=wp.float32), max_range: float, out: wp.array2d(dtype=wp.float32)):
+def field_kernel(
+    dist: wp.array2d(dtype=wp.float32),
+    origin: wp.vec2,
+    res: float,
+    poses: wp.array(dtype=wp.vec3),
+    angles: wp.array(dtype=wp.float32),
+    max_range: float,
+    out: wp.array2d(dtype=wp.float32),
+):
     p, b = wp.tid()
     pose = poses[p]
     a = pose[2] + angles[b]
@@ -99,8 +122,16 @@ def distance_to_occupied(occ: np.ndarray, res: float, occ_threshold: float) -> n
 class GridRaycaster:
     """Casts rays on one grid; the grid (or its distance field) is uploaded once, ``cast`` only launches."""
 
-    def __init__(self, method: str, occupancy: np.ndarray, origin_xy, resolution_m: float, max_range_m: float,
-                 occ_threshold: float = 0.5, device: str = "auto"):
+    def __init__(
+        self,
+        method: str,
+        occupancy: np.ndarray,
+        origin_xy,
+        resolution_m: float,
+        max_range_m: float,
+        occ_threshold: float = 0.5,
+        device: str = "auto",
+    ):
         occupancy = np.asarray(occupancy, dtype=np.float32)
         if occupancy.ndim != 2 or occupancy.size == 0:
             raise ValueError(f"occupancy grid must be a non-empty 2D array, got shape {occupancy.shape}")
@@ -114,11 +145,19 @@ class GridRaycaster:
     def cast(self, poses: wp.array, angles: wp.array, out: wp.array) -> None:
         dims = (poses.shape[0], angles.shape[0])
         if self.method == "dda":
-            wp.launch(dda_kernel, dims, [self.grid, self.origin, self.res, poses, angles, self.max_range,
-                                         self.occ_threshold, out], device=self.device)
+            wp.launch(
+                dda_kernel,
+                dims,
+                [self.grid, self.origin, self.res, poses, angles, self.max_range, self.occ_threshold, out],
+                device=self.device,
+            )
         else:
-            wp.launch(field_kernel, dims, [self.grid, self.origin, self.res, poses, angles, self.max_range, out],
-                      device=self.device)
+            wp.launch(
+                field_kernel,
+                dims,
+                [self.grid, self.origin, self.res, poses, angles, self.max_range, out],
+                device=self.device,
+            )
 
     def cast_numpy(self, poses: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Convenience for tests and offline tools: allocates, launches, copies back."""

@@ -32,6 +32,7 @@ class Registry:
                 raise ValueError(f"{self.concern}: {name!r} registered twice")
             self._factories[name] = factory
             return factory
+
         return deco
 
     def build(self, name: str, **settings):
@@ -81,8 +82,10 @@ def pick_device(requested: str = "auto") -> str:
     if requested in (None, "", "auto"):
         return "cuda:0" if wp.is_cuda_available() else "cpu"
     if str(requested).startswith("cuda") and not wp.is_cuda_available():
-        raise ValueError(f"device={requested}: Warp sees no CUDA device on this machine (no NVIDIA driver or GPU); "
-                         "use device=cpu (or device=auto)")
+        raise ValueError(
+            f"device={requested}: Warp sees no CUDA device on this machine (no NVIDIA driver or GPU); "
+            "use device=cpu (or device=auto)"
+        )
     return requested
 
 
@@ -102,8 +105,7 @@ def launch_reduction(kernel, n: int, inputs: list, device: str) -> int:
 
 
 @wp.kernel
-def _sum_row_groups(partials: wp.array2d(dtype=wp.float32), rows: int, group: int,
-                    out: wp.array2d(dtype=wp.float32)):
+def _sum_row_groups(partials: wp.array2d(dtype=wp.float32), rows: int, group: int, out: wp.array2d(dtype=wp.float32)):
     g, c = wp.tid()
     s = float(0.0)
     for r in range(g * group, wp.min((g + 1) * group, rows)):
@@ -131,8 +133,12 @@ class PartialSums:
     def finish(self, threads: int, out: wp.array) -> None:
         rows, total = self.partials, out.reshape((1, self.num_sums))  # the sums as one group of all rows
         if self.on_gpu:
-            wp.launch(_sum_row_groups, (REDUCE_GROUP, self.num_sums), [self.partials, threads, REDUCE_GROUP,
-                                                                      self.groups], device=self.device)
+            wp.launch(
+                _sum_row_groups,
+                (REDUCE_GROUP, self.num_sums),
+                [self.partials, threads, REDUCE_GROUP, self.groups],
+                device=self.device,
+            )
             rows, threads = self.groups, REDUCE_GROUP
         wp.launch(_sum_row_groups, (1, self.num_sums), [rows, threads, threads, total], device=self.device)
 

@@ -40,8 +40,12 @@ def make_kernels(dtype, normalize: bool, t_min: float, eps: float):
     """Forward and backward kernels specialised for one float type and setting."""
 
     @wp.kernel(module="unique")
-    def forward(p: wp.array2d(dtype=dtype), z: wp.array2d(dtype=dtype),
-                ranges: wp.array(dtype=dtype), opacity: wp.array(dtype=dtype)):
+    def forward(
+        p: wp.array2d(dtype=dtype),
+        z: wp.array2d(dtype=dtype),
+        ranges: wp.array(dtype=dtype),
+        opacity: wp.array(dtype=dtype),
+    ):
         i = wp.tid()
         T = dtype(1.0)
         A = dtype(0.0)
@@ -60,9 +64,15 @@ def make_kernels(dtype, normalize: bool, t_min: float, eps: float):
             ranges[i] = A
 
     @wp.kernel(module="unique")
-    def backward(p: wp.array2d(dtype=dtype), z: wp.array2d(dtype=dtype), ranges: wp.array(dtype=dtype),
-                 opacity: wp.array(dtype=dtype), grad_r: wp.array(dtype=dtype), grad_w: wp.array(dtype=dtype),
-                 grad_p: wp.array2d(dtype=dtype)):
+    def backward(
+        p: wp.array2d(dtype=dtype),
+        z: wp.array2d(dtype=dtype),
+        ranges: wp.array(dtype=dtype),
+        opacity: wp.array(dtype=dtype),
+        grad_r: wp.array(dtype=dtype),
+        grad_w: wp.array(dtype=dtype),
+        grad_p: wp.array2d(dtype=dtype),
+    ):
         i = wp.tid()
         n = p.shape[1]
         # pass 1: transmittance T_k into grad_p (scratch); count the samples the forward pass used
@@ -138,9 +148,16 @@ class Compositor:
 
 
 @wp.kernel
-def occupied_samples_kernel(points: wp.array2d(dtype=wp.vec2), values: wp.array2d(dtype=wp.float32),
-                            occupied: wp.array2d(dtype=wp.uint8), x0: float, y0: float, inv_res: float,
-                            t_min: float, keep: wp.array2d(dtype=wp.uint8)):
+def occupied_samples_kernel(
+    points: wp.array2d(dtype=wp.vec2),
+    values: wp.array2d(dtype=wp.float32),
+    occupied: wp.array2d(dtype=wp.uint8),
+    x0: float,
+    y0: float,
+    inv_res: float,
+    t_min: float,
+    keep: wp.array2d(dtype=wp.uint8),
+):
     i = wp.tid()
     T = float(1.0)
     for k in range(points.shape[1]):
@@ -169,11 +186,22 @@ class OccupiedSamples:
         if R and N:
             wp_dev = wp.device_from_torch(points.device)
             stream = wp.stream_from_torch(points.device) if wp_dev.is_cuda else None
-            wp.launch(occupied_samples_kernel, dim=R, device=wp_dev, stream=stream,
-                      inputs=[wp.from_torch(points.detach().float().contiguous(), dtype=wp.vec2),
-                              wp.from_torch(values.float().contiguous()),
-                              wp.from_torch(occupied.to(torch.uint8).contiguous(), dtype=wp.uint8),
-                              self.x0, self.y0, self.inv_res, self.t_min, wp.from_torch(keep, dtype=wp.uint8)])
+            wp.launch(
+                occupied_samples_kernel,
+                dim=R,
+                device=wp_dev,
+                stream=stream,
+                inputs=[
+                    wp.from_torch(points.detach().float().contiguous(), dtype=wp.vec2),
+                    wp.from_torch(values.float().contiguous()),
+                    wp.from_torch(occupied.to(torch.uint8).contiguous(), dtype=wp.uint8),
+                    self.x0,
+                    self.y0,
+                    self.inv_res,
+                    self.t_min,
+                    wp.from_torch(keep, dtype=wp.uint8),
+                ],
+            )
         return keep.bool()
 
 

@@ -35,8 +35,15 @@ vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
 
 @wp.kernel
-def exp_kernel(log_w: wp.array(dtype=wp.float32), top: wp.array(dtype=wp.float32), w: wp.array(dtype=wp.float32),
-               partials: wp.array2d(dtype=wp.float32), particles: wp.array(dtype=wp.vec3), centre: wp.vec2, stride: int):
+def exp_kernel(
+    log_w: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    w: wp.array(dtype=wp.float32),
+    partials: wp.array2d(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    centre: wp.vec2,
+    stride: int,
+):
     """w = exp(log_w - max); sums = [sum w^2, sum w x, sum w y, sum w cos, sum w sin, sum w, sum w x^2,
     sum w y^2], x and y taken relative to ``centre`` (so that the spread does not cancel in float32)."""
     acc = vec8()
@@ -72,9 +79,15 @@ def resample_now(sums: wp.array(dtype=wp.float32), limit: float) -> bool:
 
 
 @wp.kernel
-def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: wp.array(dtype=wp.float32), src: wp.array(dtype=wp.vec3),
-                      dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
-                      log_w: wp.array(dtype=wp.float32)):
+def systematic_kernel(
+    cdf: wp.array(dtype=wp.float32),
+    offset: wp.array(dtype=wp.float32),
+    src: wp.array(dtype=wp.vec3),
+    dst: wp.array(dtype=wp.vec3),
+    sums: wp.array(dtype=wp.float32),
+    limit: float,
+    log_w: wp.array(dtype=wp.float32),
+):
     """dst = the low-variance draw from src (pointer offset ``offset[0]`` in [0, 1)) and log_w = 0 when
     N_eff < limit, else dst = src (weights kept)."""
     i = wp.tid()
@@ -88,9 +101,15 @@ def systematic_kernel(cdf: wp.array(dtype=wp.float32), offset: wp.array(dtype=wp
 
 
 @wp.kernel
-def multinomial_kernel(cdf: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32), src: wp.array(dtype=wp.vec3),
-                       dst: wp.array(dtype=wp.vec3), sums: wp.array(dtype=wp.float32), limit: float,
-                       log_w: wp.array(dtype=wp.float32)):
+def multinomial_kernel(
+    cdf: wp.array(dtype=wp.float32),
+    seed: wp.array(dtype=wp.int32),
+    src: wp.array(dtype=wp.vec3),
+    dst: wp.array(dtype=wp.vec3),
+    sums: wp.array(dtype=wp.float32),
+    limit: float,
+    log_w: wp.array(dtype=wp.float32),
+):
     i = wp.tid()
     if resample_now(sums, limit):
         state = wp.rand_init(seed[0], i)
@@ -119,8 +138,12 @@ class ParticleWeights:
             raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
         self.top.fill_(-3.0e38)
         launch_reduction(max_kernel, log_w.shape[0], [log_w, self.top], self.device)
-        threads = launch_reduction(exp_kernel, log_w.shape[0], [log_w, self.top, self.w, self.partial.partials,
-                                                                particles, self.centre], self.device)
+        threads = launch_reduction(
+            exp_kernel,
+            log_w.shape[0],
+            [log_w, self.top, self.w, self.partial.partials, particles, self.centre],
+            self.device,
+        )
         self.partial.finish(threads, self.sums)
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
@@ -153,16 +176,33 @@ class Resampler:
         """multinomial's generator seed from the uniform draw."""
         return int(draw * 2**31)
 
-    def __call__(self, cdf: wp.array, src: wp.array, dst: wp.array, draw: float, sums: wp.array | None = None,
-                 neff_below: float = np.inf, log_w: wp.array | None = None) -> None:
+    def __call__(
+        self,
+        cdf: wp.array,
+        src: wp.array,
+        dst: wp.array,
+        draw: float,
+        sums: wp.array | None = None,
+        neff_below: float = np.inf,
+        log_w: wp.array | None = None,
+    ) -> None:
         """``draw``: a uniform number in [0, 1) (low_variance offset; multinomial derives its seed from it).
         Without ``sums`` every call resamples."""
         self._offset.assign(np.array([draw], np.float32))
         self._seed.assign(np.array([self.seed_of(draw)], np.int32))
         self.launch(cdf, src, dst, self._offset, self._seed, sums, neff_below, log_w)
 
-    def launch(self, cdf: wp.array, src: wp.array, dst: wp.array, offset: wp.array, seed: wp.array,
-               sums: wp.array | None = None, neff_below: float = np.inf, log_w: wp.array | None = None) -> None:
+    def launch(
+        self,
+        cdf: wp.array,
+        src: wp.array,
+        dst: wp.array,
+        offset: wp.array,
+        seed: wp.array,
+        sums: wp.array | None = None,
+        neff_below: float = np.inf,
+        log_w: wp.array | None = None,
+    ) -> None:
         """The same with the draw on the device: ``offset`` [1] (low_variance) and ``seed`` [1] (multinomial)."""
         if sums is None:
             sums, neff_below = self._always, np.inf
@@ -186,8 +226,9 @@ def make_multinomial(device: str = "auto") -> Resampler:
 
 
 @wp.kernel
-def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32),
-                      stride: int):
+def masked_max_kernel(
+    values: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.float32), stride: int
+):
     top = float(-3.0e38)
     for i in range(wp.tid(), values.shape[0], stride):
         if skip[i] == 0:
@@ -196,8 +237,13 @@ def masked_max_kernel(values: wp.array(dtype=wp.float32), skip: wp.array(dtype=w
 
 
 @wp.kernel
-def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), skip: wp.array(dtype=wp.int32),
-                        top: wp.array(dtype=wp.float32), partials: wp.array2d(dtype=wp.float32), stride: int):
+def log_mean_exp_kernel(
+    log_lik: wp.array(dtype=wp.float32),
+    skip: wp.array(dtype=wp.int32),
+    top: wp.array(dtype=wp.float32),
+    partials: wp.array2d(dtype=wp.float32),
+    stride: int,
+):
     """Row t of partials = [sum of exp(log_lik - top), count] over thread t's particles not marked in ``skip``."""
     total = float(0.0)
     count = float(0.0)
@@ -210,8 +256,14 @@ def log_mean_exp_kernel(log_lik: wp.array(dtype=wp.float32), skip: wp.array(dtyp
 
 
 @wp.kernel
-def inject_kernel(particles: wp.array(dtype=wp.vec3), free_xy: wp.array(dtype=wp.vec2), jitter: float,
-                  probability: float, seed: int, injected: wp.array(dtype=wp.int32)):
+def inject_kernel(
+    particles: wp.array(dtype=wp.vec3),
+    free_xy: wp.array(dtype=wp.vec2),
+    jitter: float,
+    probability: float,
+    seed: int,
+    injected: wp.array(dtype=wp.int32),
+):
     """Replace each particle, with the given probability, by a random pose on a free node (recovery);
     ``injected`` marks the replaced ones."""
     i = wp.tid()
@@ -220,8 +272,11 @@ def inject_kernel(particles: wp.array(dtype=wp.vec3), free_xy: wp.array(dtype=wp
     if wp.randf(state) < probability:
         j = int(wp.randf(state) * float(free_xy.shape[0])) % free_xy.shape[0]
         xy = free_xy[j]
-        particles[i] = wp.vec3(xy[0] + jitter * (wp.randf(state) - 0.5), xy[1] + jitter * (wp.randf(state) - 0.5),
-                               (wp.randf(state) * 2.0 - 1.0) * 3.14159265)
+        particles[i] = wp.vec3(
+            xy[0] + jitter * (wp.randf(state) - 0.5),
+            xy[1] + jitter * (wp.randf(state) - 0.5),
+            (wp.randf(state) * 2.0 - 1.0) * 3.14159265,
+        )
         injected[i] = 1
 
 
@@ -243,8 +298,9 @@ class LogMeanLikelihood:
             skip = self.none
         self.top.fill_(-3.0e38)
         launch_reduction(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], self.device)
-        threads = launch_reduction(log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top,
-                                                                           self.partial.partials], self.device)
+        threads = launch_reduction(
+            log_mean_exp_kernel, log_lik.shape[0], [log_lik, skip, self.top, self.partial.partials], self.device
+        )
         self.partial.finish(threads, self.acc)
         acc = self.acc.numpy()
         if acc[1] == 0:

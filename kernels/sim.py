@@ -43,8 +43,16 @@ def point_segment_distance(p: wp.vec2, a: wp.vec2, b: wp.vec2) -> float:
 
 
 @wp.kernel
-def lidar_kernel(segments: wp.array(dtype=wp.vec4), poses: wp.array(dtype=wp.vec3), angles: wp.array(dtype=wp.float32),
-                 max_range: float, noise_std: float, dropout: float, seed: int, out: wp.array2d(dtype=wp.float32)):
+def lidar_kernel(
+    segments: wp.array(dtype=wp.vec4),
+    poses: wp.array(dtype=wp.vec3),
+    angles: wp.array(dtype=wp.float32),
+    max_range: float,
+    noise_std: float,
+    dropout: float,
+    seed: int,
+    out: wp.array2d(dtype=wp.float32),
+):
     s, b = wp.tid()
     pose = poses[s]
     a = pose[2] + angles[b]
@@ -62,8 +70,13 @@ def lidar_kernel(segments: wp.array(dtype=wp.vec4), poses: wp.array(dtype=wp.vec
 
 
 @wp.kernel
-def rasterize_kernel(segments: wp.array(dtype=wp.vec4), origin: wp.vec2, res: float, half_thickness: float,
-                     out: wp.array2d(dtype=wp.float32)):
+def rasterize_kernel(
+    segments: wp.array(dtype=wp.vec4),
+    origin: wp.vec2,
+    res: float,
+    half_thickness: float,
+    out: wp.array2d(dtype=wp.float32),
+):
     iy, ix = wp.tid()
     p = origin + wp.vec2((float(ix) + 0.5) * res, (float(iy) + 0.5) * res)
     occ = float(0.0)
@@ -77,8 +90,15 @@ def rasterize_kernel(segments: wp.array(dtype=wp.vec4), origin: wp.vec2, res: fl
 class SegmentLidar:
     """Ranges of a planar lidar at laser poses [S, 3] against wall segments [K, 4] (x0, y0, x1, y1)."""
 
-    def __init__(self, segments: np.ndarray, angles_rad: np.ndarray, max_range_m: float, noise_std_m: float = 0.0,
-                 dropout_prob: float = 0.0, device: str = "auto"):
+    def __init__(
+        self,
+        segments: np.ndarray,
+        angles_rad: np.ndarray,
+        max_range_m: float,
+        noise_std_m: float = 0.0,
+        dropout_prob: float = 0.0,
+        device: str = "auto",
+    ):
         self.device = pick_device(device)
         self.segments = wp.array(np.asarray(segments, dtype=np.float32), dtype=wp.vec4, device=self.device)
         self.angles = wp.array(np.asarray(angles_rad, dtype=np.float32), dtype=wp.float32, device=self.device)
@@ -87,8 +107,12 @@ class SegmentLidar:
     def scan(self, laser_poses: np.ndarray, seed: int) -> np.ndarray:
         poses = wp.array(np.asarray(laser_poses, dtype=np.float32).reshape(-1, 3), dtype=wp.vec3, device=self.device)
         out = wp.zeros((poses.shape[0], self.angles.shape[0]), dtype=wp.float32, device=self.device)
-        wp.launch(lidar_kernel, out.shape, [self.segments, poses, self.angles, self.max_range, self.noise_std,
-                                            self.dropout, int(seed), out], device=self.device)
+        wp.launch(
+            lidar_kernel,
+            out.shape,
+            [self.segments, poses, self.angles, self.max_range, self.noise_std, self.dropout, int(seed), out],
+            device=self.device,
+        )
         return out.numpy()
 
 
@@ -102,11 +126,24 @@ def rasterize(segments: np.ndarray, origin_xy, resolution_m: float, shape_hw, de
     dev = pick_device(device)
     segs = wp.array(np.asarray(segments, dtype=np.float32), dtype=wp.vec4, device=dev)
     out = wp.zeros(tuple(shape_hw), dtype=wp.float32, device=dev)
-    wp.launch(rasterize_kernel, out.shape, [segs, wp.vec2(*map(float, origin_xy)), float(resolution_m),
-                                            0.5 * float(resolution_m) * (1.0 + RASTER_SLACK), out], device=dev)
+    wp.launch(
+        rasterize_kernel,
+        out.shape,
+        [
+            segs,
+            wp.vec2(*map(float, origin_xy)),
+            float(resolution_m),
+            0.5 * float(resolution_m) * (1.0 + RASTER_SLACK),
+            out,
+        ],
+        device=dev,
+    )
     return out.numpy()
 
 
 SIM.register("segment_lidar")(lambda **kw: SegmentLidar(**kw))
-SIM.register("rasterize")(lambda **kw: (lambda segments, origin_xy, resolution_m, shape_hw:
-                                        rasterize(segments, origin_xy, resolution_m, shape_hw, **kw)))
+SIM.register("rasterize")(
+    lambda **kw: (
+        lambda segments, origin_xy, resolution_m, shape_hw: rasterize(segments, origin_xy, resolution_m, shape_hw, **kw)
+    )
+)

@@ -79,8 +79,9 @@ def visit(cells: wp.array3d(dtype=wp.vec4), p: int, x: int, y: int):
 
 
 @wp.func
-def clear_dda(cells: wp.array3d(dtype=wp.vec4), p: int, seg: wp.vec4, c0: wp.vec2i, c1: wp.vec2i, origin: wp.vec2,
-              res: float):
+def clear_dda(
+    cells: wp.array3d(dtype=wp.vec4), p: int, seg: wp.vec4, c0: wp.vec2i, c1: wp.vec2i, origin: wp.vec2, res: float
+):
     """Visit every cell the beam crosses from the laser's cell to the end cell, the end cell excluded
     (Amanatides & Woo)."""
     dx = seg[2] - seg[0]
@@ -144,9 +145,16 @@ def make_integrate_kernel(line: str):
     and are added in beam order so that a run replays exactly on a GPU too."""
 
     @wp.kernel(module="unique")
-    def free(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-             angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-             cells: wp.array3d(dtype=wp.vec4)):
+    def free(
+        poses: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        angles: wp.array(dtype=wp.float32),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        cells: wp.array3d(dtype=wp.vec4),
+    ):
         p, b = wp.tid()
         r = ranges[b]
         if not (r == r) or r <= 0.0:
@@ -160,9 +168,16 @@ def make_integrate_kernel(line: str):
             clear_dda(cells, p, seg, c0, c1, origin, res)
 
     @wp.kernel(module="unique")
-    def hits(poses: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-             angles: wp.array(dtype=wp.float32), usable: float, origin: wp.vec2, res: float,
-             cells: wp.array3d(dtype=wp.vec4)):
+    def hits(
+        poses: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        angles: wp.array(dtype=wp.float32),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        cells: wp.array3d(dtype=wp.vec4),
+    ):
         p = wp.tid()
         for b in range(ranges.shape[0]):
             r = ranges[b]
@@ -213,8 +228,15 @@ def make_window_search(kernel_size: int, fullness: float, free_check: bool, read
     ``ey``: the end point's offset from the corner of its cell (the cells hold their hits' offsets alike)."""
 
     @wp.func
-    def search(cells: wp.array3d(dtype=wp.vec4), p: int, hit_cell: wp.vec2i, free_cell: wp.vec2i, ex: float,
-               ey: float, res: float) -> float:
+    def search(
+        cells: wp.array3d(dtype=wp.vec4),
+        p: int,
+        hit_cell: wp.vec2i,
+        free_cell: wp.vec2i,
+        ex: float,
+        ey: float,
+        res: float,
+    ) -> float:
         best = float(1.0e30)
         for oy in range(wp.static(-kernel_size), wp.static(kernel_size + 1)):  # row by row in memory
             for ox in range(wp.static(-kernel_size), wp.static(kernel_size + 1)):
@@ -238,8 +260,17 @@ def make_window_search(kernel_size: int, fullness: float, free_check: bool, read
     return search
 
 
-def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: float, null_likelihood: float,
-                      free_delta: float, beam_stride: int, beams_per_thread: int, free_check: bool = True):
+def make_score_kernel(
+    kernel_size: int,
+    fullness: float,
+    sigma: float,
+    lsigma: float,
+    null_likelihood: float,
+    free_delta: float,
+    beam_stride: int,
+    beams_per_thread: int,
+    free_check: bool = True,
+):
     """One thread per particle x candidate x ``beams_per_thread`` beams (1 on a GPU for parallelism; all
     beams on the CPU, where Warp runs the threads one after another and a thread per beam costs its own
     index arithmetic). Each thread writes its partial sums to [P, C, J]; ``reduce`` adds them up in beam
@@ -253,9 +284,19 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
     search_inside = make_window_search(k, fullness, free_check, cell_inside)
 
     @wp.func
-    def score_beams(cells: wp.array3d(dtype=wp.vec4), p: int, pose: wp.vec3, T_base_laser: wp.vec3,
-                    ranges: wp.array(dtype=wp.float32), beam_cs: wp.array(dtype=wp.vec2), usable: float,
-                    origin: wp.vec2, res: float, b0: int, b1: int) -> wp.vec2:
+    def score_beams(
+        cells: wp.array3d(dtype=wp.vec4),
+        p: int,
+        pose: wp.vec3,
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        b0: int,
+        b1: int,
+    ) -> wp.vec2:
         """(score, log-likelihood) of beams b0..b1-1 at ``pose`` on map p, summed in beam order."""
         lp = laser_pose(pose, T_base_laser)
         cl = wp.cos(lp[2])
@@ -292,10 +333,19 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
         return wp.vec2(s, ll)
 
     @wp.kernel(module="unique")
-    def score(poses: wp.array2d(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-              beam_cs: wp.array(dtype=wp.vec2), usable: float, origin: wp.vec2, res: float,
-              cells: wp.array3d(dtype=wp.vec4), part_score: wp.array3d(dtype=wp.float32),
-              part_loglik: wp.array3d(dtype=wp.float32), active: wp.array(dtype=wp.int32)):
+    def score(
+        poses: wp.array2d(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        cells: wp.array3d(dtype=wp.vec4),
+        part_score: wp.array3d(dtype=wp.float32),
+        part_loglik: wp.array3d(dtype=wp.float32),
+        active: wp.array(dtype=wp.int32),
+    ):
         p, c, j = wp.tid()
         if active[p] == 0:
             return
@@ -306,11 +356,22 @@ def make_score_kernel(kernel_size: int, fullness: float, sigma: float, lsigma: f
         part_loglik[p, c, j] = sl[1]
 
     @wp.kernel(module="unique")
-    def climb(start: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-              beam_cs: wp.array(dtype=wp.vec2), usable: float, origin: wp.vec2, res: float,
-              cells: wp.array3d(dtype=wp.vec4), first_steps: wp.vec3, iterations: int, max_rounds: int,
-              pose_out: wp.array(dtype=wp.vec3), best_out: wp.array(dtype=wp.float32),
-              rounds_out: wp.array(dtype=wp.int32)):
+    def climb(
+        start: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        cells: wp.array3d(dtype=wp.vec4),
+        first_steps: wp.vec3,
+        iterations: int,
+        max_rounds: int,
+        pose_out: wp.array(dtype=wp.vec3),
+        best_out: wp.array(dtype=wp.float32),
+        rounds_out: wp.array(dtype=wp.int32),
+    ):
         """The whole hill climb of one particle in one thread (the CPU's way: no launch per round, no
         particle waiting for the slowest). Each round is the one ``climb_candidates`` + ``score`` +
         ``climb_update`` make, with the same sums in the same order, so the poses are the same bit for bit."""
@@ -375,20 +436,41 @@ def make_block_climb_kernel(score_beams):
     (``block_dim_for``; a scan of more than ``MAX_BLOCK_BEAMS`` beams climbs in launched rounds instead)."""
 
     @wp.func
-    def beam_score(cells: wp.array3d(dtype=wp.vec4), p: int, pose: wp.vec3, T_base_laser: wp.vec3,
-                   ranges: wp.array(dtype=wp.float32), beam_cs: wp.array(dtype=wp.vec2), usable: float,
-                   origin: wp.vec2, res: float, lane: int) -> float:
+    def beam_score(
+        cells: wp.array3d(dtype=wp.vec4),
+        p: int,
+        pose: wp.vec3,
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        lane: int,
+    ) -> float:
         """The beam ``lane``'s term of the score at ``pose`` (0 for a thread past the last beam)."""
         B = ranges.shape[0]
-        return score_beams(cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, wp.min(lane, B),
-                           wp.min(lane + 1, B))[0]
+        return score_beams(
+            cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, wp.min(lane, B), wp.min(lane + 1, B)
+        )[0]
 
     @wp.kernel(module="unique")
-    def climb_block(start: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3, ranges: wp.array(dtype=wp.float32),
-                    beam_cs: wp.array(dtype=wp.vec2), usable: float, origin: wp.vec2, res: float,
-                    cells: wp.array3d(dtype=wp.vec4), first_steps: wp.vec3, iterations: int, max_rounds: int,
-                    pose_out: wp.array(dtype=wp.vec3), best_out: wp.array(dtype=wp.float32),
-                    rounds_out: wp.array(dtype=wp.int32)):
+    def climb_block(
+        start: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        ranges: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
+        usable: float,
+        origin: wp.vec2,
+        res: float,
+        cells: wp.array3d(dtype=wp.vec4),
+        first_steps: wp.vec3,
+        iterations: int,
+        max_rounds: int,
+        pose_out: wp.array(dtype=wp.vec3),
+        best_out: wp.array(dtype=wp.float32),
+        rounds_out: wp.array(dtype=wp.int32),
+    ):
         p, lane = wp.tid()
         B = ranges.shape[0]
         pose = start[p]
@@ -403,8 +485,9 @@ def make_block_climb_kernel(score_beams):
             rounds += 1
             mine = vec6()
             for m in range(6):
-                mine[m] = beam_score(cells, p, pose + wp.cw_mul(move(m), steps), T_base_laser, ranges, beam_cs,
-                                     usable, origin, res, lane)
+                mine[m] = beam_score(
+                    cells, p, pose + wp.cw_mul(move(m), steps), T_base_laser, ranges, beam_cs, usable, origin, res, lane
+                )
             t = wp.tile(mine, preserve_type=True)
             sums = vec6()
             for j in range(B):  # in beam order, as reduce_partials_kernel
@@ -435,15 +518,21 @@ MAX_BLOCK_BEAMS = 1024  # threads per block on NVIDIA GPUs
 def block_dim_for(beams: int) -> int:
     """Threads per block of the block climb: the beams rounded up to whole warps of 32."""
     if not 1 <= beams <= MAX_BLOCK_BEAMS:
-        raise ValueError(f"slam: the block climb runs a thread per beam, at most {MAX_BLOCK_BEAMS}; this scan has "
-                         f"{beams} (RBPF.match(how='rounds') climbs such scans)")
+        raise ValueError(
+            f"slam: the block climb runs a thread per beam, at most {MAX_BLOCK_BEAMS}; this scan has "
+            f"{beams} (RBPF.match(how='rounds') climbs such scans)"
+        )
     return 32 * ((beams + 31) // 32)
 
 
 @wp.kernel
-def reduce_partials_kernel(part_score: wp.array3d(dtype=wp.float32), part_loglik: wp.array3d(dtype=wp.float32),
-                           active: wp.array(dtype=wp.int32), out_score: wp.array2d(dtype=wp.float32),
-                           out_loglik: wp.array2d(dtype=wp.float32)):
+def reduce_partials_kernel(
+    part_score: wp.array3d(dtype=wp.float32),
+    part_loglik: wp.array3d(dtype=wp.float32),
+    active: wp.array(dtype=wp.int32),
+    out_score: wp.array2d(dtype=wp.float32),
+    out_loglik: wp.array2d(dtype=wp.float32),
+):
     """Sums of the partials in beam order (the same on every run); 0 for inactive particles."""
     p, c = wp.tid()
     if active[p] == 0:
@@ -460,8 +549,15 @@ def reduce_partials_kernel(part_score: wp.array3d(dtype=wp.float32), part_loglik
 
 
 @wp.kernel
-def motion_kernel(poses: wp.array(dtype=wp.vec3), deltas: wp.array(dtype=wp.vec3), srr: float, srt: float,
-                  str_: float, stt: float, seed: int):
+def motion_kernel(
+    poses: wp.array(dtype=wp.vec3),
+    deltas: wp.array(dtype=wp.vec3),
+    srr: float,
+    srt: float,
+    str_: float,
+    stt: float,
+    seed: int,
+):
     """GMapping's drawFromMotion, once per odometry step in order: delta = the step in the old pose's frame."""
     i = wp.tid()
     state = wp.rand_init(seed, i)
@@ -483,17 +579,24 @@ def motion_kernel(poses: wp.array(dtype=wp.vec3), deltas: wp.array(dtype=wp.vec3
 
 
 @wp.kernel
-def climb_candidates_kernel(pose: wp.array(dtype=wp.vec3), steps: wp.array(dtype=wp.vec3),
-                            cand: wp.array2d(dtype=wp.vec3)):
+def climb_candidates_kernel(
+    pose: wp.array(dtype=wp.vec3), steps: wp.array(dtype=wp.vec3), cand: wp.array2d(dtype=wp.vec3)
+):
     p, m = wp.tid()
     cand[p, m] = pose[p] + wp.cw_mul(move(m), steps[p])
 
 
 @wp.kernel
-def climb_update_kernel(cand: wp.array2d(dtype=wp.vec3), score: wp.array2d(dtype=wp.float32),
-                        pose: wp.array(dtype=wp.vec3), best: wp.array(dtype=wp.float32),
-                        steps: wp.array(dtype=wp.vec3), halvings: wp.array(dtype=wp.int32),
-                        active: wp.array(dtype=wp.int32), iterations: int):
+def climb_update_kernel(
+    cand: wp.array2d(dtype=wp.vec3),
+    score: wp.array2d(dtype=wp.float32),
+    pose: wp.array(dtype=wp.vec3),
+    best: wp.array(dtype=wp.float32),
+    steps: wp.array(dtype=wp.vec3),
+    halvings: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
+    iterations: int,
+):
     """Take the best move if it raises the score, else halve the steps; a particle is done when a round at
     the steps halved ``iterations`` times fails too (GMapping's optimize: iterations + 1 step sizes)."""
     p = wp.tid()
@@ -561,6 +664,7 @@ class ParticleMaps:
         Returns whether it grew. Twin: the numpy slice assignment in tests/test_slam.py."""
         P, H, W = self.shape
         (ox, oy), res = self.origin_xy, self.res
+
         def need(gap: float, extent: float) -> int:  # cells to add on a side the box passes by ``gap`` (>= 0: out)
             return int(np.ceil((max(gap, 0.0) + max(slack_m, 0.25 * extent)) / res)) if gap >= 0 else 0
 
@@ -571,8 +675,10 @@ class ParticleMaps:
             return False
         H2, W2 = H + down + up, W + left + right
         if H2 * W2 > self.MAX_CELLS:
-            raise ValueError(f"slam: the maps would grow to {W2} x {H2} cells at {res} m to hold the scans from "
-                             f"{lo_xy} to {hi_xy}; raise slam.resolution_m")
+            raise ValueError(
+                f"slam: the maps would grow to {W2} x {H2} cells at {res} m to hold the scans from "
+                f"{lo_xy} to {hi_xy}; raise slam.resolution_m"
+            )
         cells = wp.zeros((P, H2, W2), dtype=wp.vec4, device=self.device)
         wp.launch(shift_cells_kernel, (P, H, W), [self.cells, cells, left, down], device=self.device)
         self.cells = cells
@@ -623,6 +729,7 @@ class Integrator:
     """Adds a scan to every particle's map; ``free_space=False`` adds the end points only (the released
     code with generateMap off, the way its ROS wrapper runs the particles: their maps never learn free
     space, so a cell once hit stays occupied)."""
+
     LINES = ("bresenham", "dda")
 
     def __init__(self, usable_range_m: float, line: str = "bresenham", free_space: bool = True, device: str = "auto"):
@@ -632,8 +739,16 @@ class Integrator:
         self.free, self.hits = make_integrate_kernel(line)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
-        args = [poses, wp.vec3(*map(float, T_base_laser)), ranges, angles, self.usable, maps.origin, maps.res,
-                maps.cells]
+        args = [
+            poses,
+            wp.vec3(*map(float, T_base_laser)),
+            ranges,
+            angles,
+            self.usable,
+            maps.origin,
+            maps.res,
+            maps.cells,
+        ]
         if self.free_space:
             wp.launch(self.free, (poses.shape[0], ranges.shape[0]), args, device=self.device)
         wp.launch(self.hits, poses.shape[0], args, device=self.device)
@@ -646,9 +761,20 @@ class Scorer:
     the launch into ``cpu_threads`` blocks (default: the machine's cores) and launches them from as many
     host threads (ctypes drops the GIL during a launch), so that the matcher uses every core."""
 
-    def __init__(self, usable_range_m: float, kernel_size: int = 1, fullness: float = 0.1, sigma: float = 0.05,
-                 lsigma: float = 0.075, null_likelihood: float = -0.5, free_delta_m: float = 0.05 * np.sqrt(2),
-                 lskip: int = 0, free_check: bool = True, cpu_threads: int | None = None, device: str = "auto"):
+    def __init__(
+        self,
+        usable_range_m: float,
+        kernel_size: int = 1,
+        fullness: float = 0.1,
+        sigma: float = 0.05,
+        lsigma: float = 0.075,
+        null_likelihood: float = -0.5,
+        free_delta_m: float = 0.05 * np.sqrt(2),
+        lskip: int = 0,
+        free_check: bool = True,
+        cpu_threads: int | None = None,
+        device: str = "auto",
+    ):
         import os
 
         self.usable, self.device = float(usable_range_m), pick_device(device)
@@ -658,11 +784,28 @@ class Scorer:
         self._pool = None
         self._partials, self._beam_cs = {}, None
         self.kernel, self.climb_kernel, self.block_climb_kernel = make_score_kernel(
-            int(kernel_size), float(fullness), float(sigma), float(lsigma), float(null_likelihood), float(free_delta_m),
-            int(lskip) + 1, self.per_thread, bool(free_check))
+            int(kernel_size),
+            float(fullness),
+            float(sigma),
+            float(lsigma),
+            float(null_likelihood),
+            float(free_delta_m),
+            int(lskip) + 1,
+            self.per_thread,
+            bool(free_check),
+        )
 
-    def __call__(self, maps: ParticleMaps, candidates: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
-                 score: wp.array, loglik: wp.array, active: wp.array | None = None) -> None:
+    def __call__(
+        self,
+        maps: ParticleMaps,
+        candidates: wp.array,
+        T_base_laser,
+        ranges: wp.array,
+        angles: wp.array,
+        score: wp.array,
+        loglik: wp.array,
+        active: wp.array | None = None,
+    ) -> None:
         """candidates [P, C] (vec3); fills score and loglik [P, C]; ``active`` [P] (int32): particles marked 0
         are skipped and get 0 (all scored when None)."""
         P, C = candidates.shape
@@ -678,16 +821,42 @@ class Scorer:
             def part(a: wp.array) -> wp.array:  # one block of all particles: the arrays themselves, no views made
                 return a if (p0, p1) == (0, P) else a[p0:p1]
 
-            wp.launch(self.kernel, (p1 - p0, C, part_s.shape[2]),
-                      [part(candidates), T, ranges, beam_cs, self.usable, maps.origin, maps.res, part(maps.cells),
-                       part(part_s), part(part_l), part(active)], device=self.device)
+            wp.launch(
+                self.kernel,
+                (p1 - p0, C, part_s.shape[2]),
+                [
+                    part(candidates),
+                    T,
+                    ranges,
+                    beam_cs,
+                    self.usable,
+                    maps.origin,
+                    maps.res,
+                    part(maps.cells),
+                    part(part_s),
+                    part(part_l),
+                    part(active),
+                ],
+                device=self.device,
+            )
 
         self._run_blocks(run, P)
         wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)
 
-    def climb(self, maps: ParticleMaps, start: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
-              first_steps, iterations: int, max_rounds: int, pose: wp.array, best: wp.array,
-              rounds: wp.array) -> None:
+    def climb(
+        self,
+        maps: ParticleMaps,
+        start: wp.array,
+        T_base_laser,
+        ranges: wp.array,
+        angles: wp.array,
+        first_steps,
+        iterations: int,
+        max_rounds: int,
+        pose: wp.array,
+        best: wp.array,
+        rounds: wp.array,
+    ) -> None:
         """GMapping's hill climbing from ``start`` [P] (vec3), one thread per particle for the whole climb
         (meant for the CPU; on a GPU the rounds are launched over particles x moves x beams instead, RBPF.match).
         Fills pose [P], best [P] (its score) and rounds [P] (the rounds each particle took)."""
@@ -695,34 +864,83 @@ class Scorer:
         steps = wp.vec3(*map(float, first_steps))
 
         def run(p0: int, p1: int) -> None:
-            wp.launch(self.climb_kernel, p1 - p0,
-                      [start[p0:p1], T, ranges, beam_cs, self.usable, maps.origin, maps.res, maps.cells[p0:p1],
-                       steps, int(iterations), int(max_rounds), pose[p0:p1], best[p0:p1], rounds[p0:p1]],
-                      device=self.device)
+            wp.launch(
+                self.climb_kernel,
+                p1 - p0,
+                [
+                    start[p0:p1],
+                    T,
+                    ranges,
+                    beam_cs,
+                    self.usable,
+                    maps.origin,
+                    maps.res,
+                    maps.cells[p0:p1],
+                    steps,
+                    int(iterations),
+                    int(max_rounds),
+                    pose[p0:p1],
+                    best[p0:p1],
+                    rounds[p0:p1],
+                ],
+                device=self.device,
+            )
 
         self._run_blocks(run, start.shape[0])
 
-    def climb_blocks(self, maps: ParticleMaps, start: wp.array, T_base_laser, ranges: wp.array, angles: wp.array,
-                     first_steps, iterations: int, max_rounds: int, pose: wp.array, best: wp.array,
-                     rounds: wp.array) -> None:
+    def climb_blocks(
+        self,
+        maps: ParticleMaps,
+        start: wp.array,
+        T_base_laser,
+        ranges: wp.array,
+        angles: wp.array,
+        first_steps,
+        iterations: int,
+        max_rounds: int,
+        pose: wp.array,
+        best: wp.array,
+        rounds: wp.array,
+    ) -> None:
         """climb's GPU way: one block per particle, a thread per beam, the whole climb in one launch
         (``make_block_climb_kernel``); the same arguments and results as ``climb``. On the CPU only with
         ``wp.config.enable_cpu_blocks`` (Warp's CPU runs a block as one thread otherwise: the tests use it)."""
         if not wp.get_device(self.device).is_cuda and not wp.config.enable_cpu_blocks:
-            raise ValueError("Scorer.climb_blocks: a block per particle needs a GPU, or wp.config.enable_cpu_blocks "
-                             "on the CPU; use Scorer.climb there")
-        wp.launch_tiled(self.block_climb_kernel, dim=[start.shape[0]],
-                        inputs=[start, wp.vec3(*map(float, T_base_laser)), ranges, self._beam_directions(angles),
-                                self.usable, maps.origin, maps.res, maps.cells, wp.vec3(*map(float, first_steps)),
-                                int(iterations), int(max_rounds), pose, best, rounds],
-                        block_dim=block_dim_for(ranges.shape[0]), device=self.device)
+            raise ValueError(
+                "Scorer.climb_blocks: a block per particle needs a GPU, or wp.config.enable_cpu_blocks "
+                "on the CPU; use Scorer.climb there"
+            )
+        wp.launch_tiled(
+            self.block_climb_kernel,
+            dim=[start.shape[0]],
+            inputs=[
+                start,
+                wp.vec3(*map(float, T_base_laser)),
+                ranges,
+                self._beam_directions(angles),
+                self.usable,
+                maps.origin,
+                maps.res,
+                maps.cells,
+                wp.vec3(*map(float, first_steps)),
+                int(iterations),
+                int(max_rounds),
+                pose,
+                best,
+                rounds,
+            ],
+            block_dim=block_dim_for(ranges.shape[0]),
+            device=self.device,
+        )
 
     def reserve(self, P: int, C: int, B: int):
         """The partial-sum buffers for P x C candidates of B beams (allocate before a CUDA graph capture)."""
         key = (P, C, (B + self.per_thread - 1) // self.per_thread)
         if key not in self._partials:
-            self._partials[key] = (wp.zeros(key, dtype=wp.float32, device=self.device),
-                                   wp.zeros(key, dtype=wp.float32, device=self.device))
+            self._partials[key] = (
+                wp.zeros(key, dtype=wp.float32, device=self.device),
+                wp.zeros(key, dtype=wp.float32, device=self.device),
+            )
         return self._partials[key]
 
     def _beam_directions(self, angles: wp.array) -> wp.array:
@@ -757,8 +975,9 @@ class GmappingMotion:
     def __call__(self, poses: wp.array, deltas, seed: int) -> None:
         """Moves the poses by the odometry steps ``deltas`` ([K, 3] or one [3]), in order."""
         d = np.asarray(deltas, np.float32).reshape(-1, 3)
-        wp.launch(motion_kernel, poses.shape[0], [poses, self._on_device(d), *self.noise, int(seed)],
-                  device=self.device)
+        wp.launch(
+            motion_kernel, poses.shape[0], [poses, self._on_device(d), *self.noise, int(seed)], device=self.device
+        )
 
     def _on_device(self, d: np.ndarray) -> wp.array:
         """The steps on the device. On a GPU through a pinned buffer kept between calls (a new device array from
@@ -771,9 +990,9 @@ class GmappingMotion:
             self._staged = (wp.empty(n, dtype=wp.vec3, device=self.device), host, host.numpy())
         buf, host, view = self._staged
         wp.synchronize_stream(wp.get_stream(self.device))  # the last call's copy has run (the stream is idle here)
-        view[:len(d)] = d
+        view[: len(d)] = d
         wp.copy(buf, host, count=len(d))
-        return buf[:len(d)]
+        return buf[: len(d)]
 
 
 SLAM.register("integrate")(lambda **kw: Integrator(**kw))

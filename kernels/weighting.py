@@ -43,8 +43,11 @@ def nearest_node(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float
 def laser_pose(base: wp.vec3, T_base_laser: wp.vec3) -> wp.vec3:
     c = wp.cos(base[2])
     s = wp.sin(base[2])
-    return wp.vec3(base[0] + c * T_base_laser[0] - s * T_base_laser[1],
-                   base[1] + s * T_base_laser[0] + c * T_base_laser[1], base[2] + T_base_laser[2])
+    return wp.vec3(
+        base[0] + c * T_base_laser[0] - s * T_base_laser[1],
+        base[1] + s * T_base_laser[0] + c * T_base_laser[1],
+        base[2] + T_base_laser[2],
+    )
 
 
 @wp.func
@@ -88,8 +91,11 @@ def make_likelihood_kernel(sigma: float):
     nog_raymarch and nof_direct."""
 
     @wp.kernel(module="unique")
-    def likelihood(rendered: wp.array2d(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-                   log_weights: wp.array(dtype=wp.float32)):
+    def likelihood(
+        rendered: wp.array2d(dtype=wp.float32),
+        measured: wp.array(dtype=wp.float32),
+        log_weights: wp.array(dtype=wp.float32),
+    ):
         p = wp.tid()
         n = float(0.0)
         err = float(0.0)
@@ -103,8 +109,16 @@ def make_likelihood_kernel(sigma: float):
     return likelihood
 
 
-def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, empty_below: float,
-                       eps: float = 1e-10, batch: int = 1, beam_major: bool = False):
+def make_render_kernel(
+    num_samples: int,
+    near: float,
+    far: float,
+    t_min: float,
+    empty_below: float,
+    eps: float = 1e-10,
+    batch: int = 1,
+    beam_major: bool = False,
+):
     """Two ways to the same march, for speed:
 
     * ``batch``: samples whose nodes are loaded together before they are composited one by one (the loads
@@ -121,9 +135,15 @@ def make_render_kernel(num_samples: int, near: float, far: float, t_min: float, 
     batch = max(1, int(batch))
 
     @wp.kernel(module="unique")
-    def render(grid: wp.array2d(dtype=wp.float32), origin: wp.vec2,
-               res: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-               angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
+    def render(
+        grid: wp.array2d(dtype=wp.float32),
+        origin: wp.vec2,
+        res: float,
+        particles: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        angles: wp.array(dtype=wp.float32),
+        out: wp.array2d(dtype=wp.float32),
+    ):
         i, j = wp.tid()
         p = i
         b = j
@@ -201,21 +221,37 @@ class NogRaymarch:
 
     capturable = True
 
-    def __init__(self, nog, num_particles: int, num_beams: int, num_samples: int = 256, near_m: float = 0.02,
-                 far_m: float = 40.0, t_min: float = 0.0, sigma_m: float = 0.5, empty_below: float = 0.0,
-                 batch: int = 1, beam_major: bool = False, device: str = "auto"):
+    def __init__(
+        self,
+        nog,
+        num_particles: int,
+        num_beams: int,
+        num_samples: int = 256,
+        near_m: float = 0.02,
+        far_m: float = 40.0,
+        t_min: float = 0.0,
+        sigma_m: float = 0.5,
+        empty_below: float = 0.0,
+        batch: int = 1,
+        beam_major: bool = False,
+        device: str = "auto",
+    ):
         if nog.occupancy.size == 0 or nog.occupancy.ndim != 2:
             raise ValueError(f"nog_raymarch: the NOG is empty (shape {nog.occupancy.shape})")
         if num_samples < 2 or not far_m > near_m:
-            raise ValueError(f"nog_raymarch: need num_samples >= 2 and far > near, got {num_samples}, [{near_m}, {far_m}]")
+            raise ValueError(
+                f"nog_raymarch: need num_samples >= 2 and far > near, got {num_samples}, [{near_m}, {far_m}]"
+            )
         self.device = pick_device(device)
-        self.grid = wp.array(pack_empty_space(nog.occupancy, float(nog.resolution_m), empty_below),
-                             dtype=wp.float32, device=self.device)
+        self.grid = wp.array(
+            pack_empty_space(nog.occupancy, float(nog.resolution_m), empty_below), dtype=wp.float32, device=self.device
+        )
         self.origin, self.res = wp.vec2(*map(float, nog.origin_xy)), float(nog.resolution_m)
         self.num_beams = num_beams
         self.rendered = wp.zeros((num_particles, num_beams), dtype=wp.float32, device=self.device)
-        self.render_kernel = make_render_kernel(num_samples, near_m, far_m, t_min, empty_below, batch=batch,
-                                                beam_major=beam_major)
+        self.render_kernel = make_render_kernel(
+            num_samples, near_m, far_m, t_min, empty_below, batch=batch, beam_major=beam_major
+        )
         self.beam_major = beam_major
         self.likelihood_kernel = make_likelihood_kernel(sigma_m)
 
@@ -224,19 +260,26 @@ class NogRaymarch:
         if particles.shape[0] > self.rendered.shape[0]:
             raise ValueError(f"nog_raymarch: {particles.shape[0]} particles, built for {self.rendered.shape[0]}")
         dims = (particles.shape[0], angles.shape[0])
-        wp.launch(self.render_kernel, dims[::-1] if self.beam_major else dims,
-                  [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)),
-                   angles, self.rendered], device=self.device)
+        wp.launch(
+            self.render_kernel,
+            dims[::-1] if self.beam_major else dims,
+            [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, self.rendered],
+            device=self.device,
+        )
         return self.rendered
 
-    def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
-                 log_weights: wp.array) -> None:
+    def __call__(
+        self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array
+    ) -> None:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
-            raise ValueError(f"nog_raymarch: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
-                             f"built for {self.num_beams} beams")
+            raise ValueError(
+                f"nog_raymarch: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
+                f"built for {self.num_beams} beams"
+            )
         self.render(particles, T_base_laser, angles)
-        wp.launch(self.likelihood_kernel, particles.shape[0], [self.rendered, measured, log_weights],
-                  device=self.device)
+        wp.launch(
+            self.likelihood_kernel, particles.shape[0], [self.rendered, measured, log_weights], device=self.device
+        )
 
 
 @WEIGHTING.register("nog_raymarch")
@@ -250,15 +293,26 @@ TABLE_BUILD_FLOATS = 1 << 25  # rendered ranges per build launch (128 MB of floa
 
 
 @wp.kernel
-def quantize_ranges(rendered: wp.array2d(dtype=wp.float32), first_node: int, inv_quantum: float,
-                    table: wp.array2d(dtype=wp.uint16)):
+def quantize_ranges(
+    rendered: wp.array2d(dtype=wp.float32), first_node: int, inv_quantum: float, table: wp.array2d(dtype=wp.uint16)
+):
     i, k = wp.tid()
-    table[first_node + i, k] = wp.uint16(wp.clamp(wp.round(rendered[i, k] * inv_quantum), 0.0, wp.static(float(TABLE_LEVELS))))
+    table[first_node + i, k] = wp.uint16(
+        wp.clamp(wp.round(rendered[i, k] * inv_quantum), 0.0, wp.static(float(TABLE_LEVELS)))
+    )
 
 
 @wp.func
-def table_range(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
-                quantum: float, pose: wp.vec3, angle: float) -> float:
+def table_range(
+    table: wp.array2d(dtype=wp.uint16),
+    width: int,
+    height: int,
+    origin: wp.vec2,
+    res: float,
+    quantum: float,
+    pose: wp.vec3,
+    angle: float,
+) -> float:
     """The range the march renders from the laser's nearest node, linear in heading between the table's two
     nearest headings, moved by the laser's offset from that node along the beam (exact for a wall across the
     beam); ``pose``: the laser's, ``angle``: the beam's in the laser frame."""
@@ -275,19 +329,31 @@ def table_range(table: wp.array2d(dtype=wp.uint16), width: int, height: int, ori
     node = iy * width + ix
     r = ((1.0 - f) * float(table[node, k0]) + f * float(table[node, k1])) * quantum
     if r > 0.0:  # 0: no wall rendered (the beam leaves the grid)
-        along = (pose[0] - origin[0] - float(ix) * res) * wp.cos(a) + (pose[1] - origin[1] - float(iy) * res) * wp.sin(a)
+        along = (pose[0] - origin[0] - float(ix) * res) * wp.cos(a) + (pose[1] - origin[1] - float(iy) * res) * wp.sin(
+            a
+        )
         r = wp.max(r - along, 0.0)
     return r
 
 
 @wp.kernel
-def table_ranges(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
-                 quantum: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-                 angles: wp.array(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
+def table_ranges(
+    table: wp.array2d(dtype=wp.uint16),
+    width: int,
+    height: int,
+    origin: wp.vec2,
+    res: float,
+    quantum: float,
+    particles: wp.array(dtype=wp.vec3),
+    T_base_laser: wp.vec3,
+    angles: wp.array(dtype=wp.float32),
+    out: wp.array2d(dtype=wp.float32),
+):
     """The ranges alone [P, B], one thread per (beam, particle)."""
     b, p = wp.tid()
-    out[p, b] = table_range(table, width, height, origin, res, quantum, laser_pose(particles[p], T_base_laser),
-                            angles[b])
+    out[p, b] = table_range(
+        table, width, height, origin, res, quantum, laser_pose(particles[p], T_base_laser), angles[b]
+    )
 
 
 def make_table_likelihood_kernel(sigma: float):
@@ -295,10 +361,19 @@ def make_table_likelihood_kernel(sigma: float):
     table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array."""
 
     @wp.kernel(module="unique")
-    def likelihood(table: wp.array2d(dtype=wp.uint16), width: int, height: int, origin: wp.vec2, res: float,
-                   quantum: float, particles: wp.array(dtype=wp.vec3), T_base_laser: wp.vec3,
-                   angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-                   log_weights: wp.array(dtype=wp.float32)):
+    def likelihood(
+        table: wp.array2d(dtype=wp.uint16),
+        width: int,
+        height: int,
+        origin: wp.vec2,
+        res: float,
+        quantum: float,
+        particles: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        angles: wp.array(dtype=wp.float32),
+        measured: wp.array(dtype=wp.float32),
+        log_weights: wp.array(dtype=wp.float32),
+    ):
         p = wp.tid()
         pose = laser_pose(particles[p], T_base_laser)
         n = float(0.0)
@@ -326,9 +401,21 @@ class NogTable:
 
     capturable = True
 
-    def __init__(self, nog, num_particles: int, num_beams: int, num_angles: int = 720, num_samples: int = 256,
-                 near_m: float = 0.02, far_m: float = 40.0, t_min: float = 0.0, sigma_m: float = 0.5,
-                 empty_below: float = 0.0, table=None, device: str = "auto"):
+    def __init__(
+        self,
+        nog,
+        num_particles: int,
+        num_beams: int,
+        num_angles: int = 720,
+        num_samples: int = 256,
+        near_m: float = 0.02,
+        far_m: float = 40.0,
+        t_min: float = 0.0,
+        sigma_m: float = 0.5,
+        empty_below: float = 0.0,
+        table=None,
+        device: str = "auto",
+    ):
         H, W = nog.occupancy.shape
         self.device = pick_device(device)
         self.shape, self.num_beams, self.quantum = (H, W), num_beams, float(far_m) / TABLE_LEVELS
@@ -350,25 +437,38 @@ class NogTable:
         if num_angles < 4:
             raise ValueError(f"nog_table: mcl.table_angles={num_angles}; need at least 4 headings")
         if H * W * num_angles * 2 > TABLE_MAX_BYTES:
-            raise ValueError(f"nog_table: {H}x{W} nodes x {num_angles} headings need "
-                             f"{H * W * num_angles * 2 / 2**30:.1f} GiB (at most {TABLE_MAX_BYTES / 2**30:.0f}); "
-                             "lower mcl.table_angles or raise mcl.map_resolution_m")
+            raise ValueError(
+                f"nog_table: {H}x{W} nodes x {num_angles} headings need "
+                f"{H * W * num_angles * 2 / 2**30:.1f} GiB (at most {TABLE_MAX_BYTES / 2**30:.0f}); "
+                "lower mcl.table_angles or raise mcl.map_resolution_m"
+            )
         block = max(1, min(H * W, TABLE_BUILD_FLOATS // num_angles))
-        march = NogRaymarch(nog, block, num_angles, num_samples, near_m, far_m, t_min, empty_below=empty_below,
-                            device=device)
+        march = NogRaymarch(
+            nog, block, num_angles, num_samples, near_m, far_m, t_min, empty_below=empty_below, device=device
+        )
         iy, ix = np.divmod(np.arange(H * W), W)
-        nodes = np.stack([nog.origin_xy[0] + ix * nog.resolution_m, nog.origin_xy[1] + iy * nog.resolution_m,
-                          np.zeros(H * W)], -1).astype(np.float32)
+        nodes = np.stack(
+            [nog.origin_xy[0] + ix * nog.resolution_m, nog.origin_xy[1] + iy * nog.resolution_m, np.zeros(H * W)], -1
+        ).astype(np.float32)
         headings = wp.array(table_headings(num_angles), dtype=wp.float32, device=device)
         table = wp.zeros((H * W, num_angles), dtype=wp.uint16, device=device)
         from tqdm import tqdm  # minutes on a CPU for a building's NOG (fr079 at 720 headings: ~80 s on 2 cores)
 
-        for first in tqdm(range(0, H * W, block), desc=f"nog_table: {H}x{W} nodes x {num_angles} headings",
-                          unit="block", disable=H * W <= 4 * block, leave=False):
-            chunk = wp.array(nodes[first:first + block], dtype=wp.vec3, device=device)
+        for first in tqdm(
+            range(0, H * W, block),
+            desc=f"nog_table: {H}x{W} nodes x {num_angles} headings",
+            unit="block",
+            disable=H * W <= 4 * block,
+            leave=False,
+        ):
+            chunk = wp.array(nodes[first : first + block], dtype=wp.vec3, device=device)
             rendered = march.render(chunk, (0.0, 0.0, 0.0), headings)
-            wp.launch(quantize_ranges, (chunk.shape[0], num_angles),
-                      [rendered, first, TABLE_LEVELS / float(far_m), table], device=device)
+            wp.launch(
+                quantize_ranges,
+                (chunk.shape[0], num_angles),
+                [rendered, first, TABLE_LEVELS / float(far_m), table],
+                device=device,
+            )
         return table
 
     def render(self, particles: wp.array, T_base_laser, angles: wp.array) -> wp.array:
@@ -377,21 +477,41 @@ class NogTable:
             raise ValueError(f"nog_table: {particles.shape[0]} particles, built for {self.num_particles}")
         if self._rendered is None or self._rendered.shape != (particles.shape[0], angles.shape[0]):
             self._rendered = wp.zeros((particles.shape[0], angles.shape[0]), dtype=wp.float32, device=self.device)
-        wp.launch(table_ranges, (angles.shape[0], particles.shape[0]), self._args(particles, T_base_laser, angles)
-                  + [self._rendered], device=self.device)
+        wp.launch(
+            table_ranges,
+            (angles.shape[0], particles.shape[0]),
+            self._args(particles, T_base_laser, angles) + [self._rendered],
+            device=self.device,
+        )
         return self._rendered
 
     def _args(self, particles, T_base_laser, angles) -> list:
-        return [self.table, self.shape[1], self.shape[0], self.origin, self.res, self.quantum, particles,
-                wp.vec3(*map(float, T_base_laser)), angles]
+        return [
+            self.table,
+            self.shape[1],
+            self.shape[0],
+            self.origin,
+            self.res,
+            self.quantum,
+            particles,
+            wp.vec3(*map(float, T_base_laser)),
+            angles,
+        ]
 
-    def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
-                 log_weights: wp.array) -> None:
+    def __call__(
+        self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array
+    ) -> None:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
-            raise ValueError(f"nog_table: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
-                             f"built for {self.num_beams} beams")
-        wp.launch(self.likelihood_kernel, particles.shape[0], self._args(particles, T_base_laser, angles)
-                  + [measured, log_weights], device=self.device)
+            raise ValueError(
+                f"nog_table: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
+                f"built for {self.num_beams} beams"
+            )
+        wp.launch(
+            self.likelihood_kernel,
+            particles.shape[0],
+            self._args(particles, T_base_laser, angles) + [measured, log_weights],
+            device=self.device,
+        )
 
 
 def table_headings(num_angles: int) -> np.ndarray:
@@ -406,21 +526,32 @@ def make_nog_table(**settings) -> NogTable:
 
 def make_likelihood_field_kernel(z_hit: float, z_rand: float, sigma_hit: float, max_range: float, max_dist: float):
     @wp.kernel(module="unique")
-    def field(dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
-              T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-              log_lik: wp.array(dtype=wp.float32)):
+    def field(
+        dist: wp.array2d(dtype=wp.float32),
+        origin: wp.vec2,
+        res: float,
+        particles: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        angles: wp.array(dtype=wp.float32),
+        measured: wp.array(dtype=wp.float32),
+        log_lik: wp.array(dtype=wp.float32),
+    ):
         p = wp.tid()
         s = float(0.0)
         for b in range(angles.shape[0]):
             m = measured[b]
             if m == m:  # NaN: invalid beam
-                end = beam_origin(particles[p], T_base_laser) + m * beam_direction(particles[p], T_base_laser, angles[b])
+                end = beam_origin(particles[p], T_base_laser) + m * beam_direction(
+                    particles[p], T_base_laser, angles[b]
+                )
                 ix = int(wp.floor((end[0] - origin[0]) / res))
                 iy = int(wp.floor((end[1] - origin[1]) / res))
                 d = wp.static(max_dist)
                 if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
                     d = wp.min(dist[iy, ix], wp.static(max_dist))
-                q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(z_rand / max_range)
+                q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(
+                    z_rand / max_range
+                )
                 s += wp.log(q)
         log_lik[p] = s
 
@@ -444,9 +575,21 @@ class _GridModel:
         return occupancy
 
     def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
-        wp.launch(self.kernel, particles.shape[0],
-                  [self.grid, self.origin, self.res, particles, wp.vec3(*map(float, T_base_laser)), angles, measured,
-                   log_lik], device=self.device)
+        wp.launch(
+            self.kernel,
+            particles.shape[0],
+            [
+                self.grid,
+                self.origin,
+                self.res,
+                particles,
+                wp.vec3(*map(float, T_base_laser)),
+                angles,
+                measured,
+                log_lik,
+            ],
+            device=self.device,
+        )
 
 
 class LikelihoodField(_GridModel):
@@ -457,12 +600,23 @@ class LikelihoodField(_GridModel):
 
     name = "likelihood_field"
 
-    def __init__(self, occupancy, origin_xy, resolution_m: float, z_hit: float = 0.95, z_rand: float = 0.05,
-                 sigma_hit_m: float = 0.2, max_range_m: float = 30.0, max_dist_m: float = 2.0,
-                 occ_threshold: float = 0.65, device: str = "auto"):
+    def __init__(
+        self,
+        occupancy,
+        origin_xy,
+        resolution_m: float,
+        z_hit: float = 0.95,
+        z_rand: float = 0.05,
+        sigma_hit_m: float = 0.2,
+        max_range_m: float = 30.0,
+        max_dist_m: float = 2.0,
+        occ_threshold: float = 0.65,
+        device: str = "auto",
+    ):
         occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
-        self.grid = wp.array(distance_to_occupied(occupancy, resolution_m, occ_threshold), dtype=wp.float32,
-                             device=self.device)
+        self.grid = wp.array(
+            distance_to_occupied(occupancy, resolution_m, occ_threshold), dtype=wp.float32, device=self.device
+        )
         self.kernel = make_likelihood_field_kernel(z_hit, z_rand, sigma_hit_m, max_range_m, max_dist_m)
 
 
@@ -473,17 +627,30 @@ def make_likelihood_field(**settings) -> LikelihoodField:
 
 def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
     @wp.kernel(module="unique")
-    def beam(occ: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, particles: wp.array(dtype=wp.vec3),
-             T_base_laser: wp.vec3, angles: wp.array(dtype=wp.float32), measured: wp.array(dtype=wp.float32),
-             log_lik: wp.array(dtype=wp.float32)):
+    def beam(
+        occ: wp.array2d(dtype=wp.float32),
+        origin: wp.vec2,
+        res: float,
+        particles: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        angles: wp.array(dtype=wp.float32),
+        measured: wp.array(dtype=wp.float32),
+        log_lik: wp.array(dtype=wp.float32),
+    ):
         p = wp.tid()
         s = float(0.0)
         for b in range(angles.shape[0]):
             z = measured[b]
             if z == z:  # NaN: invalid beam
-                expected = dda_range(occ, origin, res, beam_origin(particles[p], T_base_laser),
-                                     beam_direction(particles[p], T_base_laser, angles[b]),
-                                     wp.static(max_range), wp.static(occ_threshold))
+                expected = dda_range(
+                    occ,
+                    origin,
+                    res,
+                    beam_origin(particles[p], T_base_laser),
+                    beam_direction(particles[p], T_base_laser, angles[b]),
+                    wp.static(max_range),
+                    wp.static(occ_threshold),
+                )
                 e = z - expected
                 q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
                 if z < expected:
@@ -505,13 +672,26 @@ class BeamModel(_GridModel):
 
     name = "beam_model"
 
-    def __init__(self, occupancy, origin_xy, resolution_m: float, z_hit: float = 0.95, z_short: float = 0.1,
-                 z_max: float = 0.05, z_rand: float = 0.05, sigma_hit_m: float = 0.2, lambda_short: float = 0.1,
-                 max_range_m: float = 30.0, occ_threshold: float = 0.5, device: str = "auto"):
+    def __init__(
+        self,
+        occupancy,
+        origin_xy,
+        resolution_m: float,
+        z_hit: float = 0.95,
+        z_short: float = 0.1,
+        z_max: float = 0.05,
+        z_rand: float = 0.05,
+        sigma_hit_m: float = 0.2,
+        lambda_short: float = 0.1,
+        max_range_m: float = 30.0,
+        occ_threshold: float = 0.5,
+        device: str = "auto",
+    ):
         occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
         self.grid = wp.array(occupancy, dtype=wp.float32, device=self.device)
-        self.kernel = make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, max_range_m,
-                                             occ_threshold)
+        self.kernel = make_beam_model_kernel(
+            z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, max_range_m, occ_threshold
+        )
 
 
 @WEIGHTING.register("beam_model")

@@ -23,13 +23,19 @@ def fake_run(root: Path, stage: str, config: dict, metrics: dict, files: dict | 
     settings = runs.read_settings(config, stage)
     run_id = runs.digest([stage, settings, metrics, sorted((files or {}).items())])
     label = runs.label_of(stage, config)
-    folder = Path(root) / str(config["exp"]) / stage / f"{label}-{run_id[:runs.ID_CHARS]}"
+    folder = Path(root) / str(config["exp"]) / stage / f"{label}-{run_id[: runs.ID_CHARS]}"
     folder.mkdir(parents=True)
     for name, text in (files or {}).items():
         (folder / name).write_text(text)
     (folder / "metrics.json").write_text(json.dumps(metrics))
     (folder / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.create(settings)))
-    manifest = {"id": run_id, "stage": stage, "exp": config["exp"], "label": label, "upstream": upstream or {},
-                "outputs": runs.output_digests(folder)}
+    manifest = {
+        "id": run_id,
+        "stage": stage,
+        "exp": config["exp"],
+        "label": label,
+        "upstream": upstream or {},
+        "outputs": runs.output_digests(folder),
+    }
     (folder / "manifest.json").write_text(json.dumps(manifest))
     return folder

@@ -21,8 +21,14 @@ def _lint(root: Path) -> subprocess.CompletedProcess:
     """lint-imports on the packages under ``root`` (its pyproject.toml), as CI would run it."""
     code = "import sys; from importlinter.cli import lint_imports_command; sys.exit(lint_imports_command())"
     env = {"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"}
-    return subprocess.run([sys.executable, "-c", code, "--config", str(root / "pyproject.toml")], cwd=root,
-                          capture_output=True, text=True, env=env, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-c", code, "--config", str(root / "pyproject.toml")],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
 
 
 def test_import_contracts_hold():
@@ -31,11 +37,14 @@ def test_import_contracts_hold():
     assert "0 broken" in run.stdout
 
 
-@pytest.mark.parametrize("importer, forbidden, contract", [
-    ("kernels/grid.py", "from irmcl_warp.nof.model import NOF", "kernels is a leaf"),
-    ("irmcl_warp/slam/stage.py", "from irmcl_warp.mcl.stage import run_localize", "no stage imports another stage"),
-    ("irmcl_warp/services/data.py", "from eval.tables import main", "(and the runs module) import no stage"),
-])
+@pytest.mark.parametrize(
+    "importer, forbidden, contract",
+    [
+        ("kernels/grid.py", "from irmcl_warp.nof.model import NOF", "kernels is a leaf"),
+        ("irmcl_warp/slam/stage.py", "from irmcl_warp.mcl.stage import run_localize", "no stage imports another stage"),
+        ("irmcl_warp/services/data.py", "from eval.tables import main", "(and the runs module) import no stage"),
+    ],
+)
 def test_a_forbidden_import_breaks_a_contract(tmp_path, importer, forbidden, contract):
     for name in FOLDERS:  # the links in irmcl_warp/ stay links, to the copies
         shutil.copytree(REPO / name, tmp_path / name, symlinks=True, ignore=shutil.ignore_patterns("__pycache__"))
@@ -47,26 +56,37 @@ def test_a_forbidden_import_breaks_a_contract(tmp_path, importer, forbidden, con
 
 
 def test_the_kernels_leaf_contract_names_every_other_part_of_the_package():
-    """"kernels is a leaf" lists the package's other modules one by one (a contract cannot forbid the package
+    """ "kernels is a leaf" lists the package's other modules one by one (a contract cannot forbid the package
     that holds its source): a new module must join the list, or kernels could import it unseen."""
     import tomllib
 
     contracts = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
-    leaf, = [c for c in contracts if c["name"].startswith("kernels is a leaf")]
-    parts = {f"irmcl_warp.{p.stem}" for p in (REPO / "irmcl_warp").iterdir()
-             if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").is_file()}
+    (leaf,) = [c for c in contracts if c["name"].startswith("kernels is a leaf")]
+    parts = {
+        f"irmcl_warp.{p.stem}"
+        for p in (REPO / "irmcl_warp").iterdir()
+        if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").is_file()
+    }
     assert parts - {"irmcl_warp.kernels", "irmcl_warp.conf"} == set(leaf["forbidden_modules"]) - {"eval"}
 
 
 def test_no_module_imports_itself_through_others():
     graph = grimp.build_graph(*PACKAGES, include_external_packages=False)
-    cycles = sorted({tuple(sorted((a, b))) for a in graph.modules for b in graph.find_modules_directly_imported_by(a)
-                     if graph.chain_exists(importer=b, imported=a)})
+    cycles = sorted(
+        {
+            tuple(sorted((a, b)))
+            for a in graph.modules
+            for b in graph.find_modules_directly_imported_by(a)
+            if graph.chain_exists(importer=b, imported=a)
+        }
+    )
     assert cycles == [], cycles
 
 
-FOLDER_LITERAL = re.compile(r"""["'](?:localize|slam|train|synthesis|globloc|pipeline|inspect|relations)-|"""
-                            r"reference-(?:gmapping|irmcl)|stage_dir|run_tag|train_folder")
+FOLDER_LITERAL = re.compile(
+    r"""["'](?:localize|slam|train|synthesis|globloc|pipeline|inspect|relations)-|"""
+    r"reference-(?:gmapping|irmcl)|stage_dir|run_tag|train_folder"
+)
 FOLDER_BUILT = re.compile(r"\s/\s*(?:cfg\.)?exp\s*/|\{(?:cfg\.)?exp\}/")
 
 
@@ -86,6 +106,24 @@ def test_run_folders_are_named_in_one_place():
 def test_the_linter_finds_nothing():
     """ruff's default rules (pyflakes and pycodestyle's errors: unused or undefined names, ambiguous names, ...)
     over the repository, as pyproject.toml configures it."""
-    run = subprocess.run([sys.executable, "-m", "ruff", "check", "--output-format", "concise", str(REPO)], cwd=REPO,
-                         capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        [sys.executable, "-m", "ruff", "check", "--output-format", "concise", str(REPO)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-1000:]
+
+
+def test_the_code_is_formatted():
+    """``ruff format --check``: the formatter's style, at the ruff version pyproject.toml pins (formatters change
+    their style between releases; `ruff format .` with that version fixes what this finds)."""
+    run = subprocess.run(
+        [sys.executable, "-m", "ruff", "format", "--check", str(REPO)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-1000:]

@@ -86,8 +86,10 @@ def test_file_errors_name_file_and_line(tmp_path):
 
 def test_g2o_reader(tmp_path):
     g = tmp_path / "x.g2o"
-    g.write_text("VERTEX_SE2 0 1 2 0.5\nVERTEX_SE2 1 2 2 0.5\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
-                 "ROBOTLASER1 0 -1.5 3.1 0.01 50 0.1 0 2 1.0 1.0 0 0 0 0 0 0 0 0 0 0 0 0 12.25 h 0\n")
+    g.write_text(
+        "VERTEX_SE2 0 1 2 0.5\nVERTEX_SE2 1 2 2 0.5\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"
+        "ROBOTLASER1 0 -1.5 3.1 0.01 50 0.1 0 2 1.0 1.0 0 0 0 0 0 0 0 0 0 0 0 0 12.25 h 0\n"
+    )
     graph = read_g2o(g)
     np.testing.assert_array_equal(graph.vertex_ids, [0, 1])
     assert graph.edges.shape == (1, 5) and graph.laser_stamps.tolist() == [12.25]

@@ -75,10 +75,17 @@ def test_reversed_scanner_is_read_in_increasing_angle(tmp_path):
     np.testing.assert_array_equal(b.ranges_m, f.ranges_m)
 
 
-@pytest.mark.parametrize("field, value, expected", [
-    ("increment", 0.0, "non-zero increment"), ("increment", float("nan"), "angle_increment is nan"),
-    ("range_max", 0.0, "0 <= range_min < range_max"), ("range_min", -1.0, "0 <= range_min < range_max"),
-    ("angle_min", float("inf"), "angle_min is inf"), ("increment", 1.0, "spanning at most 2 pi")])
+@pytest.mark.parametrize(
+    "field, value, expected",
+    [
+        ("increment", 0.0, "non-zero increment"),
+        ("increment", float("nan"), "angle_increment is nan"),
+        ("range_max", 0.0, "0 <= range_min < range_max"),
+        ("range_min", -1.0, "0 <= range_min < range_max"),
+        ("angle_min", float("inf"), "angle_min is inf"),
+        ("increment", 1.0, "spanning at most 2 pi"),
+    ],
+)
 def test_degenerate_geometry_is_an_error_naming_the_message(tmp_path, field, value, expected):
     bad = common_scan(1)
     bad[field] = value
@@ -93,7 +100,9 @@ def test_zero_quaternion_is_an_error_and_an_unnormalised_one_is_normalised_and_c
     zero["quat"] = (0, 0, 0, 0)
     p = tmp_path / "q0.bag"
     write_scans(p, [common_scan(0), zero])
-    with pytest.raises(LogFormatError, match=r"q0.bag, message 1 on /odom: quaternion \(0.0, 0.0, 0.0, 0.0\) is no rotation"):
+    with pytest.raises(
+        LogFormatError, match=r"q0.bag, message 1 on /odom: quaternion \(0.0, 0.0, 0.0, 0.0\) is no rotation"
+    ):
         read_bag(p)
     yaw = 0.8
     scaled = [common_scan(k) for k in range(3)]
@@ -126,15 +135,20 @@ def test_a_typo_in_the_beam_policy_is_an_error(tmp_path):
 def robotlaser(start, fov, ranges, stamp):
     r = " ".join(f"{v:.3f}" for v in ranges)
     pose = "0 0 0 0 0 0"
-    return (f"ROBOTLASER1 0 {start:.6f} {fov:.6f} {fov / (len(ranges) - 1):.6f} 30 0.01 0 {len(ranges)} {r} 0 "
-            f"{pose} 0 0 0 0 0 {stamp:.6f} host {stamp:.6f}\n")
+    return (
+        f"ROBOTLASER1 0 {start:.6f} {fov:.6f} {fov / (len(ranges) - 1):.6f} 30 0.01 0 {len(ranges)} {r} 0 "
+        f"{pose} 0 0 0 0 0 {stamp:.6f} host {stamp:.6f}\n"
+    )
 
 
 def test_carmen_robotlaser_lines_carry_their_own_geometry(tmp_path):
     a = -np.pi / 2 + STEP * np.arange(B)
     shift = 2 * STEP
-    lines = [robotlaser(-np.pi / 2, np.pi, wall(a), 1.0), robotlaser(-np.pi / 2, np.pi, wall(a), 1.1),
-             robotlaser(-np.pi / 2 + shift, np.pi, wall(a + shift), 1.2)]
+    lines = [
+        robotlaser(-np.pi / 2, np.pi, wall(a), 1.0),
+        robotlaser(-np.pi / 2, np.pi, wall(a), 1.1),
+        robotlaser(-np.pi / 2 + shift, np.pi, wall(a + shift), 1.2),
+    ]
     p = tmp_path / "rl.clf"
     p.write_text("".join(lines))
     with pytest.raises(LogFormatError, match=r"rl.clf, line 3: scan's beams start at"):
@@ -147,10 +161,14 @@ def test_carmen_robotlaser_lines_carry_their_own_geometry(tmp_path):
     assert np.isnan(log.ranges_m[2, :2]).all()
 
 
-@pytest.mark.parametrize("line, expected", [
-    ("FLASER -5 1 2 3", "FLASER beam count: expected a whole number"),
-    ("FLASER 2.5 1 2 3 4 5 6 7 8 9", "FLASER beam count: expected a whole number"),
-    ("FLASER 1 1.0 0 0 0 0 0 0 5.0", "scan has 1 beams: expected at least 2")])
+@pytest.mark.parametrize(
+    "line, expected",
+    [
+        ("FLASER -5 1 2 3", "FLASER beam count: expected a whole number"),
+        ("FLASER 2.5 1 2 3 4 5 6 7 8 9", "FLASER beam count: expected a whole number"),
+        ("FLASER 1 1.0 0 0 0 0 0 0 5.0", "scan has 1 beams: expected at least 2"),
+    ],
+)
 def test_carmen_bad_beam_counts_are_clear_errors(tmp_path, line, expected):
     p = tmp_path / "c.clf"
     p.write_text(line + "\n")
@@ -188,8 +206,14 @@ def test_the_log_s_geometry_is_the_majority_s_even_when_its_increment_jitters(rn
 
     n = 400
     minority = rng.random(n) < 0.25
-    geometries = [ScanGeometry(181, -1.5708, 0.0174533) if m else
-                  ScanGeometry(180, -1.5708, float(np.float32(0.0175504 + rng.normal(0, 3e-9)))) for m in minority]
+    geometries = [
+        ScanGeometry(181, -1.5708, 0.0174533)
+        if m
+        else ScanGeometry(180, -1.5708, float(np.float32(0.0175504 + rng.normal(0, 3e-9))))
+        for m in minority
+    ]
     scans = [rng.uniform(1, 5, g.num_beams) for g in geometries]
-    ranges, kept, common = harmonise_beams("log", scans, [f"scan {i}" for i in range(n)], "reject", DefectReport(), geometries)
+    ranges, kept, common = harmonise_beams(
+        "log", scans, [f"scan {i}" for i in range(n)], "reject", DefectReport(), geometries
+    )
     assert common.num_beams == 180 and len(kept) == int((~minority).sum()) and ranges.shape == (len(kept), 180)

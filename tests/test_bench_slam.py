@@ -12,9 +12,18 @@ from eval.bench.slam import run_slam_bench
 
 
 def _args(tmp_path, match_at):
-    return argparse.Namespace(exp="gmapping_sim", particles=[6], device="cpu", scans=None,
-                              override=["sim.duration_s=40"], repeats=1, released=False, match_at=match_at,
-                              match_repeats=2, out=str(tmp_path / "bench"))
+    return argparse.Namespace(
+        exp="gmapping_sim",
+        particles=[6],
+        device="cpu",
+        scans=None,
+        override=["sim.duration_s=40"],
+        repeats=1,
+        released=False,
+        match_at=match_at,
+        match_repeats=2,
+        out=str(tmp_path / "bench"),
+    )
 
 
 def test_the_match_benchmark_times_each_way_and_the_ways_agree(tmp_path, monkeypatch):

@@ -73,14 +73,17 @@ def test_odometry_against_its_velocity_is_reported(tmp_path):
         read_carmen(_write(tmp_path, text))
 
 
-@pytest.mark.parametrize("bad, match", [
-    ("FLASER 6 1 2 x 4 5 6 0 0 0 0 0 0 9.0 h 9.0\n", r"line 2: FLASER ranges: expected a number, found 'x'"),
-    ("FLASER 6 1 2 nan 4 5 6 0 0 0 0 0 0 9.0 h 9.0\n", "line 2: FLASER ranges: NaN or infinite"),
-    ("FLASER 6 1 2 3\n", "line 2: FLASER with 6 beams"),
-    ("ODOM 1 2\n", "line 2: ODOM: expected 8 fields"),
-])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ("FLASER 6 1 2 x 4 5 6 0 0 0 0 0 0 9.0 h 9.0\n", r"line 2: FLASER ranges: expected a number, found 'x'"),
+        ("FLASER 6 1 2 nan 4 5 6 0 0 0 0 0 0 9.0 h 9.0\n", "line 2: FLASER ranges: NaN or infinite"),
+        ("FLASER 6 1 2 3\n", "line 2: FLASER with 6 beams"),
+        ("ODOM 1 2\n", "line 2: ODOM: expected 8 fields"),
+    ],
+)
 def test_garbage_lines_name_the_line(tmp_path, bad, match):
-    text = small_log(1) .split("\n")
+    text = small_log(1).split("\n")
     text.insert(1, bad.strip())
     with pytest.raises(LogFormatError, match=match):
         read_carmen(_write(tmp_path, "\n".join(text)))
@@ -93,8 +96,12 @@ def test_negative_range_is_an_error(tmp_path):
 
 def test_absurd_range_is_an_error_not_an_overflow(tmp_path):
     with pytest.raises(LogFormatError, match=r"scan 1: range 1e\+39 m is beyond any lidar"):
-        read_carmen(_write(tmp_path, small_log(2).replace("FLASER 6 1.00", "FLASER 6 1e39", 2).replace(
-            "FLASER 6 1e39", "FLASER 6 1.00", 1)))
+        read_carmen(
+            _write(
+                tmp_path,
+                small_log(2).replace("FLASER 6 1.00", "FLASER 6 1e39", 2).replace("FLASER 6 1e39", "FLASER 6 1.00", 1),
+            )
+        )
 
 
 def test_empty_log_is_an_error_not_an_empty_result(tmp_path):
@@ -133,7 +140,7 @@ def test_fuzzed_logs_read_or_fail_clearly(tmp_path, data):
     pos = data.draw(st.integers(0, len(text) - 1))
     junk = data.draw(st.text(alphabet="0123456789 .-naxFLSERODM\n", max_size=12))
     cut = data.draw(st.booleans())
-    mutated = text[:pos] + junk + ("" if cut else text[pos + len(junk):])
+    mutated = text[:pos] + junk + ("" if cut else text[pos + len(junk) :])
     p = _write(tmp_path, mutated, "fuzz.clf")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LogDefectWarning)

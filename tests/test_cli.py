@@ -40,7 +40,9 @@ def test_expected_errors_are_one_line_and_exit_2(tmp_path):
     cut = tmp_path / "cut.bag"
     cut.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
     _one_clean_line(_run(["irmcl_warp.inspect", "data=bag", f"data.path={cut}"], tmp_path), str(cut))
-    _one_clean_line(_run(["irmcl_warp.inspect", "data=bag", f"data.path={tmp_path / 'none.bag'}"], tmp_path), "none.bag")
+    _one_clean_line(
+        _run(["irmcl_warp.inspect", "data=bag", f"data.path={tmp_path / 'none.bag'}"], tmp_path), "none.bag"
+    )
     _one_clean_line(_run(["irmcl_warp.slam", "slam.num_particles=0"], tmp_path), "slam.num_particles=0", ">= 1")
     _one_clean_line(_run(["irmcl_warp.localize", "+mcl.foo=1"], tmp_path), "mcl.foo", "no such setting")
     shown = _run(["irmcl_warp.slam", "slam.num_particles=0"], tmp_path, IRMCL_TRACEBACK="1")
@@ -55,11 +57,15 @@ def test_settings_are_checked_by_key_and_range():
     register()
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
         validate(compose("config"))  # the defaults pass
-        for override, message in [("mcl.num_particles=-5", "mcl.num_particles=-5: expected a number >= 1"),
-                                  ("mapping.resolution_m=0", "mapping.resolution_m=0.0: expected a number > 0"),
-                                  ("localize.run_s=-5", "localize.run_s=-5.0"), ("data.max_step_m=-1", "data.max_step_m"),
-                                  ("data.beam_policy=resampel", "expected one of error, reject, resample"),
-                                  ("+foo=1", "foo: no such setting"), ("+mcl.foo=1", "mcl.foo: no such setting")]:
+        for override, message in [
+            ("mcl.num_particles=-5", "mcl.num_particles=-5: expected a number >= 1"),
+            ("mapping.resolution_m=0", "mapping.resolution_m=0.0: expected a number > 0"),
+            ("localize.run_s=-5", "localize.run_s=-5.0"),
+            ("data.max_step_m=-1", "data.max_step_m"),
+            ("data.beam_policy=resampel", "expected one of error, reject, resample"),
+            ("+foo=1", "foo: no such setting"),
+            ("+mcl.foo=1", "mcl.foo: no such setting"),
+        ]:
             with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
                 validate(compose("config", overrides=[override]))
 
@@ -90,21 +96,34 @@ def test_data_tests_skip_without_the_data_and_fail_when_ci_requires_it(tmp_path)
     assert required.returncode == 1 and "shared data is missing" in required.stdout, required.stdout[-2000:]
 
 
-@pytest.mark.parametrize("entry", ["irmcl_warp.slam", "irmcl_warp.train", "irmcl_warp.localize", "irmcl_warp.globloc",
-                                   "irmcl_warp.inspect", "irmcl_warp.pipeline", "irmcl_warp.synthesis",
-                                   "irmcl_warp.relations"])
+@pytest.mark.parametrize(
+    "entry",
+    [
+        "irmcl_warp.slam",
+        "irmcl_warp.train",
+        "irmcl_warp.localize",
+        "irmcl_warp.globloc",
+        "irmcl_warp.inspect",
+        "irmcl_warp.pipeline",
+        "irmcl_warp.synthesis",
+        "irmcl_warp.relations",
+    ],
+)
 def test_every_hydra_entry_point_starts_and_checks_its_settings(tmp_path, entry):
     _one_clean_line(_run([entry, "mcl.num_particles=0"], tmp_path), "mcl.num_particles=0", ">= 1")
 
 
 def test_argparse_entry_points_report_bad_input_without_a_traceback(tmp_path):
-    _one_clean_line(_run(["eval.bench", "mcl", "--nog", str(tmp_path / "none.npz"), "--out", str(tmp_path)], tmp_path),
-                    "none.npz")
+    _one_clean_line(
+        _run(["eval.bench", "mcl", "--nog", str(tmp_path / "none.npz"), "--out", str(tmp_path)], tmp_path), "none.npz"
+    )
     kept = _run(["eval.keep", str(tmp_path / "not-a-run"), "--results", str(tmp_path / "results")], tmp_path)
     assert kept.returncode == 2 and "not a finished run" in kept.stderr and "Traceback" not in kept.stderr
 
 
-@pytest.mark.parametrize("mistake, said", [("mcl.no_such_key=1", "no_such_key"), ("+exp=no_such_experiment", "no_such_experiment")])
+@pytest.mark.parametrize(
+    "mistake, said", [("mcl.no_such_key=1", "no_such_key"), ("+exp=no_such_experiment", "no_such_experiment")]
+)
 def test_hydra_s_own_mistakes_exit_2_as_ours_do(tmp_path, mistake, said):
     run = _run(["irmcl_warp.inspect", mistake], tmp_path)
     assert run.returncode == 2 and said in run.stderr, (run.returncode, run.stderr[-2000:])

@@ -55,8 +55,15 @@ def test_training_presets_compose_and_name_themselves(preset):
 def test_paper_recipe_is_the_authors_script():
     cfg = _compose(["+exp=fr079", "train=paper"])
     t, r, m = cfg.train, cfg.render, cfg.model
-    assert (t.epochs, t.batch_rays, t.num_samples, t.lr, list(t.lr_milestones), t.lr_gamma, t.weight_decay) == \
-        (32, 1024, 256, 1e-4, [4, 8], 0.5, 1e-3)
+    assert (t.epochs, t.batch_rays, t.num_samples, t.lr, list(t.lr_milestones), t.lr_gamma, t.weight_decay) == (
+        32,
+        1024,
+        256,
+        1e-4,
+        [4, 8],
+        0.5,
+        1e-3,
+    )
     assert (t.loss, t.lambda_opacity, r.near_m, cfg.data.far_m) == ("smooth_l1", 1e-5, 0.02, 40.0)
     assert (m.num_freqs, m.width, m.depth, m.skip_after) == (10, 256, 8, 4)
 
@@ -77,9 +84,16 @@ def test_config_choices_are_what_the_code_implements():
     from irmcl_warp.slam.rbpf import RBPF
     from irmcl_warp.kernels import MAPPING, RAYCAST, RESAMPLE, WEIGHTING
 
-    implemented = {"mcl.weighting": WEIGHTING.names(), "mcl.estimate": ESTIMATORS, "mcl.resample": RESAMPLE.names(),
-                   "render.name": RENDERERS, "raycast.name": RAYCAST.names(), "mapping.kernel": MAPPING.names(),
-                   "data.split": SPLITS, "slam.proposal": RBPF.PROPOSALS}
+    implemented = {
+        "mcl.weighting": WEIGHTING.names(),
+        "mcl.estimate": ESTIMATORS,
+        "mcl.resample": RESAMPLE.names(),
+        "render.name": RENDERERS,
+        "raycast.name": RAYCAST.names(),
+        "mapping.kernel": MAPPING.names(),
+        "data.split": SPLITS,
+        "slam.proposal": RBPF.PROPOSALS,
+    }
     for key, names in implemented.items():
         assert sorted(CHOICES[key]) == sorted(names), key
 

@@ -31,9 +31,17 @@ def test_evo_scores_an_own_map_run_as_its_metrics_say(tmp_path, monkeypatch):
     files = save_map(grid, tmp_path / "office")
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=[*(f"sim.{k}={v}" for k, v in SMALL.items()), f"localize.map_path={files['yaml']}",
-                                           "device=cpu", "mcl.weighting=likelihood_field", "mcl.num_particles=4000",
-                                           "localize.run_s=null"])
+        cfg = compose(
+            "config",
+            overrides=[
+                *(f"sim.{k}={v}" for k, v in SMALL.items()),
+                f"localize.map_path={files['yaml']}",
+                "device=cpu",
+                "mcl.weighting=likelihood_field",
+                "mcl.num_particles=4000",
+                "localize.run_s=null",
+            ],
+        )
     out = run_localize(cfg)
     m = json.loads((out / "metrics.json").read_text())
     scored, whole = m["aligned_to_ground_truth"], m["aligned_whole_run"]

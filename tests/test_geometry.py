@@ -14,7 +14,9 @@ def test_compose_inverse_roundtrip(rng):
 def test_hand_computed_compose_and_points():
     # a quarter turn at (1, 0): the point 1 m ahead of it lies at (1, 1)
     np.testing.assert_allclose(compose([1, 0, np.pi / 2], [1, 0, 0]), [1, 1, np.pi / 2], atol=1e-12)
-    np.testing.assert_allclose(transform_points(np.array([1.0, 0, np.pi / 2]), np.array([[1.0, 0]])), [[1, 1]], atol=1e-12)
+    np.testing.assert_allclose(
+        transform_points(np.array([1.0, 0, np.pi / 2]), np.array([[1.0, 0]])), [[1, 1]], atol=1e-12
+    )
 
 
 def test_interpolation_takes_the_short_way_across_pi():

@@ -47,8 +47,23 @@ def test_camera_kernel_matches_twin(rng):
     k = cam.kernel
     pose = np.array([rng.uniform(2, 12), 5.0 + rng.uniform(-0.5, 0.5), rng.uniform(-np.pi, np.pi)])
     rgb, depth = k.render(pose[None], 0.9, (1.0, 0.95, 1.05), 0.0, 0)
-    want_rgb, want_depth = twin.render(world.segments, look.heights, look.colours, look.posters, pose, k.W, k.H, k.fx,
-                                       k.fy, k.cx, k.cy, k.cam_height, k.wall_height, 0.9, (1.0, 0.95, 1.05))
+    want_rgb, want_depth = twin.render(
+        world.segments,
+        look.heights,
+        look.colours,
+        look.posters,
+        pose,
+        k.W,
+        k.H,
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy,
+        k.cam_height,
+        k.wall_height,
+        0.9,
+        (1.0, 0.95, 1.05),
+    )
     same = np.abs(rgb[0] - want_rgb) < 1.0
     assert same.mean() > 0.99, f"seed {rng.seed}: {same.mean():.3f}"  # float32 at wall edges may flip a pixel
     assert np.abs(depth[0] - want_depth)[same.all(-1)].max() < 1e-3
@@ -87,8 +102,12 @@ def test_pnp_drops_features_on_depth_edges():
 
 def _db(n=6, hw=(24, 32)):
     rng = np.random.default_rng(0)
-    return KeyframeDB(rng.uniform(0, 10, (n, 3)), np.zeros((n, *hw, 3), np.uint8), np.ones((n, *hw), np.float32),
-                      rng.normal(0, 1, (n, 8)).astype(np.float32))
+    return KeyframeDB(
+        rng.uniform(0, 10, (n, 3)),
+        np.zeros((n, *hw, 3), np.uint8),
+        np.ones((n, *hw), np.float32),
+        rng.normal(0, 1, (n, 8)).astype(np.float32),
+    )
 
 
 def test_database_errors_are_clear():
@@ -127,8 +146,9 @@ def test_scan2map_prefers_the_true_pose(rng):
     grid, origin = grid_of(world, 0.05)
     angles = np.linspace(-np.pi, np.pi, 180, endpoint=False)
     truth = np.array([6.0, 5.0, rng.uniform(-np.pi, np.pi)])
-    ranges = SIM.build("segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=20.0,
-                       device="cpu").scan(truth[None], seed=1)[0]
+    ranges = SIM.build(
+        "segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=20.0, device="cpu"
+    ).scan(truth[None], seed=1)[0]
     off = truth + [0.4, -0.3, 0.2]
     for kind in ("paper", "likelihood_field"):
         s = Scan2Map(grid, origin, 0.05, kind)((np.stack([truth, off])), (0, 0, 0), ranges, angles)
@@ -159,14 +179,17 @@ def test_the_trigger_fires_on_a_kidnap_and_not_on_normal_motion(confirm):
     truth = np.concatenate([a, b])
     odom = np.concatenate([a, compose(a[-1], relative(b[:1], b))])  # exact odometry that does not see the jump
 
-    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=laser_angles(cfg), max_range_m=20.0,
-                      device="cpu")
+    lidar = SIM.build(
+        "segment_lidar", segments=world.segments, angles_rad=laser_angles(cfg), max_range_m=20.0, device="cpu"
+    )
     ranges = lidar.scan(compose(truth, np.array([cfg.sim.laser_x_m, 0, 0])), seed=3)
     cam_idx = np.arange(0, len(truth), 5)
     st = Stream(np.arange(len(truth)) * 0.2, truth, odom, ranges, cam_idx, np.zeros((len(cam_idx), 2, 2, 3)), len(a))
     s2m = Scan2Map(grid, origin, 0.05, "paper")
-    hyps = [[(truth[i], 100, float(s2m(truth[i][None], (cfg.sim.laser_x_m, 0, 0), ranges[i], laser_angles(cfg))[0]))]
-            for i in cam_idx]
+    hyps = [
+        [(truth[i], 100, float(s2m(truth[i][None], (cfg.sim.laser_x_m, 0, 0), ranges[i], laser_angles(cfg))[0]))]
+        for i in cam_idx
+    ]
     est, relocs = run_method("paper", cfg, st, hyps, grid, origin, "cpu", np.random.default_rng(0))
     assert relocs[0] == 0  # the first fix
     during = [r for r in relocs[1:] if r < len(a)]
@@ -189,8 +212,12 @@ def test_camera_frames_round_trip_through_a_bag(tmp_path, version, encoding):
     cam = Camera(world.segments, appearance(world), width=40, height=30, device="cpu")
     idx = np.arange(0, len(log), 5)
     rgb, depth = cam.render(log.ground_truth[idx])
-    path = write_bag(log, tmp_path / ("run.bag" if version == 1 else "run"), version=version,
-                     images=CameraFrames(log.stamps[idx], rgb, depth, encoding))
+    path = write_bag(
+        log,
+        tmp_path / ("run.bag" if version == 1 else "run"),
+        version=version,
+        images=CameraFrames(log.stamps[idx], rgb, depth, encoding),
+    )
     back = read_bag_images(path)
     assert np.allclose(back.stamps, log.stamps[idx], atol=1e-6)
     assert np.array_equal(back.rgb, rgb)

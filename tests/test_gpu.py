@@ -51,8 +51,15 @@ def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch, preset):
     from irmcl_warp.services.metrics import scan_synthesis_metrics
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg("+exp=sim_office", f"train={preset}", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=200",
-               "train.val_scans=8", "train.max_time_s=null")
+    cfg = _cfg(
+        "+exp=sim_office",
+        f"train={preset}",
+        "sim.duration_s=120",
+        "train.epochs=2",
+        "train.steps_per_epoch=200",
+        "train.val_scans=8",
+        "train.max_time_s=null",
+    )
     torch.manual_seed(0)
     val = prepare_beams(cfg)["val"].subset(np.arange(8))
     untrained = NOF(ModelConfig(**cfg.model)).cuda().eval()

@@ -10,8 +10,17 @@ from omegaconf import OmegaConf
 
 from irmcl_warp.config import ConfigError, DataConfig, validate
 from irmcl_warp.geometry import compose, interpolate_poses, interpolate_se2, relative, se2_exp, se2_log, wrap_angle
-from irmcl_warp.io import (LogDefectWarning, LogFormatError, apply_ground_truth, attach_ground_truth, read_carmen,
-                           read_carmen_poses, read_matched_csv, read_tum, write_tum)
+from irmcl_warp.io import (
+    LogDefectWarning,
+    LogFormatError,
+    apply_ground_truth,
+    attach_ground_truth,
+    read_carmen,
+    read_carmen_poses,
+    read_matched_csv,
+    read_tum,
+    write_tum,
+)
 from irmcl_warp.io.clock import estimate_clock_offset
 from irmcl_warp.io.groundtruth import Relations
 from irmcl_warp.services.metrics import relations_error
@@ -84,11 +93,16 @@ def test_a_dense_ground_truth_with_a_clock_offset_is_named_then_scores_every_rel
     # within a quarter of the 0.2 s scan period under heading noise (40 draws: median 17 ms, worst 30 ms; the
     # bound of a seventh of the period failed CI at 34 ms)
     assert c.convincing and abs(c.offset_s - 4711.25) < 0.05
-    with pytest.raises(LogFormatError, match=r"mocap.tum: ground truth for robot.bag is refused: none of its \d+ "
-                                             r"poses .* set data.ground_truth_time_offset_s=4711.[23]\d\d"):
+    with pytest.raises(
+        LogFormatError,
+        match=r"mocap.tum: ground truth for robot.bag is refused: none of its \d+ "
+        r"poses .* set data.ground_truth_time_offset_s=4711.[23]\d\d",
+    ):
         apply_ground_truth(log, path, gt_config())
     # the offset set: still refused as keyframes (100 Hz stamps never meet the 5 Hz scans) ...
-    with pytest.raises(LogFormatError, match=r"poses in the log's time span match a scan by stamp \(5 %.*data.ground_truth_max_gap_s"):
+    with pytest.raises(
+        LogFormatError, match=r"poses in the log's time span match a scan by stamp \(5 %.*data.ground_truth_max_gap_s"
+    ):
         apply_ground_truth(log, path, gt_config(ground_truth_time_offset_s=4711.25))
     # ... and interpolated at every scan once the trajectory is declared dense
     m = apply_ground_truth(log, path, gt_config(ground_truth_time_offset_s=4711.25, ground_truth_max_gap_s=0.05))
@@ -116,14 +130,22 @@ def test_a_simulated_drive_s_dense_truth_70_s_off_is_matched_by_the_hint_it_gets
     log, _ = simulate(OmegaConf.structured(SimConfig(duration_s=120.0)), "cpu")
     truth, log.ground_truth = log.ground_truth, None
     t = np.arange(log.stamps[0] + 0.013, log.stamps[-1], 0.05)
-    dense = np.column_stack([np.interp(t, log.stamps, truth[:, 0]), np.interp(t, log.stamps, truth[:, 1]),
-                             wrap_angle(np.interp(t, log.stamps, np.unwrap(truth[:, 2])))])
+    dense = np.column_stack(
+        [
+            np.interp(t, log.stamps, truth[:, 0]),
+            np.interp(t, log.stamps, truth[:, 1]),
+            wrap_angle(np.interp(t, log.stamps, np.unwrap(truth[:, 2]))),
+        ]
+    )
     path = tmp_path / "truth.tum"
     write_tum(path, t - 70.18, dense)
     with pytest.raises(LogFormatError) as refused:
         apply_ground_truth(log, path, gt_config())
-    said = re.search(r"set data.ground_truth_time_offset_s=([\d.]+) data.ground_truth_max_gap_s=([\d.]+) \(tried: "
-                     r"(\d+) % of the log", str(refused.value))
+    said = re.search(
+        r"set data.ground_truth_time_offset_s=([\d.]+) data.ground_truth_max_gap_s=([\d.]+) \(tried: "
+        r"(\d+) % of the log",
+        str(refused.value),
+    )
     assert said, str(refused.value)
     offset, gap = float(said[1]), float(said[2])
     assert abs(offset - 70.18) < 0.02 and int(said[3]) >= 95
@@ -183,14 +205,18 @@ def test_dense_trajectories_are_interpolated_at_relation_stamps(rng):
     dense_t = np.arange(-1, 81, 0.013)
     dense = drive(dense_t)
     # the drive is integrated on another grid: compare against it, not against the coarse integration
-    rel_dense = Relations(rel.t1, rel.t2, relative(interpolate_se2(dense_t, dense, rel.t1, 0.02),
-                                                   interpolate_se2(dense_t, dense, rel.t2, 0.02)))
+    rel_dense = Relations(
+        rel.t1,
+        rel.t2,
+        relative(interpolate_se2(dense_t, dense, rel.t1, 0.02), interpolate_se2(dense_t, dense, rel.t2, 0.02)),
+    )
     with pytest.raises(ValueError, match="no relation could be matched"):  # by stamp, 77 Hz poses meet none
         relations_error(dense_t, dense, rel_dense)
     inter = relations_error(dense_t, dense, rel_dense, max_gap_s=0.02)
     assert inter["relations_used"] == 60 and inter["trans_abs_mean_m"] < 1e-9
-    shifted = relations_error(dense_t, np.column_stack([dense[:, :2], dense[:, 2] + 0.01 * dense_t]), rel_dense,
-                              max_gap_s=0.02)
+    shifted = relations_error(
+        dense_t, np.column_stack([dense[:, :2], dense[:, 2] + 0.01 * dense_t]), rel_dense, max_gap_s=0.02
+    )
     assert shifted["rot_abs_mean_deg"] > 0.05  # and the interpolated figure still sees an error
 
 
@@ -221,8 +247,9 @@ def test_real_corrected_logs_clock_offsets_are_found(data_dir):
         corrected = data_dir / "corrected/intel-corrected.log.gz"
         with pytest.raises(LogFormatError, match=r"set data.ground_truth_time_offset_s=97605285(7.3[34]\d)"):
             apply_ground_truth(log, corrected, gt_config())
-        m = apply_ground_truth(log, corrected, gt_config(ground_truth_time_offset_s=976052857.337,
-                                                         ground_truth_tolerance_s=0.02))
+        m = apply_ground_truth(
+            log, corrected, gt_config(ground_truth_time_offset_s=976052857.337, ground_truth_tolerance_s=0.02)
+        )
         assert m.scans_posed == 910 and m.share == 1.0
         ts, ps = read_matched_csv(data_dir / "corrected/matched/intel.gmapping_corrected_keyframes.csv")
         idx = np.searchsorted(log.stamps, ts) if np.all(np.diff(log.stamps) > 0) else None

@@ -12,8 +12,12 @@ def test_the_kernels_live_in_the_top_level_folder_and_are_imported_inside_the_pa
     distribution on the index uses, and no module imports the folder under its top-level name."""
     assert Path(irmcl_warp.kernels.__file__).resolve() == REPO / "kernels" / "__init__.py"
     top_level = re.compile(r"^\s*(from|import) kernels\b", re.M)
-    found = [str(p.relative_to(REPO)) for folder in ("irmcl_warp", "kernels", "eval", "tests", "hydra_plugins")
-             for p in (REPO / folder).rglob("*.py") if top_level.search(p.read_text())]
+    found = [
+        str(p.relative_to(REPO))
+        for folder in ("irmcl_warp", "kernels", "eval", "tests", "hydra_plugins")
+        for p in (REPO / folder).rglob("*.py")
+        if top_level.search(p.read_text())
+    ]
     assert found == []
 
 
@@ -32,5 +36,16 @@ def test_every_registry_entry_has_a_reference_twin():
     assert callable(motion.sample_irmcl) and callable(motion.sample_odometry)  # one twin per motion model
     assert ESTIMATE.names() == ["best_cluster", "top_share"]
     assert SLAM.names() == ["integrate", "motion", "score"]
-    for twin in ("raycast", "mapping", "sim", "camera", "render", "weighting", "motion", "resample", "estimate", "slam"):
+    for twin in (
+        "raycast",
+        "mapping",
+        "sim",
+        "camera",
+        "render",
+        "weighting",
+        "motion",
+        "resample",
+        "estimate",
+        "slam",
+    ):
         assert (REPO / "irmcl_warp" / "reference" / f"{twin}.py").is_file()

@@ -12,20 +12,34 @@ SETTINGS = dict(l_occ=0.85, l_free=-0.4, l_min=-4.0, l_max=4.0, max_range_m=3.0)
 
 def test_logodds_kernel_matches_numpy_twin(rng):
     H, W, res, origin = 40, 50, 0.1, (-1.0, -2.0)
-    poses = np.c_[rng.uniform(-0.5, 3.5, 6), rng.uniform(-1.5, 1.5, 6), rng.uniform(-np.pi, np.pi, 6)].astype(np.float32)
+    poses = np.c_[rng.uniform(-0.5, 3.5, 6), rng.uniform(-1.5, 1.5, 6), rng.uniform(-np.pi, np.pi, 6)].astype(
+        np.float32
+    )
     angles = np.linspace(-2, 2, 21).astype(np.float32)
     ranges = rng.uniform(0.05, 4.0, (6, 21)).astype(np.float32)
     ranges[rng.random((6, 21)) < 0.1] = np.nan
     got = wp.zeros((H, W), dtype=wp.float32, device=DEVICE)
-    MAPPING.build("logodds", **SETTINGS).integrate(got, origin, res, wp.array(poses, dtype=wp.vec3, device=DEVICE),
-                                                    wp.array(ranges, device=DEVICE), wp.array(angles, device=DEVICE))
+    MAPPING.build("logodds", **SETTINGS).integrate(
+        got,
+        origin,
+        res,
+        wp.array(poses, dtype=wp.vec3, device=DEVICE),
+        wp.array(ranges, device=DEVICE),
+        wp.array(angles, device=DEVICE),
+    )
     want = integrate(np.zeros((H, W), np.float32), origin, res, poses, ranges, angles, **SETTINGS)
     assert np.mean(np.abs(got.numpy() - want) < 1e-5) > 0.995, f"seed {rng.seed}"
     # the same scans in another order give the same grid bit for bit (the per-cell counts are whole numbers)
     order = rng.permutation(len(poses))
     again = wp.zeros((H, W), dtype=wp.float32, device=DEVICE)
-    MAPPING.build("logodds", **SETTINGS).integrate(again, origin, res, wp.array(poses[order], dtype=wp.vec3, device=DEVICE),
-                                                    wp.array(ranges[order], device=DEVICE), wp.array(angles, device=DEVICE))
+    MAPPING.build("logodds", **SETTINGS).integrate(
+        again,
+        origin,
+        res,
+        wp.array(poses[order], dtype=wp.vec3, device=DEVICE),
+        wp.array(ranges[order], device=DEVICE),
+        wp.array(angles, device=DEVICE),
+    )
     assert np.array_equal(again.numpy(), got.numpy()), f"seed {rng.seed}"
 
 

@@ -53,8 +53,14 @@ def test_pose_tracking_stays_within_a_bound(weighting):
     lf = None
     if weighting == "likelihood_field":  # the grid baseline on the same walls (cells: corner origin)
         corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
-        lf = WEIGHTING.build("likelihood_field", occupancy=nog.walls, origin_xy=corner,
-                             resolution_m=nog.resolution_m, max_range_m=20.0, device=DEVICE)
+        lf = WEIGHTING.build(
+            "likelihood_field",
+            occupancy=nog.walls,
+            origin_xy=corner,
+            resolution_m=nog.resolution_m,
+            max_range_m=20.0,
+            device=DEVICE,
+        )
     table = dict(weighting="nog_table", table_angles=120) if weighting == "nog_table" else {}
     pf = _filter(nog, MCLConfig(num_particles=1000, num_samples=128, seed=3, **table), log, lf)
     pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
@@ -109,8 +115,9 @@ def test_without_data_far_m_the_far_bound_is_the_sensors_range_max(tmp_path, mon
     import json
 
     monkeypatch.chdir(tmp_path)
-    out = sim_tracking_run(duration_s=20, starts=1, run_s=10, particles=300, extra=("data.far_m=null",
-                                                                                    "sim.max_range_m=12.5"))
+    out = sim_tracking_run(
+        duration_s=20, starts=1, run_s=10, particles=300, extra=("data.far_m=null", "sim.max_range_m=12.5")
+    )
     assert json.loads((out / "metrics.json").read_text())["settings"]["far_m"] == 12.0
 
 
@@ -120,10 +127,21 @@ def sim_tracking_run(duration_s: float, starts: int, run_s: float, particles: in
 
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", f"sim.duration_s={duration_s}",
-                                           "mcl.weighting=likelihood_field", "localize.mode=tracking",
-                                           f"localize.num_starts={starts}", f"localize.run_s={run_s}",
-                                           f"mcl.num_particles={particles}", "mcl.map_resolution_m=0.1", *extra])
+        cfg = compose(
+            "config",
+            overrides=[
+                "+exp=sim_office",
+                f"device={DEVICE}",
+                f"sim.duration_s={duration_s}",
+                "mcl.weighting=likelihood_field",
+                "localize.mode=tracking",
+                f"localize.num_starts={starts}",
+                f"localize.run_s={run_s}",
+                f"mcl.num_particles={particles}",
+                "mcl.map_resolution_m=0.1",
+                *extra,
+            ],
+        )
     return run_localize(cfg)
 
 
@@ -179,7 +197,7 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
     est = follow(pf, log, idx, cfg)
     err = np.hypot(*(est[:, :2] - log.ground_truth[idx, :2]).T)
     cut = len(first)
-    assert err[cut - 5:cut].max() < 0.3  # tracked before the kidnapping
+    assert err[cut - 5 : cut].max() < 0.3  # tracked before the kidnapping
     assert np.hypot(*(log.ground_truth[idx[cut], :2] - log.ground_truth[idx[cut - 1], :2])) > 3.0  # teleported ...
     assert err[cut] > 2.0  # ... and the filter did not see it
     end = err[-25:]  # the last 5 s
@@ -192,8 +210,16 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
 def _sim_cfg(*overrides):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=["+exp=sim_office", f"device={DEVICE}", "sim.duration_s=60",
-                                            "mcl.map_resolution_m=0.1", *overrides])
+        return compose(
+            "config",
+            overrides=[
+                "+exp=sim_office",
+                f"device={DEVICE}",
+                "sim.duration_s=60",
+                "mcl.map_resolution_m=0.1",
+                *overrides,
+            ],
+        )
 
 
 def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
@@ -240,8 +266,13 @@ def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):
     from irmcl_warp.mcl.stage import run_localize
 
     monkeypatch.chdir(tmp_path)
-    cfg = _sim_cfg("mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.run_s=10", "localize.kidnap_at_s=12",
-                   "mcl.num_particles=100")
+    cfg = _sim_cfg(
+        "mcl.weighting=likelihood_field",
+        "localize.mode=tracking",
+        "localize.run_s=10",
+        "localize.kidnap_at_s=12",
+        "mcl.num_particles=100",
+    )
     with pytest.raises(ValueError, match="kidnap_at_s=12.0 must lie inside the run"):
         run_localize(cfg)
     assert not list((tmp_path / "outputs").glob("*/localize-*"))  # a failed stage leaves no empty folder behind
@@ -279,7 +310,9 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
     runs = {}
     table = dict(table_angles=48) if weighting == "nog_table" else {}
     for mode in ("off", "on"):
-        poses, neffs, pf = run(log, nog, maps, weighting, seed, mode, DEVICE, **table)  # the run eval.determinism repeats
+        poses, neffs, pf = run(
+            log, nog, maps, weighting, seed, mode, DEVICE, **table
+        )  # the run eval.determinism repeats
         assert pf.use_graph == (mode == "on") and len(pf.graphs) == (2 if mode == "on" else 0)
         runs[mode] = (poses, neffs, pf.particles.numpy())
         if weighting == "nog_table":  # built once: the second run and every reduce() read the first table
@@ -293,8 +326,10 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
 
 def test_step_graph_refuses_what_it_cannot_capture():
     log, nog = _world_and_map(duration_s=2.0)
-    for extra, why in [(dict(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1), "recovery is on"),
-                       (dict(estimate="best_cluster"), "finds its cluster on the host")]:
+    for extra, why in [
+        (dict(recovery_alpha_slow=0.001, recovery_alpha_fast=0.1), "recovery is on"),
+        (dict(estimate="best_cluster"), "finds its cluster on the host"),
+    ]:
         with pytest.raises(ValueError, match=why):
             _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="on", **extra), log)
         pf = _filter(nog, MCLConfig(num_particles=16, num_samples=32, step_graph="auto", **extra), log)
@@ -341,6 +376,8 @@ def test_beams_are_spread_over_the_scan_or_strided_as_the_authors_code_does():
 
     # their settings are runs of their own, never the default run's folder
     base = ["+exp=sim_office", "device=cpu", "mcl.weighting=likelihood_field", "localize.mode=tracking"]
-    ids = {runs.identify(compose_config(base + ov), "localize").id for ov in
-           ([], ["mcl.beam_pick=stride"], ["mcl.resample_threshold=1.0"])}
+    ids = {
+        runs.identify(compose_config(base + ov), "localize").id
+        for ov in ([], ["mcl.beam_pick=stride"], ["mcl.resample_threshold=1.0"])
+    }
     assert len(ids) == 3

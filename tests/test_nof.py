@@ -30,9 +30,9 @@ def test_encoding_matches_its_formula(rng):
     assert g.shape == (5, 42)
     assert torch.equal(g[:, :2], xy)
     for k in range(10):  # layout per frequency: sin x, sin y, cos x, cos y
-        f = 2.0 ** k
-        assert torch.allclose(g[:, 2 + 4 * k:4 + 4 * k], torch.sin(f * xy), atol=1e-5)
-        assert torch.allclose(g[:, 4 + 4 * k:6 + 4 * k], torch.cos(f * xy), atol=1e-5)
+        f = 2.0**k
+        assert torch.allclose(g[:, 2 + 4 * k : 4 + 4 * k], torch.sin(f * xy), atol=1e-5)
+        assert torch.allclose(g[:, 4 + 4 * k : 6 + 4 * k], torch.cos(f * xy), atol=1e-5)
 
 
 def test_paper_network_shape_and_output_range(rng):
@@ -49,8 +49,9 @@ def test_paper_network_shape_and_output_range(rng):
 
 def _beams(S=20, B=8, name="unit"):
     ranges = np.full((S, B), 3.0, np.float32)
-    return BeamSet(np.arange(S, dtype=float) + 100.0, np.zeros((S, 3)), ranges, np.linspace(-1, 1, B),
-                   np.ones((S, B), bool), name)
+    return BeamSet(
+        np.arange(S, dtype=float) + 100.0, np.zeros((S, 3)), ranges, np.linspace(-1, 1, B), np.ones((S, B), bool), name
+    )
 
 
 def test_bad_inputs_give_clear_errors():
@@ -106,8 +107,18 @@ def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch)
     from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=120", "train.epochs=2", "train.steps_per_epoch=150",
-                "train.val_scans=8", "train.num_samples=96", "render.num_samples=128"])
+    cfg = _cfg(
+        [
+            "+exp=sim_office",
+            "device=cpu",
+            "sim.duration_s=120",
+            "train.epochs=2",
+            "train.steps_per_epoch=150",
+            "train.val_scans=8",
+            "train.num_samples=96",
+            "render.num_samples=128",
+        ]
+    )
     torch.manual_seed(0)
     val = prepare_beams(cfg)["val"].subset(np.arange(8))
     untrained = NOF(ModelConfig(**cfg.model)).eval()
@@ -148,9 +159,11 @@ def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
         prepare_beams(_cfg(["+exp=fr079"]))
 
 
-@pytest.mark.parametrize("extra", [[], ["train.lr_schedule=cosine", "train.warmup_steps=5", "train.ema_decay=0.9",
-                                         "train.bn_recalibrate=2"]],
-                         ids=["multistep", "cosine-ema"])
+@pytest.mark.parametrize(
+    "extra",
+    [[], ["train.lr_schedule=cosine", "train.warmup_steps=5", "train.ema_decay=0.9", "train.bn_recalibrate=2"]],
+    ids=["multistep", "cosine-ema"],
+)
 def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_does(tmp_path, monkeypatch, extra):
     """train.sampler=occupancy: the grid (and the RNG its readings draw from) are in last.pt, so a run
     stopped after its first epoch and resumed gives the same weights and grid, bit for bit, as one that
@@ -161,17 +174,33 @@ def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_
     from irmcl_warp.services.data import prepare_beams
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=40", "train=quick", "train.sampler=occupancy",
-                "train.epochs=2", "train.steps_per_epoch=12", "train.grid_every=5", "train.val_scans=2",
-                "train.batch_rays=128", "train.num_samples=64", "render.num_samples=64", "train.max_time_s=null", *extra])
+    cfg = _cfg(
+        [
+            "+exp=sim_office",
+            "device=cpu",
+            "sim.duration_s=40",
+            "train=quick",
+            "train.sampler=occupancy",
+            "train.epochs=2",
+            "train.steps_per_epoch=12",
+            "train.grid_every=5",
+            "train.val_scans=2",
+            "train.batch_rays=128",
+            "train.num_samples=64",
+            "render.num_samples=64",
+            "train.max_time_s=null",
+            *extra,
+        ]
+    )
     sets = prepare_beams(cfg)
     cpu = torch.device("cpu")
 
     def trainer(out):
         torch.manual_seed(cfg.train.seed)
         validate = make_validator(sets["val"], cfg, 0.02, 20.0, cpu)
-        return Trainer(NOF(ModelConfig(**cfg.model)), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, out, "key",
-                       validate, {})
+        return Trainer(
+            NOF(ModelConfig(**cfg.model)), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, out, "key", validate, {}
+        )
 
     straight = trainer(tmp_path / "a")
     straight.run()
@@ -225,7 +254,9 @@ def test_cosine_schedule_and_weight_average_follow_their_formulas():
     rng = np.random.default_rng()
     model = torch.nn.Sequential(torch.nn.Linear(3, 4), torch.nn.BatchNorm1d(4))
     avg = WeightAverage(model, decay=0.8)
-    twin = {k: v.detach().numpy().astype(np.float64).copy() for k, v in model.state_dict().items() if v.is_floating_point()}
+    twin = {
+        k: v.detach().numpy().astype(np.float64).copy() for k, v in model.state_dict().items() if v.is_floating_point()
+    }
     for n in range(12):
         with torch.no_grad():
             for k, v in model.state_dict().items():
@@ -253,12 +284,34 @@ def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path
     from irmcl_warp.services.data import prepare_beams
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=30", "train=quick", f"train.sampler={sampler}",
-                "train.batch_rays=64", "train.num_samples=32", "render.num_samples=32", "train.val_scans=2"])
+    cfg = _cfg(
+        [
+            "+exp=sim_office",
+            "device=cpu",
+            "sim.duration_s=30",
+            "train=quick",
+            f"train.sampler={sampler}",
+            "train.batch_rays=64",
+            "train.num_samples=32",
+            "render.num_samples=32",
+            "train.val_scans=2",
+        ]
+    )
     sets = prepare_beams(cfg)
     cpu = torch.device("cpu")
-    tr = Trainer(NOF(ModelConfig(**cfg.model)), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, tmp_path, "key",
-                 make_validator(sets["val"], cfg, 0.02, 20.0, cpu), {})
+    tr = Trainer(
+        NOF(ModelConfig(**cfg.model)),
+        sets,
+        cfg.train,
+        cfg.render,
+        0.02,
+        20.0,
+        cpu,
+        tmp_path,
+        "key",
+        make_validator(sets["val"], cfg, 0.02, 20.0, cpu),
+        {},
+    )
     for _ in range(3):
         tr.step(torch.randint(len(tr.ranges), (64,)))
     bn = tr.model.head[1][1]
@@ -269,6 +322,7 @@ def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path
             return
         means.append(inputs[0].double().mean(0))
         sizes.append(len(inputs[0]))
+
     hook = bn.register_forward_hook(record)
     before = bn.running_mean.clone()
     tr.recalibrate_batch_norm(4)

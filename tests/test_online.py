@@ -34,9 +34,20 @@ def world(tmp_path_factory):
 def _cfg(bag, map_yaml, *overrides, gates=("mcl.update_min_trans_m=0.2", "mcl.update_min_rot_rad=0.5")):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=["data=bag", f"data.path={bag}", f"localize.map_path={map_yaml}",
-                                            f"device={DEVICE}", "mcl.weighting=likelihood_field", "localize.run_s=20",
-                                            "localize.start_s=2", *gates, *overrides])
+        return compose(
+            "config",
+            overrides=[
+                "data=bag",
+                f"data.path={bag}",
+                f"localize.map_path={map_yaml}",
+                f"device={DEVICE}",
+                "mcl.weighting=likelihood_field",
+                "localize.run_s=20",
+                "localize.start_s=2",
+                *gates,
+                *overrides,
+            ],
+        )
 
 
 @pytest.mark.parametrize("start", ["pose", "global"])
@@ -44,16 +55,27 @@ def test_one_scan_at_a_time_gives_the_offline_run_bit_for_bit(world, tmp_path, m
     map_yaml, bag, truth = world
     monkeypatch.chdir(tmp_path)
     pose = [float(truth[0, 0]) + 0.2, float(truth[0, 1]) - 0.1, float(truth[0, 2]) + 0.05]
-    extra = (["mcl.num_particles=600", f"localize.initial_pose=[{pose[0]},{pose[1]},{pose[2]}]"] if start == "pose"
-             else ["mcl.num_particles=3000", "mcl.first_update=motion"])
+    extra = (
+        ["mcl.num_particles=600", f"localize.initial_pose=[{pose[0]},{pose[1]},{pose[2]}]"]
+        if start == "pose"
+        else ["mcl.num_particles=3000", "mcl.first_update=motion"]
+    )
     cfg = _cfg(bag, map_yaml, *extra)
     out = run_localize(cfg)  # the offline stage
 
     log = load_stream(cfg)  # the log as the stage read it
     idx = window(log, cfg.localize.start_s, cfg.localize.run_s, "localize")
-    loc = open_localizer(map_yaml, cfg.mcl, log.T_base_laser, log.info.angles_rad, far_bound_m(cfg, log.info.range_max_m),
-                         device=DEVICE, initial_pose=cfg.localize.initial_pose, initial_std=list(cfg.localize.tracking_std),
-                         reduce_after_s=cfg.localize.reduce_after_s if start == "global" else None)
+    loc = open_localizer(
+        map_yaml,
+        cfg.mcl,
+        log.T_base_laser,
+        log.info.angles_rad,
+        far_bound_m(cfg, log.info.range_max_m),
+        device=DEVICE,
+        initial_pose=cfg.localize.initial_pose,
+        initial_std=list(cfg.localize.tracking_std),
+        reduce_after_s=cfg.localize.reduce_after_s if start == "global" else None,
+    )
     est, updated, covs = [], [], []
     for i in idx:  # as a robot's driver would hand them over
         e = loc.update(float(log.stamps[i]), log.ranges_m[i].copy(), log.odom[i].copy())
@@ -72,7 +94,7 @@ def test_one_scan_at_a_time_gives_the_offline_run_bit_for_bit(world, tmp_path, m
     cov = covs[int(np.flatnonzero(updated)[-1])]
     assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) >= -1e-12)
     # the resampled set's x-y variance against the filter's own spread of the weighted set before resampling
-    assert 0.5 < (cov[0, 0] + cov[1, 1]) / loc.pf.spread ** 2 < 2.0
+    assert 0.5 < (cov[0, 0] + cov[1, 1]) / loc.pf.spread**2 < 2.0
     assert np.isnan(covs[int(np.flatnonzero(~updated)[-1])]).all()  # between updates: no fresh covariance
 
 
@@ -120,12 +142,24 @@ def test_the_converter_template_turns_arrays_into_a_bag_we_read_back(tmp_path):
 
     log, _ = simulate(OmegaConf.structured(SimConfig(duration_s=4.0, num_beams=30, width_m=12, height_m=8)), "cpu")
     i = log.info
-    np.savez(tmp_path / "mine.npz", stamps=log.stamps, ranges=np.nan_to_num(log.ranges_m, nan=np.inf), odom=log.odom,
-             angle_min=i.angle_min_rad, angle_increment=i.angle_increment_rad, range_min=i.range_min_m,
-             range_max=i.range_max_m, T_base_laser=log.T_base_laser)
+    np.savez(
+        tmp_path / "mine.npz",
+        stamps=log.stamps,
+        ranges=np.nan_to_num(log.ranges_m, nan=np.inf),
+        odom=log.odom,
+        angle_min=i.angle_min_rad,
+        angle_increment=i.angle_increment_rad,
+        range_min=i.range_min_m,
+        range_max=i.range_max_m,
+        T_base_laser=log.T_base_laser,
+    )
     script = Path(__file__).resolve().parents[1] / "examples" / "convert_to_bag.py"
-    run = subprocess.run([sys.executable, str(script), str(tmp_path / "mine.npz"), str(tmp_path / "mine.bag")],
-                         capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "mine.npz"), str(tmp_path / "mine.bag")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr[-2000:]
     back = read_bag(tmp_path / "mine.bag")
     assert np.array_equal(np.isnan(back.ranges_m), np.isnan(log.ranges_m))
@@ -151,8 +185,9 @@ def test_a_calibrated_confidence_judges_the_run_and_changes_no_pose(world, tmp_p
     assert (f"localized, confidence {c:.2f}" in last) if c >= CONFIDENT_ABOVE else ("NOT localized" in last)
     spread = np.genfromtxt(out / "spread.csv", delimiter=",", names=True)
     assert np.isfinite(spread["confidence"][-1]) and np.isnan(spread["confidence"][0])  # none before the first update
-    plain = run_localize(_cfg(bag, map_yaml, "mcl=amcl", "localize.run_s=25", "mcl.temper=0.031",
-                              gates=()))  # another filter: no calibration holds
+    plain = run_localize(
+        _cfg(bag, map_yaml, "mcl=amcl", "localize.run_s=25", "mcl.temper=0.031", gates=())
+    )  # another filter: no calibration holds
     assert "no confidence: the filter differs from the calibrated one (mcl=amcl) in temper" in capsys.readouterr().out
     assert json.loads((plain / "metrics.json").read_text())["confidence_at_end"] is None
 
@@ -171,9 +206,14 @@ def test_the_judge_changes_no_pose(world):
     for judged in (False, True):
         pf, grid = filter_in_map(map_yaml, m, log.T_base_laser, log.info.angles_rad, 20.0, DEVICE)
         pf.init_uniform()
-        judge = Judge(FeatureTracker(ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy,
-                                                   grid.resolution_m)),
-                      Confidence(np.zeros(8), 0.0, np.zeros(8), np.ones(8)), log.info.angles_rad, log.T_base_laser)
+        judge = Judge(
+            FeatureTracker(
+                ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
+            ),
+            Confidence(np.zeros(8), 0.0, np.zeros(8), np.ones(8)),
+            log.info.angles_rad,
+            log.T_base_laser,
+        )
         conf = []
         runs_.append(follow(pf, log, np.arange(60), m, judge=judge if judged else None, confidences=conf))
     assert np.array_equal(runs_[0], runs_[1], equal_nan=True)

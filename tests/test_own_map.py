@@ -37,17 +37,32 @@ def world(tmp_path_factory):
 def _cfg(bag, map_yaml, *overrides):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=["data=bag", f"data.path={bag}", f"localize.map_path={map_yaml}",
-                                            "device=cpu", "mcl.weighting=likelihood_field", "localize.run_s=null",
-                                            *overrides])
+        return compose(
+            "config",
+            overrides=[
+                "data=bag",
+                f"data.path={bag}",
+                f"localize.map_path={map_yaml}",
+                "device=cpu",
+                "mcl.weighting=likelihood_field",
+                "localize.run_s=null",
+                *overrides,
+            ],
+        )
 
 
 @pytest.mark.parametrize("start", ["global", "pose"])
 def test_a_bag_without_ground_truth_is_localized_in_a_map_server_map(world, tmp_path, monkeypatch, start):
     d, map_yaml, bag, truth, stamps = world
     monkeypatch.chdir(tmp_path)
-    extra = ["mcl.num_particles=4000"] if start == "global" else ["mcl.num_particles=500",
-                                                                  f"localize.initial_pose=[{truth[0, 0] + 0.2},{truth[0, 1] - 0.2},{truth[0, 2] + 0.1}]"]
+    extra = (
+        ["mcl.num_particles=4000"]
+        if start == "global"
+        else [
+            "mcl.num_particles=500",
+            f"localize.initial_pose=[{truth[0, 0] + 0.2},{truth[0, 1] - 0.2},{truth[0, 2] + 0.1}]",
+        ]
+    )
     out = run_localize(_cfg(bag, map_yaml, *extra))
     for name in ("trajectory.tum", "spread.csv", "run.png", "particles.gif", "metrics.json", "manifest.json"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
@@ -68,8 +83,11 @@ def test_map_files_are_read_right_or_refused(world, tmp_path):
     grid = load_map(map_yaml)
     text = Path(map_yaml).read_text()
     rotated = tmp_path / "rotated.yaml"
-    rotated.write_text(text.replace("image: office.pgm", f"image: {d / 'office.pgm'}").replace(
-        "origin: [", "origin: [").replace(", 0.0]", ", 0.5]"))
+    rotated.write_text(
+        text.replace("image: office.pgm", f"image: {d / 'office.pgm'}")
+        .replace("origin: [", "origin: [")
+        .replace(", 0.0]", ", 0.5]")
+    )
     with pytest.raises(ValueError, match="rotated.yaml: origin yaw 0.5 is not supported"):
         load_map(rotated)
     missing = tmp_path / "missing.yaml"
@@ -79,8 +97,13 @@ def test_map_files_are_read_right_or_refused(world, tmp_path):
     import matplotlib.image
 
     png = tmp_path / "office.png"  # the same map as a PNG image: the same grid
-    matplotlib.image.imsave(png, np.asarray(__import__("PIL.Image", fromlist=["Image"]).open(d / "office.pgm")),
-                            cmap="gray", vmin=0, vmax=255)
+    matplotlib.image.imsave(
+        png,
+        np.asarray(__import__("PIL.Image", fromlist=["Image"]).open(d / "office.pgm")),
+        cmap="gray",
+        vmin=0,
+        vmax=255,
+    )
     (tmp_path / "png.yaml").write_text(text.replace("office.pgm", "office.png"))
     again = load_map(tmp_path / "png.yaml")
     assert np.array_equal(np.sign(again.logodds), np.sign(grid.logodds)) and again.origin_xy == grid.origin_xy
@@ -94,8 +117,17 @@ def test_ground_truth_of_the_log_is_scored_after_alignment(world, tmp_path, monk
     register()
     sim = [f"sim.{k}={v}" for k, v in SMALL.items()]
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["device=cpu", f"localize.map_path={map_yaml}", "localize.run_s=null",
-                                           "mcl.weighting=likelihood_field", "mcl.num_particles=500", *sim,
-                                           f"localize.initial_pose=[{truth[0, 0]},{truth[0, 1]},{truth[0, 2]}]"])
+        cfg = compose(
+            "config",
+            overrides=[
+                "device=cpu",
+                f"localize.map_path={map_yaml}",
+                "localize.run_s=null",
+                "mcl.weighting=likelihood_field",
+                "mcl.num_particles=500",
+                *sim,
+                f"localize.initial_pose=[{truth[0, 0]},{truth[0, 1]},{truth[0, 2]}]",
+            ],
+        )
     m = json.loads((run_localize(cfg) / "metrics.json").read_text())
     assert m["aligned_to_ground_truth"]["poses"] == len(truth) and m["aligned_to_ground_truth"]["ate_rmse_m"] < 0.1

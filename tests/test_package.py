@@ -24,18 +24,27 @@ def wheel(tmp_path_factory) -> zipfile.ZipFile:
     """Built from a copy of the checkout's files (tracked, or new and not ignored; links kept as links), so that a
     stale build/ folder cannot slip old modules in and a file git does not carry cannot make it work here only."""
     src, out = tmp_path_factory.mktemp("src"), tmp_path_factory.mktemp("dist")
-    listed = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=REPO,
-                            capture_output=True, text=True, check=True).stdout.split("\0")
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split("\0")
     for name in filter(None, listed):
         path, to = REPO / name, src / name
         if not path.is_symlink() and not path.is_file():
             continue  # deleted in the working tree
         to.parent.mkdir(parents=True, exist_ok=True)
         to.symlink_to(path.readlink()) if path.is_symlink() else shutil.copy2(path, to)
-    run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(out),
-                          str(src)], capture_output=True, text=True, timeout=600)
+    run = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(out), str(src)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
-    built, = out.glob("irmcl_warp-*.whl")
+    (built,) = out.glob("irmcl_warp-*.whl")
     return zipfile.ZipFile(built)
 
 
@@ -47,7 +56,8 @@ def test_the_wheel_holds_the_package_its_configs_and_kernels_and_no_foreign_top_
     kernels = {f"irmcl_warp/kernels/{p.name}" for p in (REPO / "kernels").glob("*.py")}
     assert configs <= set(names) and kernels <= set(names) and len(configs) > 40
     assert set(n for n in names if n.startswith("irmcl_warp/mcl/calibration/")) == {
-        f"irmcl_warp/mcl/calibration/{p.name}" for p in (REPO / "irmcl_warp/mcl/calibration").glob("*.json")}
+        f"irmcl_warp/mcl/calibration/{p.name}" for p in (REPO / "irmcl_warp/mcl/calibration").glob("*.json")
+    }
     entry = wheel.read(f"{info}/entry_points.txt").decode()
     assert "irmcl-warp = irmcl_warp.cli:main" in entry
     assert f"Version: {irmcl_warp.__version__}\n" in wheel.read(f"{info}/METADATA").decode()

@@ -7,8 +7,13 @@ import pytest
 import warp as wp
 
 from irmcl_warp.reference.motion import sample_odometry
-from irmcl_warp.reference.resample import (effective_sample_size, low_variance_indices, multinomial_indices,
-                                           weighted_mean, weighted_spread)
+from irmcl_warp.reference.resample import (
+    effective_sample_size,
+    low_variance_indices,
+    multinomial_indices,
+    weighted_mean,
+    weighted_spread,
+)
 from irmcl_warp.kernels import MOTION, RESAMPLE
 from irmcl_warp.kernels.motion import odometry_step
 from irmcl_warp.kernels.resample import ParticleWeights
@@ -43,7 +48,9 @@ def test_motion_kernel_statistics_match_the_twin(rng):
 
 def _weights(rng, n):
     log_w = rng.normal(0, 2, n).astype(np.float32)
-    particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(np.float32)
+    particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(
+        np.float32
+    )
     pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
     weights = ParticleWeights(n, device=DEVICE)
     weights.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), pw)
@@ -104,8 +111,10 @@ def test_top_share_estimate_matches_twin_and_ignores_the_light_tail(rng):
     particles[800:, :2] += 20.0  # a far-off tail ...
     log_w[800:] -= 30.0  # ... of the lightest particles
     est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
-    ours = est(wp.array(particles.astype(np.float32), dtype=wp.vec3, device=DEVICE),
-               wp.array(log_w.astype(np.float32), dtype=wp.float32, device=DEVICE))
+    ours = est(
+        wp.array(particles.astype(np.float32), dtype=wp.vec3, device=DEVICE),
+        wp.array(log_w.astype(np.float32), dtype=wp.float32, device=DEVICE),
+    )
     twin = top_share_mean(particles.astype(np.float32), log_w.astype(np.float32), 0.8)
     assert np.allclose(ours, twin, atol=1e-4), f"seed {rng.seed}"
     assert abs(ours[0] - 2.0) < 0.05 and abs(abs(ours[2]) - 3.1) < 0.1  # yaw near +-pi: circular mean
@@ -174,7 +183,10 @@ def test_irmcl_motion_kernel_statistics_match_the_twin(rng):
     q = wp.array(start[:2], dtype=wp.vec3, device=DEVICE)
     MOTION.build("irmcl", noise=(0,) * 9, device=DEVICE)(q, (0.5, 1.0, 0.1), seed=1)
     yaw0 = float(start[0, 2])
-    assert np.allclose(q.numpy()[0], [1.0 + np.cos(yaw0 + 0.5), -2.0 + np.sin(yaw0 + 0.5),
-                                      np.angle(np.exp(1j * (yaw0 + 0.6)))], atol=1e-5)
+    assert np.allclose(
+        q.numpy()[0],
+        [1.0 + np.cos(yaw0 + 0.5), -2.0 + np.sin(yaw0 + 0.5), np.angle(np.exp(1j * (yaw0 + 0.6)))],
+        atol=1e-5,
+    )
     with pytest.raises(ValueError, match="9 non-negative noise coefficients"):
         MOTION.build("irmcl", noise=(0.1, 0.1), device=DEVICE)

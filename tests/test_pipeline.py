@@ -13,9 +13,20 @@ from irmcl_warp.io import read_tum
 from irmcl_warp.sim import simulate
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
-SMALL = ["sim.duration_s=40", "sim.width_m=14", "sim.height_m=10", "device=cpu", "slam.num_particles=4",
-         "train.max_time_s=8", "train.val_scans=4", "train.steps_per_epoch=40", "mcl.num_particles=2000",
-         "mcl.reduce_to=500", "mcl.num_samples=64", "pipeline.run_s=15"]
+SMALL = [
+    "sim.duration_s=40",
+    "sim.width_m=14",
+    "sim.height_m=10",
+    "device=cpu",
+    "slam.num_particles=4",
+    "train.max_time_s=8",
+    "train.val_scans=4",
+    "train.steps_per_epoch=40",
+    "mcl.num_particles=2000",
+    "mcl.reduce_to=500",
+    "mcl.num_samples=64",
+    "pipeline.run_s=15",
+]
 
 
 def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):
@@ -41,7 +52,10 @@ def test_pipeline_on_a_small_simulated_office(tmp_path, monkeypatch, capsys):
     assert len(read_tum(out / "localization.tum")[0]) == m["localized_scans"] == 76  # 15 s at 5 Hz, both ends
     assert m["localization"]["poses"] == m["localized_scans"]
     report = (out / "report.md").read_text()
-    assert all(f"| {s} |" in report for s in ("slam", "train", "nog", "localize")) and "![position error](error.png)" in report
+    assert (
+        all(f"| {s} |" in report for s in ("slam", "train", "nog", "localize"))
+        and "![position error](error.png)" in report
+    )
     assert (out / "map.png").stat().st_size > 10_000 and (out / "error.png").is_file()
     capsys.readouterr()
     # a second run finds everything finished; a removed NOF makes its stage and the pipeline run again
@@ -76,12 +90,17 @@ def test_pipeline_on_bags_without_a_far_bound(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     sim = dict(duration_s=40.0, width_m=14.0, height_m=10.0, max_range_m=12.5)
-    bags = [write_bag(simulate(OmegaConf.structured(SimConfig(**sim, path_seed=s)), "cpu")[0], tmp_path / f"d{s}.bag")
-            for s in (0, 1)]
+    bags = [
+        write_bag(simulate(OmegaConf.structured(SimConfig(**sim, path_seed=s)), "cpu")[0], tmp_path / f"d{s}.bag")
+        for s in (0, 1)
+    ]
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("pipeline", overrides=[o for o in SMALL if not o.startswith("sim.")] + [
-            "data=bag", f"data.path={bags[0]}", f"pipeline.path={bags[1]}"])
+        cfg = compose(
+            "pipeline",
+            overrides=[o for o in SMALL if not o.startswith("sim.")]
+            + ["data=bag", f"data.path={bags[0]}", f"pipeline.path={bags[1]}"],
+        )
     assert cfg.data.far_m is None
     out = run_pipeline(cfg)
     m = json.loads((out / "metrics.json").read_text())
@@ -89,5 +108,7 @@ def test_pipeline_on_bags_without_a_far_bound(tmp_path, monkeypatch):
     trained = json.loads((out / "manifest.json").read_text())["stages"]["train"]["path"]
     import torch
 
-    assert torch.load(Path(trained) / "nof.pt", map_location="cpu", weights_only=False)["far_m"] == 12.0  # floor(range_max)
+    assert (
+        torch.load(Path(trained) / "nof.pt", map_location="cpu", weights_only=False)["far_m"] == 12.0
+    )  # floor(range_max)
     assert (out / "localization.tum").is_file() and (out / "report.md").is_file()

@@ -48,13 +48,15 @@ def test_a_map_whose_free_space_is_mostly_beside_walls_is_said_to_be(drive):
     from irmcl_warp.io.plausibility import check_map, free_on_walls_share
 
     grid = build_map(drive, drive.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu")
-    assert free_on_walls_share(grid.probability, grid.known) < 0.25 and _warned(check_map, "office.yaml",
-                                                                                 grid.probability, grid.known) == []
+    assert (
+        free_on_walls_share(grid.probability, grid.known) < 0.25
+        and _warned(check_map, "office.yaml", grid.probability, grid.known) == []
+    )
     # free space only in thin lines beside the walls (a third of the known cells occupied: the share check is quiet)
     p, known = np.full((200, 200), 0.5, np.float32), np.zeros((200, 200), bool)
     for row in range(10, 190, 20):
         p[row], p[row - 1], p[row + 1] = 0.9, 0.1, 0.1
-        known[row - 1:row + 2] = True
+        known[row - 1 : row + 2] = True
     said = _warned(check_map, "thin.yaml", p, known)
     assert free_on_walls_share(p, known) == 1.0
     assert len(said) == 1 and "thin.yaml" in said[0] and "touch an occupied cell" in said[0]

@@ -18,11 +18,14 @@ def quiet(fn, *a, **k):
         return fn(*a, **k)
 
 
-@pytest.mark.parametrize("log, scans, beams", [
-    ("kuemmerle2009/derived/fr079.revfix.clf.gz", 4934, 360),
-    ("kuemmerle2009/derived/intel.fileorder.clf.gz", 13631, 180),
-    ("kuemmerle2009/mit-csail.clf.gz", 1988, 361),
-])
+@pytest.mark.parametrize(
+    "log, scans, beams",
+    [
+        ("kuemmerle2009/derived/fr079.revfix.clf.gz", 4934, 360),
+        ("kuemmerle2009/derived/intel.fileorder.clf.gz", 13631, 180),
+        ("kuemmerle2009/mit-csail.clf.gz", 1988, 361),
+    ],
+)
 def test_carmen_logs_counts(data_dir, log, scans, beams):
     L = quiet(read_carmen, data_dir / log)
     assert (len(L), L.info.num_beams) == (scans, beams)
@@ -55,7 +58,9 @@ def test_fr079_bag_repaired_on_reading_equals_the_derived_log(data_dir):
     idx = match_stamps(bag.stamps, ref.stamps)
     assert (idx >= 0).all() and bag.defects.counts["odometry_steps_reversed"] > 300
     got, want = bag.odom[idx], ref.odom
-    np.testing.assert_allclose(relative(got[:-1], got[1:]), relative(want[:-1], want[1:]), atol=1e-5)  # the log prints 6 decimals
+    np.testing.assert_allclose(
+        relative(got[:-1], got[1:]), relative(want[:-1], want[1:]), atol=1e-5
+    )  # the log prints 6 decimals
 
 
 def test_relations_of_fr079_against_corrected_poses_and_odometry(data_dir):
@@ -79,8 +84,10 @@ def test_killian_relations_match_only_through_g2o_stamps(data_dir):
     assert both.sum() == 658
 
 
-@pytest.mark.parametrize("name, count, backwards, repeated", [
-    ("fr079", 1685, 0, 4), ("intel", 2984, 6, 0), ("mit-csail", 1172, 0, 1), ("mit-killian", 4677, 0, 4)])
+@pytest.mark.parametrize(
+    "name, count, backwards, repeated",
+    [("fr079", 1685, 0, 4), ("intel", 2984, 6, 0), ("mit-csail", 1172, 0, 1), ("mit-killian", 4677, 0, 4)],
+)
 def test_every_real_file_reads_with_its_known_oddities_reported(data_dir, name, count, backwards, repeated):
     """Every relations, split and ground-truth file of the shared data reads; what is odd in it is warned about
     (intel's 6 relations whose t1 is later than t2: its logger's clock steps back), not refused."""

@@ -40,14 +40,20 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
     k = np.arange(0, len(log) - 6, 3)
     rel_file = tmp_path / "sim.relations"
     motion = relative(laser_truth[k], laser_truth[k + 6])
-    rel_file.write_text("".join(f"{log.stamps[a]:.6f} {log.stamps[a + 6]:.6f} {m[0]:.6f} {m[1]:.6f} 0 0 0 {m[2]:.6f}\n"
-                                for a, m in zip(k, motion)))
+    rel_file.write_text(
+        "".join(
+            f"{log.stamps[a]:.6f} {log.stamps[a + 6]:.6f} {m[0]:.6f} {m[1]:.6f} 0 0 0 {m[2]:.6f}\n"
+            for a, m in zip(k, motion)
+        )
+    )
     fake = tmp_path / "gmapping_replay"
     fake.write_text(FAKE.format(python=sys.executable))
     fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
     (tmp_path / "COMMIT").write_text("fake 0\n")
     monkeypatch.setattr(ref, "BINARY", fake)
-    cfg = OmegaConf.create({"exp": "sim", "data": {"name": "sim", "relations_path": str(rel_file), "relation_stamps_path": None}})
+    cfg = OmegaConf.create(
+        {"exp": "sim", "data": {"name": "sim", "relations_path": str(rel_file), "relation_stamps_path": None}}
+    )
     scans = tmp_path / "scans.txt"
     ref.export_scans(log, scans)
     np.savetxt(str(scans) + ".truth", laser_truth, fmt="%.9f")
@@ -63,9 +69,18 @@ def test_runner_scores_the_drivers_path_like_our_own_runs(tmp_path, monkeypatch)
     first = scans.read_text().splitlines()[0].split()
     assert int(first[4]) == 24 and len(first) == 5 + 24
     # a run with the log's data config overridden is a variant of its own: its own folder, not in the default rows
-    other = ref.run_seed(cfg, log, scans, 3, {"maxRange": "19.99", "maxUrange": "10"}, tmp_path,
-                         data_overrides=["data.laser_offset=[0,0,0]"])
-    assert other["run"] == "30p-maxUrange10-laser_offset0_0_0-seed3" and other["data_overrides"] == ["data.laser_offset=[0,0,0]"]
+    other = ref.run_seed(
+        cfg,
+        log,
+        scans,
+        3,
+        {"maxRange": "19.99", "maxUrange": "10"},
+        tmp_path,
+        data_overrides=["data.laser_offset=[0,0,0]"],
+    )
+    assert other["run"] == "30p-maxUrange10-laser_offset0_0_0-seed3" and other["data_overrides"] == [
+        "data.laser_offset=[0,0,0]"
+    ]
     runs = {("sim", r["run"]): r for r in (m, other)}
     assert len(released_errors(runs, "sim", variant="maxUrange=10")) == 1
     assert len(released_errors(runs, "sim", variant="maxUrange=10, data.laser_offset=[0,0,0]")) == 1
@@ -78,13 +93,16 @@ def test_neff_check_reads_the_released_resamplings_from_its_post_resampling_trac
     from runfakes import composed, fake_run
 
     traces = {0: [30, 22.5, 30, 18.0, 30, 30], 1: [30, 25.0, 30, 21.0, 19.5, 17.0]}
-    neff = "scan,neff,resampled,match_rounds\n" + "".join(f"{k},{v},{int(v < 15)},3\n"
-                                                         for k, v in enumerate([29.0, 12.0, 24.0, 11.0, 20.0]))
+    neff = "scan,neff,resampled,match_rounds\n" + "".join(
+        f"{k},{v},{int(v < 15)},3\n" for k, v in enumerate([29.0, 12.0, 24.0, 11.0, 20.0])
+    )
     for seed, values in traces.items():
         d = runs.tool_dir("gmapping_intel", TOOL, f"30p-seed{seed}", seed, tmp_path)
         d.mkdir(parents=True)
         np.savetxt(d / "neff.txt", np.column_stack([np.arange(len(values)), values]), fmt="%.6f")
-        (d / "metrics.json").write_text(json.dumps({"particles": 30, "settings": {}, "data_overrides": [], "run": d.name}))
+        (d / "metrics.json").write_text(
+            json.dumps({"particles": 30, "settings": {}, "data_overrides": [], "run": d.name})
+        )
         cfg = composed("+exp=gmapping_intel", "slam.proposal=gmapping_code", f"slam.seed={seed}")
         fake_run(tmp_path, "slam", cfg, {}, {"neff.csv": neff})
     other = composed("+exp=gmapping_intel", "slam.proposal=gmapping_code", "data.laser_offset=[0,0,0]")
@@ -104,9 +122,11 @@ def test_gfs_path_is_read_from_gfs2logs_odom_lines(tmp_path):
     keeps its last pose); a broken line is an error naming the file and the line; its runs form their own
     variant, apart from the wrapper replay's runs."""
     f = tmp_path / "best.log"
-    f.write_text("ODOM 0 0 0 0 0 0 0.000000 pippo 0\nNEFF 29.5 0 pippo 0\n"
-                 "ODOM 1.0 2.0 0.5 0 0 0 10.250000 pippo 10.25\nROBOTLASER1 0 0\n"
-                 "ODOM 1.5 2.0 0.6 0 0 0 10.500000 pippo 10.5\nODOM 1.6 2.1 0.7 0 0 0 10.500000 pippo 10.5\n")
+    f.write_text(
+        "ODOM 0 0 0 0 0 0 0.000000 pippo 0\nNEFF 29.5 0 pippo 0\n"
+        "ODOM 1.0 2.0 0.5 0 0 0 10.250000 pippo 10.25\nROBOTLASER1 0 0\n"
+        "ODOM 1.5 2.0 0.6 0 0 0 10.500000 pippo 10.5\nODOM 1.6 2.1 0.7 0 0 0 10.500000 pippo 10.5\n"
+    )
     stamps, poses = ref.read_gfs_path(f)
     assert stamps.tolist() == [10.25, 10.5] and poses.tolist() == [[1.0, 2.0, 0.5], [1.6, 2.1, 0.7]]
     f.write_text("ODOM 1.0 2.0 0.5 0 0 0 10.25 pippo 10.25\nODOM 1.0 x 0.5\n")
@@ -148,23 +168,43 @@ def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_
     k = np.arange(0, len(log) - 4, 2)
     rel_file = tmp_path / "sim.relations"
     motion = relative(log.ground_truth[k], log.ground_truth[k + 4])
-    rel_file.write_text("".join(f"{log.stamps[a]:.6f} {log.stamps[a + 4]:.6f} {m[0]:.6f} {m[1]:.6f} 0 0 0 {m[2]:.6f}\n"
-                                for a, m in zip(k, motion)))
+    rel_file.write_text(
+        "".join(
+            f"{log.stamps[a]:.6f} {log.stamps[a + 4]:.6f} {m[0]:.6f} {m[1]:.6f} 0 0 0 {m[2]:.6f}\n"
+            for a, m in zip(k, motion)
+        )
+    )
     clf = tmp_path / "sim.clf.gz"
     clf.write_bytes(gzip.compress(b"FLASER 16 " + b"1.0 " * 16 + b"0 0 0 0 0 0 1.0 host 1.0\n"))
     np.savetxt(tmp_path / "truth.txt", log.ground_truth, fmt="%.9f")
     np.savetxt(tmp_path / "stamps.txt", log.stamps, fmt="%.6f")
-    for name, text in (("gfs_nogui", FAKE_GFS.format(python=sys.executable)),
-                       ("gfs2log", FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
-                                                       stamps=str(tmp_path / "stamps.txt"), cut=""))):
+    for name, text in (
+        ("gfs_nogui", FAKE_GFS.format(python=sys.executable)),
+        (
+            "gfs2log",
+            FAKE_GFS2LOG.format(
+                python=sys.executable, truth=str(tmp_path / "truth.txt"), stamps=str(tmp_path / "stamps.txt"), cut=""
+            ),
+        ),
+    ):
         (tmp_path / name).write_text(text)
         (tmp_path / name).chmod(0o755)
     (tmp_path / "COMMIT").write_text("fake 0\n")
     monkeypatch.setattr(ref, "GFS", tmp_path / "gfs_nogui")
     monkeypatch.setattr(ref, "GFS2LOG", tmp_path / "gfs2log")
     monkeypatch.setattr(ref, "BINARY", tmp_path / "gmapping_replay")
-    cfg = OmegaConf.create({"exp": "sim", "data": {"name": "sim", "format": "carmen", "path": str(clf),
-                                     "relations_path": str(rel_file), "relation_stamps_path": None}})
+    cfg = OmegaConf.create(
+        {
+            "exp": "sim",
+            "data": {
+                "name": "sim",
+                "format": "carmen",
+                "path": str(clf),
+                "relations_path": str(rel_file),
+                "relation_stamps_path": None,
+            },
+        }
+    )
     out = tmp_path / "runs"
     out.mkdir()
     plain = ref.gfs_log(cfg, out)  # the log in plain text, once for every seed
@@ -175,8 +215,11 @@ def test_gfs_runner_scores_the_tools_path_and_names_a_log_it_does_not_cover(tmp_
     folder = runs.tool_dir("sim", TOOL, "gfs-30p-seed4", {"tool": "gfs_nogui", "seed": 4}, out)
     assert folder.is_dir() and not list(folder.glob("*.dat"))  # its own folder, scratch removed
     # a path that misses the last scans: an error naming gfs2log's file (a finished run is kept, not run again)
-    (tmp_path / "gfs2log").write_text(FAKE_GFS2LOG.format(python=sys.executable, truth=str(tmp_path / "truth.txt"),
-                                                         stamps=str(tmp_path / "stamps.txt"), cut="[:-3]"))
+    (tmp_path / "gfs2log").write_text(
+        FAKE_GFS2LOG.format(
+            python=sys.executable, truth=str(tmp_path / "truth.txt"), stamps=str(tmp_path / "stamps.txt"), cut="[:-3]"
+        )
+    )
     assert ref.run_gfs_seed(cfg, log, plain, 4, out) == m
     (folder / "metrics.json").unlink()
     with pytest.raises(RuntimeError, match="best.log: poses at"):

@@ -54,6 +54,7 @@ def test_our_field_computes_the_same_occupancy_under_their_names(tmp_path):
 
 def test_a_field_of_another_shape_is_refused(tmp_path):
     from irmcl_warp.config import ModelConfig
+
     small = NOF(ModelConfig(width=64))
     pt = tmp_path / "nof.pt"
     torch.save({"model": small.state_dict(), "model_config": small.config_dict()}, pt)
@@ -76,7 +77,9 @@ def test_a_window_goes_out_in_their_sequence_format(tmp_path):
     assert first == 3
     doc = json.loads((tmp_path / "seq.json").read_text())
     assert doc["num_beams"] == 24 and doc["max_range"] == 30.0 and len(doc["scans"]) == 20
-    assert np.isclose(doc["angle_min"], log.info.angles_rad[0]) and np.isclose(doc["angle_res"], np.diff(log.info.angles_rad).mean())
+    assert np.isclose(doc["angle_min"], log.info.angles_rad[0]) and np.isclose(
+        doc["angle_res"], np.diff(log.info.angles_rad).mean()
+    )
     s = doc["scans"]
     assert s[0]["timestamp"] == 0.0 and np.isclose(s[7]["timestamp"], log.stamps[7] - log.stamps[0])
     # no-return and too-far beams at max_range, which their loader drops (>= max_range -> 0)
@@ -92,9 +95,11 @@ def test_a_window_goes_out_in_their_sequence_format(tmp_path):
 
 
 def test_their_printed_summary_and_step_times_are_read_back():
-    text = ("finished frame 1 at timestamp 0.20s with time cost: 0.010s\nfinished frame 2 at timestamp 0.40s with time "
-            "cost: 0.030s\nfinished frame 3 at timestamp 0.60s with time cost: 0.020s\n  location_rmse\t  location_ptc5\t"
-            " ...\n           5.56\t 49.18\t 98.36\t 100.00\t 0.68\t 54.64\t 85.79\t 98.91\t\n")
+    text = (
+        "finished frame 1 at timestamp 0.20s with time cost: 0.010s\nfinished frame 2 at timestamp 0.40s with time "
+        "cost: 0.030s\nfinished frame 3 at timestamp 0.60s with time cost: 0.020s\n  location_rmse\t  location_ptc5\t"
+        " ...\n           5.56\t 49.18\t 98.36\t 100.00\t 0.68\t 54.64\t 85.79\t 98.91\t\n"
+    )
     out = ref.parse_their_log(text)
     assert np.isclose(out["their_ms_per_frame_median"], 20.0)
     assert out["their_summary"]["location_rmse_cm"] == 5.56 and out["their_summary"]["yaw_rmse_deg"] == 0.68
@@ -106,6 +111,7 @@ def test_their_printed_summary_and_step_times_are_read_back():
 def test_a_split_goes_out_as_their_dataset_reads_it(tmp_path):
     """Their loader takes transform_matrix[:2, :3] as [R | t] and marks beams >= max_range invalid."""
     from irmcl_warp.nof.beams import BeamSet
+
     rng = np.random.default_rng(3)
     poses = np.column_stack([rng.uniform(-5, 5, 4), rng.uniform(-5, 5, 4), rng.uniform(-3, 3, 4)])
     ranges = rng.uniform(0.5, 9.0, (4, 7)).astype(np.float32)

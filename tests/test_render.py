@@ -89,6 +89,7 @@ def test_renderer_rejects_unknown_names_and_dtypes():
 
 # --- occupancy-guided sampling (RENDER["occupied_samples"], train.sampler=occupancy) ---------------------------
 
+
 def _random_grid(rng, H=23, W=31):
     values = torch.from_numpy(rng.uniform(0.0, 1.0, (H, W)) ** 2).float()
     occupied = torch.from_numpy(rng.uniform(0.0, 1.0, (H, W)) < 0.6)
@@ -125,7 +126,9 @@ def test_occupied_samples_by_hand():
     keep = RENDER.build("occupied_samples", origin_xy=(0.0, 0.0), resolution_m=0.1, t_min=0.1)(points, values, occupied)
     # T before each: 1, 1, 0.5, 0.05 (< 0.1: the beam has ended), and the last point is off the grid
     assert keep.cpu().tolist() == [[False, True, True, False, False]]
-    no_end = RENDER.build("occupied_samples", origin_xy=(0.0, 0.0), resolution_m=0.1, t_min=0.0)(points, values, occupied)
+    no_end = RENDER.build("occupied_samples", origin_xy=(0.0, 0.0), resolution_m=0.1, t_min=0.0)(
+        points, values, occupied
+    )
     assert no_end.cpu().tolist() == [[False, True, True, True, False]]
 
 
@@ -149,8 +152,9 @@ def test_guided_rendering_equals_full_rendering_where_the_grid_is_right(rng, end
     a = rng.uniform(-0.6, 0.6, n)
     d = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
     ends = o + d * ((4.5 - o[:, :1]) / d[:, :1])
-    tc = SimpleNamespace(grid_resolution_m=0.1, grid_threshold=0.01, grid_decay=0.8, grid_dilate=1, grid_end=end,
-                         grid_t_min=1e-4)
+    tc = SimpleNamespace(
+        grid_resolution_m=0.1, grid_threshold=0.01, grid_decay=0.8, grid_dilate=1, grid_end=end, grid_t_min=1e-4
+    )
     grid = OccupancyGrid(o, ends, tc, DEV)
     for _ in range(4):  # a random point per cell: a few readings find every wall cell
         grid.update(Walls())

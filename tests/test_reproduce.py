@@ -57,8 +57,9 @@ def test_runner_tells_done_kept_and_missing_apart(tmp_path):
         kept_cfg = OmegaConf.to_container(cfgs[1], resolve=True)
         kept_cfg["device"] = "cuda:0"  # ran on a GPU; the job asks for device=auto: still the same run
         other = {**kept_cfg, "slam": {**kept_cfg["slam"], "seed": 2, "num_particles": 31}}  # seed 2, but not its job
-        (doc,) = keep([fake_run(tmp_path / "gpu", "slam", c, {"seed": c["slam"]["seed"]}) for c in (kept_cfg, other)],
-                      results)  # kept in the repository (eval.keep)
+        (doc,) = keep(
+            [fake_run(tmp_path / "gpu", "slam", c, {"seed": c["slam"]["seed"]}) for c in (kept_cfg, other)], results
+        )  # kept in the repository (eval.keep)
         kept_doc = json.loads(doc.read_text())
         for rec in kept_doc["records"].values():
             del rec["config"]["sim"]  # a section the stage reads only since these runs: not compared
@@ -69,17 +70,35 @@ def test_runner_tells_done_kept_and_missing_apart(tmp_path):
     missing = [ov for ov, s in zip(sweep.jobs(), states) if s == "missing"]
     flags = argparse.Namespace(jobs=3, gpus=2, jobs_per_gpu=4)
     (cmd,) = multirun_commands(sweep, missing, "joblib", flags, ["device=cpu"])
-    assert cmd[2:] == ["irmcl_warp.slam", "-m", "+exp=gmapping_sim", "slam.seed=2,3", "hydra/launcher=joblib",
-                       "hydra.launcher.n_jobs=3", "device=cpu"]
+    assert cmd[2:] == [
+        "irmcl_warp.slam",
+        "-m",
+        "+exp=gmapping_sim",
+        "slam.seed=2,3",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=3",
+        "device=cpu",
+    ]
     (cmd,) = multirun_commands(sweep, sweep.jobs(), "basic", flags, [])  # all missing: one multirun, all at once
     assert cmd[2:] == ["irmcl_warp.slam", "-m", "+exp=gmapping_sim", "slam.seed=0,1,2,3"]
     (cmd,) = multirun_commands(sweep, missing, "pool", flags, [])
-    assert cmd[-4:] == ["hydra/launcher=pool", "hydra.launcher.cpu_workers=3", "hydra.launcher.gpus=2",
-                        "hydra.launcher.jobs_per_gpu=4"]
+    assert cmd[-4:] == [
+        "hydra/launcher=pool",
+        "hydra.launcher.cpu_workers=3",
+        "hydra.launcher.gpus=2",
+        "hydra.launcher.jobs_per_gpu=4",
+    ]
 
 
-@pytest.mark.parametrize("launcher,target", [("joblib", "JoblibLauncher"), ("slurm", "SlurmLauncher"),
-                                             ("pool", "PoolLauncher"), ("submitit_local", "LocalLauncher")])
+@pytest.mark.parametrize(
+    "launcher,target",
+    [
+        ("joblib", "JoblibLauncher"),
+        ("slurm", "SlurmLauncher"),
+        ("pool", "PoolLauncher"),
+        ("submitit_local", "LocalLauncher"),
+    ],
+)
 def test_launcher_configs_compose(launcher, target):
     cfg = _compose(f"hydra/launcher={launcher}", hydra=True)
     assert cfg.hydra.launcher._target_.endswith(target)
@@ -94,7 +113,9 @@ def test_every_sweep_composes_and_its_jobs_are_runs_of_their_own(rng, data_dir):
 
     jobs = [(s, ov) for s in SWEEPS for ov in s.jobs()]
     others = [j for j in jobs if j[0].group != "ablation"]
-    pick = [j for j in jobs if j[0].group == "ablation"] + [others[i] for i in rng.choice(len(others), 40, replace=False)]
+    pick = [j for j in jobs if j[0].group == "ablation"] + [
+        others[i] for i in rng.choice(len(others), 40, replace=False)
+    ]
     seen = {}
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):

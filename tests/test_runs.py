@@ -46,6 +46,7 @@ def _finish(cfg, stage, root, files=None, metrics=None) -> Path:
 
 # --- identity ------------------------------------------------------------------------------------------------
 
+
 def test_identity_follows_what_the_stage_reads(tmp_path):
     """globloc reads mcl (its lidar filter): changing mcl.alphas makes it run again; localize reads neither
     mapping nor raycast: changing them returns the finished run; a likelihood-field run does not depend on a
@@ -57,8 +58,14 @@ def test_identity_follows_what_the_stage_reads(tmp_path):
     assert runs.finished(runs.identify(alphas, "globloc"), tmp_path) is None  # a new run, not the old one
     lf = _cfg("+exp=sim_office", "mcl.weighting=likelihood_field", *SMALL)
     lf_done = _finish(lf, "localize", tmp_path)
-    other_grids = _cfg("+exp=sim_office", "mcl.weighting=likelihood_field", *SMALL, "mapping.resolution_m=0.1",
-                       "raycast.name=distance_field", "train.lr=0.05")
+    other_grids = _cfg(
+        "+exp=sim_office",
+        "mcl.weighting=likelihood_field",
+        *SMALL,
+        "mapping.resolution_m=0.1",
+        "raycast.name=distance_field",
+        "train.lr=0.05",
+    )
     assert runs.finished(runs.identify(other_grids, "localize"), tmp_path) == lf_done
     nog = [runs.identify(_cfg("+exp=sim_office", *SMALL, f"train.lr={lr}"), "localize") for lr in (0.003, 0.05)]
     assert nog[0].id != nog[1].id and nog[0].upstream["train"].id != nog[1].upstream["train"].id
@@ -94,6 +101,7 @@ def test_file_settings_count_by_content_not_by_name(tmp_path):
 
 # --- stages: folders of their own, never overwritten ------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def drives(tmp_path_factory):
     """Inspect runs of two drives through the simulated office (sim.path_seed 1 and 2), each writing its bag."""
@@ -121,9 +129,20 @@ def test_path_seeds_bags_and_maps_land_in_folders_of_their_own(drives, monkeypat
     image = (a / "map.pgm").read_bytes()
     (other.parent / "map.pgm").write_bytes(image[:-200] + bytes(200))  # another map under the same names
     other.write_text((a / "map.yaml").read_text())
-    loc = [run_localize(_cfg("data=bag", f"data.path={b / 'sim.bag'}", f"localize.map_path={m}", "device=cpu",
-                             "mcl.weighting=likelihood_field", "mcl.num_particles=300", "localize.run_s=4"))
-           for m in (a / "map.yaml", other)]
+    loc = [
+        run_localize(
+            _cfg(
+                "data=bag",
+                f"data.path={b / 'sim.bag'}",
+                f"localize.map_path={m}",
+                "device=cpu",
+                "mcl.weighting=likelihood_field",
+                "mcl.num_particles=300",
+                "localize.run_s=4",
+            )
+        )
+        for m in (a / "map.yaml", other)
+    ]
     assert loc[0] != loc[1] and all(runs.intact(p)[0] for p in loc)
     images = {json.loads((p / "manifest.json").read_text())["inputs"]["localize.map_path"][1]["sha256"] for p in loc}
     assert len(images) == 2  # each names the image it read
@@ -132,9 +151,23 @@ def test_path_seeds_bags_and_maps_land_in_folders_of_their_own(drives, monkeypat
 def test_the_jobs_of_a_sweep_get_runs_of_their_own(tmp_path):
     """An untagged Hydra sweep through the joblib launcher: two jobs at once, two runs."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    done = subprocess.run([sys.executable, "-m", "irmcl_warp.inspect", "-m", *SMALL, "sim.path_seed=3,4",
-                           "hydra/launcher=joblib", "hydra.launcher.n_jobs=2"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "irmcl_warp.inspect",
+            "-m",
+            *SMALL,
+            "sim.path_seed=3,4",
+            "hydra/launcher=joblib",
+            "hydra.launcher.n_jobs=2",
+        ],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     made = [r for r in runs.records("inspect", root=tmp_path / "outputs")]
     assert sorted(r.setting("sim.path_seed") for r in made) == [3, 4]
@@ -143,8 +176,10 @@ def test_the_jobs_of_a_sweep_get_runs_of_their_own(tmp_path):
 def test_two_runs_of_one_identity_started_at_once_leave_one_intact_run(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     args = [sys.executable, "-m", "irmcl_warp.inspect", *SMALL, "sim.path_seed=5"]
-    procs = [subprocess.Popen(args, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for _ in range(2)]
+    procs = [
+        subprocess.Popen(args, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
     outs = [p.communicate(timeout=600) for p in procs]
     assert all(p.returncode == 0 for p in procs), [o[1][-1000:] for o in outs]
     stage = tmp_path / "outputs" / "sim_office" / "inspect"
@@ -167,21 +202,37 @@ def test_a_redone_run_leaves_no_file_of_the_damaged_one(drives, monkeypatch, cap
 
 # --- consuming runs ---------------------------------------------------------------------------------------------
 
+
 def _field(cfg) -> bytes:
     """A tiny NOF checkpoint (what a finished training leaves as nof.pt)."""
     import io
 
     mc = ModelConfig(**OmegaConf.to_container(cfg.model))
     buf = io.BytesIO()
-    torch.save({"model_config": dataclasses.asdict(mc), "model": NOF(mc).state_dict(), "near_m": 0.02, "far_m": 20.0,
-                "epoch": 1}, buf)
+    torch.save(
+        {
+            "model_config": dataclasses.asdict(mc),
+            "model": NOF(mc).state_dict(),
+            "near_m": 0.02,
+            "far_m": 20.0,
+            "epoch": 1,
+        },
+        buf,
+    )
     return buf.getvalue()
 
 
 def test_localize_refuses_an_unfinished_field_and_records_the_one_it_read(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg("+exp=sim_office", *SMALL, *TINY_FIELD, "mcl.num_particles=200", "mcl.num_samples=16",
-               "localize.num_starts=1", "localize.run_s=3")
+    cfg = _cfg(
+        "+exp=sim_office",
+        *SMALL,
+        *TINY_FIELD,
+        "mcl.num_particles=200",
+        "mcl.num_samples=16",
+        "localize.num_starts=1",
+        "localize.run_s=3",
+    )
     with pytest.raises(RuntimeError, match="killed"):  # a training interrupted after writing its first field
         with runs.start(cfg, "train") as run:
             (run.dir / "nof.pt").write_bytes(_field(cfg))
@@ -200,8 +251,16 @@ def test_a_changed_validation_trains_a_run_of_its_own(tmp_path, monkeypatch):
     from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
-    base = ["+exp=sim_office", *SMALL, *TINY_FIELD, "train.epochs=1", "train.steps_per_epoch=2", "train.batch_rays=64",
-            "train.num_samples=16", "render.num_samples=16"]
+    base = [
+        "+exp=sim_office",
+        *SMALL,
+        *TINY_FIELD,
+        "train.epochs=1",
+        "train.steps_per_epoch=2",
+        "train.batch_rays=64",
+        "train.num_samples=16",
+        "render.num_samples=16",
+    ]
     two, three = (run_train(_cfg(*base, f"train.val_scans={k}")) for k in (2, 3))
     assert two != three
     assert [json.loads((p / "metrics.json").read_text())["val"]["scans"] for p in (two, three)] == [2, 3]
@@ -211,8 +270,17 @@ def test_a_damaged_checkpoint_is_an_error_naming_it_and_the_way_out(tmp_path, mo
     from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
-    cfg = _cfg("+exp=sim_office", *SMALL, *TINY_FIELD, "train.epochs=1", "train.steps_per_epoch=2",
-               "train.batch_rays=64", "train.num_samples=16", "render.num_samples=16", "train.val_scans=2")
+    cfg = _cfg(
+        "+exp=sim_office",
+        *SMALL,
+        *TINY_FIELD,
+        "train.epochs=1",
+        "train.steps_per_epoch=2",
+        "train.batch_rays=64",
+        "train.num_samples=16",
+        "render.num_samples=16",
+        "train.val_scans=2",
+    )
     partial = runs.identify(cfg, "train").folder()
     partial = partial.with_name(f".{partial.name}.partial")
     partial.mkdir(parents=True)
@@ -222,6 +290,7 @@ def test_a_damaged_checkpoint_is_an_error_naming_it_and_the_way_out(tmp_path, mo
 
 
 # --- caches and inputs --------------------------------------------------------------------------------------------
+
 
 def _carmen(ranges_cm: int) -> str:
     lines = []

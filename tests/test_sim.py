@@ -30,8 +30,15 @@ def test_lidar_kernel_matches_twin_without_noise(rng):
 
 def test_lidar_noise_and_dropout_statistics():
     seg = np.array([[5.0, -50, 5.0, 50]])  # a wall 5 m ahead
-    lidar = SIM.build("segment_lidar", segments=seg, angles_rad=np.zeros(2000), max_range_m=20.0, noise_std_m=0.05,
-                      dropout_prob=0.1, device=DEVICE)
+    lidar = SIM.build(
+        "segment_lidar",
+        segments=seg,
+        angles_rad=np.zeros(2000),
+        max_range_m=20.0,
+        noise_std_m=0.05,
+        dropout_prob=0.1,
+        device=DEVICE,
+    )
     r = lidar.scan(np.zeros((1, 3)), seed=3)[0]
     valid = r[np.isfinite(r)]
     assert 0.08 < np.isnan(r).mean() < 0.12
@@ -51,7 +58,7 @@ def test_rasterize_matches_twin(rng, on_lattice):
     for x0, y0, x1, y1 in world.segments:
         mid = ((x0 + x1) / 2 - origin[0]) / 0.1, ((y0 + y1) / 2 - origin[1]) / 0.1
         ix, iy = int(np.clip(mid[0], 0, 129)), int(np.clip(mid[1], 0, 89))
-        assert got[max(iy - 1, 0):iy + 2, max(ix - 1, 0):ix + 2].any(), (x0, y0, x1, y1)
+        assert got[max(iy - 1, 0) : iy + 2, max(ix - 1, 0) : ix + 2].any(), (x0, y0, x1, y1)
 
 
 def test_simulation_is_deterministic_and_odometry_noise_follows_alphas():
@@ -62,8 +69,9 @@ def test_simulation_is_deterministic_and_odometry_noise_follows_alphas():
     c, _ = simulate(small_sim(seed=6), device=DEVICE)
     assert not np.array_equal(a.ground_truth[:5], c.ground_truth[:5]) or not np.array_equal(a.ranges_m, c.ranges_m)
     exact = noisy_odometry(a.ground_truth, [0, 0, 0, 0], np.random.default_rng(0))
-    np.testing.assert_allclose(relative(exact[:-1], exact[1:]), relative(a.ground_truth[:-1], a.ground_truth[1:]),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        relative(exact[:-1], exact[1:]), relative(a.ground_truth[:-1], a.ground_truth[1:]), atol=1e-9
+    )
     drift = np.hypot(*(a.odom[-1, :2] - relative(a.ground_truth[:1], a.ground_truth[-1:])[0, :2]))
     assert drift > 1e-3  # the default alphas do perturb the odometry
 

@@ -28,8 +28,15 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 def _sim(duration_s=20.0, **extra):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=[f"sim.duration_s={duration_s}", "sim.width_m=14", "sim.height_m=10",
-                                           *[f"{k}={v}" for k, v in extra.items()]])
+        cfg = compose(
+            "config",
+            overrides=[
+                f"sim.duration_s={duration_s}",
+                "sim.width_m=14",
+                "sim.height_m=10",
+                *[f"{k}={v}" for k, v in extra.items()],
+            ],
+        )
     return simulate(cfg.sim, DEVICE)[0]
 
 
@@ -37,8 +44,18 @@ def _maps_numpy(maps: ParticleMaps, p: int) -> dict:
     return {f: a.astype(np.float64) for f, a in maps.fields(p).items()}
 
 
-def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), P=2, jitter=0.0, rng=None,
-                    line="bresenham", free_space=True):
+def _integrate_both(
+    log,
+    scans,
+    res=0.1,
+    origin=(-1.0, -1.0),
+    shape=(120, 160),
+    P=2,
+    jitter=0.0,
+    rng=None,
+    line="bresenham",
+    free_space=True,
+):
     maps = ParticleMaps(P, shape, origin, res, device=DEVICE)
     ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
     integ = SLAM.build("integrate", usable_range_m=8.0, line=line, free_space=free_space, device=DEVICE)
@@ -47,27 +64,64 @@ def _integrate_both(log, scans, res=0.1, origin=(-1.0, -1.0), shape=(120, 160), 
         poses = np.tile(log.ground_truth[k], (P, 1))
         if jitter:
             poses = poses + rng.normal(0, jitter, poses.shape)
-        integ(maps, wp.array(poses.astype(np.float32), dtype=wp.vec3, device=DEVICE), log.T_base_laser,
-              wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE), angles)
+        integ(
+            maps,
+            wp.array(poses.astype(np.float32), dtype=wp.vec3, device=DEVICE),
+            log.T_base_laser,
+            wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
+            angles,
+        )
         for p in range(P):
-            twin.integrate(ref[p], poses[p].astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                           log.info.angles_rad, 8.0, origin, res, line=line, free_space=free_space)
+            twin.integrate(
+                ref[p],
+                poses[p].astype(np.float32),
+                log.T_base_laser,
+                log.ranges_m[k],
+                log.info.angles_rad,
+                8.0,
+                origin,
+                res,
+                line=line,
+                free_space=free_space,
+            )
     return maps, ref
 
 
 def _score_against_twin(maps, log, k, cands, origin, free_check, rng, res=0.1):
     """Scan k scored at ``cands`` on map 0 by the kernel and by the twin; asserts they agree and returns the
     kernel's scores."""
-    scorer = SLAM.build("score", usable_range_m=8.0, kernel_size=1, free_delta_m=res * np.sqrt(2),
-                        free_check=free_check, device=DEVICE)
+    scorer = SLAM.build(
+        "score", usable_range_m=8.0, kernel_size=1, free_delta_m=res * np.sqrt(2), free_check=free_check, device=DEVICE
+    )
     cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
     score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
     loglik = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
-    scorer(maps, cw, log.T_base_laser, wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
-           wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE), score, loglik)
-    want = np.array([twin.score(_maps_numpy(maps, 0), c.astype(np.float32), log.T_base_laser, log.ranges_m[k],
-                                log.info.angles_rad, 8.0, origin, res, free_delta=res * np.sqrt(2),
-                                free_check=free_check) for c in cands])
+    scorer(
+        maps,
+        cw,
+        log.T_base_laser,
+        wp.array(log.ranges_m[k], dtype=wp.float32, device=DEVICE),
+        wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE),
+        score,
+        loglik,
+    )
+    want = np.array(
+        [
+            twin.score(
+                _maps_numpy(maps, 0),
+                c.astype(np.float32),
+                log.T_base_laser,
+                log.ranges_m[k],
+                log.info.angles_rad,
+                8.0,
+                origin,
+                res,
+                free_delta=res * np.sqrt(2),
+                free_check=free_check,
+            )
+            for c in cands
+        ]
+    )
     assert np.allclose(score.numpy()[0], want[:, 0], rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
     assert np.allclose(loglik.numpy()[0], want[:, 1], rtol=1e-3, atol=1e-1), f"seed {rng.seed}"
     return score.numpy()[0]
@@ -89,7 +143,10 @@ def test_integrate_matches_twin(rng, line):
     assert got["hits"].sum() == ref_h[0]["hits"].sum() > 500
     if line == "bresenham":  # one cell per step along the major axis: fewer visits than every crossed cell
         dda, _ = _integrate_both(log, [0, 7, 14], P=2, jitter=0.0, rng=rng, line="dda")
-        assert dda.fields(0)["visits"].sum() > 1.2 * _maps_numpy(_integrate_both(log, [0, 7, 14], P=2)[0], 0)["visits"].sum()
+        assert (
+            dda.fields(0)["visits"].sum()
+            > 1.2 * _maps_numpy(_integrate_both(log, [0, 7, 14], P=2)[0], 0)["visits"].sum()
+        )
 
 
 @pytest.mark.parametrize("free_check", [True, False])
@@ -129,8 +186,9 @@ def _map_from_true_poses(rbpf, log):
     """Every particle's map from scans 0, 5 and 10 at their true poses (the matcher tests' map)."""
     rbpf.start(log.ground_truth[0], log.ranges_m[0])
     for k in (5, 10):
-        rbpf.poses.assign(wp.array(np.tile(log.ground_truth[k], (rbpf.P, 1)).astype(np.float32), dtype=wp.vec3,
-                                   device=DEVICE))
+        rbpf.poses.assign(
+            wp.array(np.tile(log.ground_truth[k], (rbpf.P, 1)).astype(np.float32), dtype=wp.vec3, device=DEVICE)
+        )
         rbpf._set_ranges(log.ranges_m[k])
         rbpf.integrator(rbpf.maps, rbpf.poses, rbpf.T_base_laser, rbpf.ranges, rbpf.angles)
 
@@ -193,8 +251,9 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=60",
-                                           "slam.num_particles=10"])
+        cfg = compose(
+            "config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=60", "slam.num_particles=10"]
+        )
     out = run_slam(cfg)
     m = json.loads((out / "metrics.json").read_text())
     assert m["processed_scans"] > 20
@@ -216,8 +275,17 @@ def test_the_laser_frame_carries_laser_poses_and_writes_the_base_path(tmp_path, 
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=60",
-                                           "sim.laser_x_m=0.3", "slam.num_particles=10", "slam.frame=laser"])
+        cfg = compose(
+            "config",
+            overrides=[
+                "+exp=gmapping_sim",
+                f"device={DEVICE}",
+                "sim.duration_s=60",
+                "sim.laser_x_m=0.3",
+                "slam.num_particles=10",
+                "slam.frame=laser",
+            ],
+        )
     log = _sim(10.0, **{"sim.laser_x_m": 0.3})
     odom, T = filter_frame(cfg, log)
     assert np.allclose(odom, compose_poses(log.odom, log.T_base_laser)) and not T.any()
@@ -343,7 +411,7 @@ def test_growing_the_maps_keeps_every_cell_where_it_was(rng):
     left, down = round((1.0 - maps.origin_xy[0]) / res), round((-2.0 - maps.origin_xy[1]) / res)
     assert left >= 1 and down >= 1 and maps.grown == 1
     expect = np.zeros(maps.cells.shape + (4,), np.float32)
-    expect[:, down:down + H, left:left + W] = before  # the twin
+    expect[:, down : down + H, left : left + W] = before  # the twin
     assert np.array_equal(maps.cells.numpy(), expect)
     x1 = maps.origin_xy[0] + maps.shape[2] * res
     assert x1 >= 1.61 + 0.2 and maps.origin_xy[0] <= 0.93 - 0.2  # the slack beyond the box on both sides
@@ -369,7 +437,6 @@ def test_hits_far_from_the_origin_keep_their_mean_to_a_millimetre():
     assert abs(mean_x - (float(pose[0, 0]) + 1.2345)) < 1e-3 and abs(mean_y - float(pose[0, 1])) < 1e-3
 
 
-
 def test_a_frame_holds_exactly_the_boxes_it_would_not_grow_for(rng):
     """ParticleMaps.holds, which lets RBPF skip computing a scan's end points, says yes exactly where cover()
     would not grow, on fresh random boxes in, across and beyond a frame (and at its edges)."""
@@ -384,6 +451,7 @@ def test_a_frame_holds_exactly_the_boxes_it_would_not_grow_for(rng):
             hi = (lo[0] + rng.uniform(0, 2), lo[1] + rng.uniform(0, 2))
         held = maps.holds(lo, hi)
         assert held == (not maps.cover(lo, hi, 0.5)), (lo, hi, maps.origin_xy)
+
 
 def test_the_filter_grows_its_maps_and_drops_no_end_point():
     """A filter whose first map is smaller than the scans: every end point within the usable range is
@@ -400,7 +468,6 @@ def test_the_filter_grows_its_maps_and_drops_no_end_point():
         assert rbpf.maps.fields(p)["hits"].sum() == valid
 
 
-
 def test_scans_are_processed_by_distance_turn_or_time_and_steps_queued_exactly():
     """The update rule, on the simulator's odometry against a direct count: a scan is processed once the path
     since the last processed one reaches linear_update, its turns angular_update, or (temporal_update) more
@@ -410,10 +477,23 @@ def test_scans_are_processed_by_distance_turn_or_time_and_steps_queued_exactly()
 
     log = _sim(30.0)
     for temporal in (-1.0, 2.0):
-        cfg = SlamConfig(num_particles=2, resolution_m=0.1, map_margin_m=2.0, linear_update=1.5,
-                         angular_update=0.7, temporal_update=temporal)
-        rbpf = RBPF(cfg, (40, 40), (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0), log.T_base_laser,
-                    log.info.angles_rad, 8.0, DEVICE)
+        cfg = SlamConfig(
+            num_particles=2,
+            resolution_m=0.1,
+            map_margin_m=2.0,
+            linear_update=1.5,
+            angular_update=0.7,
+            temporal_update=temporal,
+        )
+        rbpf = RBPF(
+            cfg,
+            (40, 40),
+            (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0),
+            log.T_base_laser,
+            log.info.angles_rad,
+            8.0,
+            DEVICE,
+        )
         rbpf.start(log.odom[0], log.ranges_m[0], float(log.stamps[0]))
         want, got, timed, path, turn, last = [], [], set(), 0.0, 0.0, 0
         for k in range(1, len(log)):
@@ -421,7 +501,7 @@ def test_scans_are_processed_by_distance_turn_or_time_and_steps_queued_exactly()
             turn += abs(float(wrap_angle(log.odom[k, 2] - log.odom[k - 1, 2])))
             due = path >= 1.5 or turn >= 0.7 or (temporal >= 0 and log.stamps[k] - log.stamps[last] > temporal)
             if not due and k - last == 3:  # the steps queued so far, before this one is added
-                steps = relative(log.odom[last:k - 1], log.odom[last + 1:k])
+                steps = relative(log.odom[last : k - 1], log.odom[last + 1 : k])
                 assert np.array_equal(np.array(rbpf.pending), steps[np.any(steps != 0, axis=1)])
             if due:
                 want.append(k)
@@ -433,11 +513,13 @@ def test_scans_are_processed_by_distance_turn_or_time_and_steps_queued_exactly()
         assert got == want and len(got) >= 5
         by_time = sum(1 for k in got if k in timed)
         assert (by_time > 0) == (temporal > 0), (temporal, by_time)
-    rbpf = RBPF(cfg, (40, 40), (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0), log.T_base_laser, log.info.angles_rad,
-                8.0, DEVICE)
+    rbpf = RBPF(
+        cfg, (40, 40), (log.odom[0, 0] - 2.0, log.odom[0, 1] - 2.0), log.T_base_laser, log.info.angles_rad, 8.0, DEVICE
+    )
     rbpf.start(log.odom[0], log.ranges_m[0])
     with pytest.raises(ValueError, match="temporal_update needs each scan's stamp"):
         rbpf.step(1, log.odom[1], log.ranges_m[1])
+
 
 def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     """Documented handling: the jump is reported in metrics.json and the filter takes it as motion."""
@@ -447,7 +529,9 @@ def test_an_odometry_jump_is_counted_and_run_through(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=20", "slam.num_particles=4"])
+        cfg = compose(
+            "config", overrides=["+exp=gmapping_sim", f"device={DEVICE}", "sim.duration_s=20", "slam.num_particles=4"]
+        )
     real = stage.load_stream
 
     def jumping(cfg):
@@ -487,8 +571,9 @@ def test_relations_are_scored_in_the_laser_frame(rng):
     from irmcl_warp.io.groundtruth import Relations
 
     T = np.array([rng.uniform(0.1, 0.4), rng.uniform(-0.1, 0.1), 0.0])
-    base = np.column_stack([np.full(6, rng.uniform(-5, 5)), np.full(6, rng.uniform(-5, 5)),
-                            np.cumsum(rng.uniform(0.3, 0.8, 6))])  # turning on the spot
+    base = np.column_stack(
+        [np.full(6, rng.uniform(-5, 5)), np.full(6, rng.uniform(-5, 5)), np.cumsum(rng.uniform(0.3, 0.8, 6))]
+    )  # turning on the spot
     stamps = np.arange(6, dtype=float)
     laser = compose(base, np.broadcast_to(T, base.shape))
     rel = Relations(stamps[:-1], stamps[1:], relative(laser[:-1], laser[1:]))
@@ -512,8 +597,10 @@ def test_runs_of_other_settings_are_runs_of_their_own_and_tables_read_their_sett
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         base = compose("config", overrides=["+exp=gmapping_fr079"])
         rot = compose("config", overrides=["+exp=gmapping_fr079", "slam=gmapping_rot2x"])
-        odd = compose("config", overrides=["+exp=gmapping_fr079", "slam.free_check=true", "slam.line=dda",
-                                           "data.laser_offset=[0,0,0]"])
+        odd = compose(
+            "config",
+            overrides=["+exp=gmapping_fr079", "slam.free_check=true", "slam.line=dda", "data.laser_offset=[0,0,0]"],
+        )
     assert variant(base) == {} and runs.label_of("slam", base) == "paper-selective-30p-seed0"
     changed = {k for k in base.slam if base.slam[k] != rot.slam[k]}
     assert changed == {"stt", "srt"} and rot.slam.stt == 2 * base.slam.stt
@@ -530,8 +617,16 @@ def test_the_trace_check_led_by_our_own_path_agrees_at_every_step():
     from eval.reference.gmapping import one_step_check
 
     log = _sim(40.0, **{"sim.laser_x_m": 0.2})
-    cfg = SlamConfig(num_particles=1, proposal="gmapping_code", srr=0.0, srt=0.0, str=0.0, stt=0.0, resolution_m=0.05,
-                     map_margin_m=2.0)
+    cfg = SlamConfig(
+        num_particles=1,
+        proposal="gmapping_code",
+        srr=0.0,
+        srt=0.0,
+        str=0.0,
+        stt=0.0,
+        resolution_m=0.05,
+        map_margin_m=2.0,
+    )
     p0 = log.odom[0]
     rbpf = RBPF(cfg, (80, 80), (p0[0] - 2.0, p0[1] - 2.0), log.T_base_laser, log.info.angles_rad, 8.0, DEVICE)
     rbpf.start(log.odom[0], log.ranges_m[0])
@@ -552,8 +647,14 @@ def test_kept_runs_are_made_again_with_their_own_settings():
     from irmcl_warp import runs
     from irmcl_warp.config import compose_config
 
-    line = ["+exp=gmapping_fr079", "slam.proposal=gmapping_code", "slam.seed=3", "slam.frame=laser",
-            "slam.srt=0.4", "data.laser_offset=[0.0,0.0,0.0]"]
+    line = [
+        "+exp=gmapping_fr079",
+        "slam.proposal=gmapping_code",
+        "slam.seed=3",
+        "slam.frame=laser",
+        "slam.srt=0.4",
+        "data.laser_offset=[0.0,0.0,0.0]",
+    ]
     cfg = compose_config(line)
     kept = {"slam": OmegaConf.to_container(cfg.slam), "data": OmegaConf.to_container(cfg.data)}
     again = compose_config(overrides("gmapping_fr079", kept))
@@ -575,7 +676,9 @@ def test_rerun_compare_says_which_runs_made_again_give_their_kept_errors(tmp_pat
     cfg = lambda k: composed("+exp=gmapping_fr079", f"slam.seed={k}")  # noqa: E731
     keep([fake_run(tmp_path / "gpu", "slam", cfg(k), metrics) for k in range(3)], results)
     again = {0: metrics, 1: {**metrics, "relations": {"trans_abs_mean_m": 0.06745453373839878}}, 7: metrics}
-    made = {k: fake_run(outputs, "slam", cfg(k), {**m, "wall_s": 1.0 + k}) for k, m in again.items()}  # others may differ
+    made = {
+        k: fake_run(outputs, "slam", cfg(k), {**m, "wall_s": 1.0 + k}) for k, m in again.items()
+    }  # others may differ
     same, differ, not_kept = compare(outputs, results)
     assert same == ["gmapping_fr079/paper-selective-30p-seed0"]
     assert differ == ["gmapping_fr079/paper-selective-30p-seed1"]
@@ -601,8 +704,11 @@ def test_slam_maps_that_cannot_fit_are_refused_before_the_first_scan(tmp_path, m
     monkeypatch.setattr(stage, "available_memory", lambda device: box // 2)
     started = []
     monkeypatch.setattr(stage.RBPF, "start", lambda *a, **k: started.append(1))
-    with pytest.raises(ValueError, match=r"slam: 30 particle maps over the \d+ x \d+ cells .* need about .* GiB, .* free "
-                                         rf"on {DEVICE}: set slam.resolution_m=") as refused:
+    with pytest.raises(
+        ValueError,
+        match=r"slam: 30 particle maps over the \d+ x \d+ cells .* need about .* GiB, .* free "
+        rf"on {DEVICE}: set slam.resolution_m=",
+    ) as refused:
         stage.start_filter(cfg, log, DEVICE)
     assert not started
     res = float(re.search(r"slam.resolution_m=([\d.]+)", str(refused.value))[1])

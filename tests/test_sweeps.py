@@ -32,8 +32,17 @@ def test_a_pool_sweep_reports_a_failed_job_with_its_log_and_a_rerun_runs_only_wh
     """Two jobs on two CPU workers: the simulator's runs, and a log that is not there (fails, is retried once,
     then reported with its log's last lines). The other job's run is whole; the sweep ends with an error."""
     env = {**os.environ, "PYTHONPATH": str(REPO), "IRMCL_DATA": str(tmp_path / "no-data")}
-    cmd = [sys.executable, "-m", "irmcl_warp.inspect", "-m", *SMALL_SIM, "+exp=sim_office,fr079",
-           "hydra/launcher=pool", "hydra.launcher.cpu_workers=2", "hydra.sweep.dir=sweep"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "irmcl_warp.inspect",
+        "-m",
+        *SMALL_SIM,
+        "+exp=sim_office,fr079",
+        "hydra/launcher=pool",
+        "hydra.launcher.cpu_workers=2",
+        "hydra.sweep.dir=sweep",
+    ]
     done = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     said = done.stdout + done.stderr
     assert done.returncode == 1 and "Traceback" not in said, said[-3000:]
@@ -57,13 +66,38 @@ def test_a_submitit_local_sweep_of_four_simulator_jobs_leaves_four_records_and_t
     four jobs share one SLAM run and one NOF (the first job makes them, the others wait for it and reuse
     them), each leaves a pipeline record, and the pipeline table is generated from those records."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    tiny = ["sim.duration_s=30", "sim.width_m=14", "sim.height_m=10", "device=cpu", "slam.num_particles=4",
-            "train.max_time_s=5", "train.val_scans=4", "train.steps_per_epoch=20", "mcl.num_particles=1000",
-            "mcl.reduce_to=300", "mcl.num_samples=32", "pipeline.run_s=8"]
-    done = subprocess.run([sys.executable, "-m", "irmcl_warp.pipeline", "-m", *tiny, "pipeline.sim_path_seed=1,2,3,4",
-                           "hydra/launcher=submitit_local", "hydra.launcher.timeout_min=20",
-                           "hydra.sweep.dir=sweep"], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=1500)
+    tiny = [
+        "sim.duration_s=30",
+        "sim.width_m=14",
+        "sim.height_m=10",
+        "device=cpu",
+        "slam.num_particles=4",
+        "train.max_time_s=5",
+        "train.val_scans=4",
+        "train.steps_per_epoch=20",
+        "mcl.num_particles=1000",
+        "mcl.reduce_to=300",
+        "mcl.num_samples=32",
+        "pipeline.run_s=8",
+    ]
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "irmcl_warp.pipeline",
+            "-m",
+            *tiny,
+            "pipeline.sim_path_seed=1,2,3,4",
+            "hydra/launcher=submitit_local",
+            "hydra.launcher.timeout_min=20",
+            "hydra.sweep.dir=sweep",
+        ],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1500,
+    )
     assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
     made = runs.records("pipeline", root=tmp_path / "outputs")
     assert sorted(r.setting("pipeline.sim_path_seed") for r in made) == [1, 2, 3, 4]
@@ -78,8 +112,9 @@ def test_a_submitit_local_sweep_of_four_simulator_jobs_leaves_four_records_and_t
     assert "succeeded" in summary
 
 
-def test_reproduce_runs_the_missing_jobs_of_a_sweep_in_its_workdir_and_then_finds_them_done(tmp_path, monkeypatch,
-                                                                                             capsys):
+def test_reproduce_runs_the_missing_jobs_of_a_sweep_in_its_workdir_and_then_finds_them_done(
+    tmp_path, monkeypatch, capsys
+):
     """eval.reproduce's runner on a sweep of two simulator jobs through the pool launcher, in a working folder
     outside the repository (the jobs import the repository's code from there): two runs; the same sweep again
     runs nothing."""
@@ -92,8 +127,9 @@ def test_reproduce_runs_the_missing_jobs_of_a_sweep_in_its_workdir_and_then_find
 
     monkeypatch.delenv("PYTHONPATH", raising=False)
     sweep = Sweep("test", "irmcl_warp.inspect", ["+exp=sim_office", *SMALL_SIM], {"sim.path_seed": [7, 8]})
-    flags = argparse.Namespace(list=False, rerun_kept=False, launcher="pool", jobs=2, gpus=None, jobs_per_gpu=1,
-                               hydra_arg=[])
+    flags = argparse.Namespace(
+        list=False, rerun_kept=False, launcher="pool", jobs=2, gpus=None, jobs_per_gpu=1, hydra_arg=[]
+    )
     register()
     with initialize_config_dir(config_dir=str(REPO / "conf"), version_base="1.3"):
         first = run_sweep(sweep, flags, tmp_path / "outputs", tmp_path / "results")
@@ -110,12 +146,27 @@ def test_the_sweeps_bench_takes_medians_over_whole_repeats_and_compares_like_wit
     from eval.bench.sweeps import layouts, table
 
     def report(gpus, per, wall, done=0, failed=0):
-        return {"gpus": gpus, "jobs_per_gpu": per, "wall_s": wall, "failed_commands": failed,
-                "sweeps": [{"module": "irmcl_warp.slam", "fixed": ["+exp=x"], "jobs_run": 20 - done, "done": done,
-                            "kept": 0}]}
+        return {
+            "gpus": gpus,
+            "jobs_per_gpu": per,
+            "wall_s": wall,
+            "failed_commands": failed,
+            "sweeps": [
+                {"module": "irmcl_warp.slam", "fixed": ["+exp=x"], "jobs_run": 20 - done, "done": done, "kept": 0}
+            ],
+        }
 
-    groups = layouts([report(1, 8, 60.0), report(1, 8, 64.0), report(1, 8, 62.0), report(2, 8, 40.0),
-                      report(2, 8, 30.0, done=5), report(2, 8, 20.0, failed=1), report(2, 4, 50.0)])
+    groups = layouts(
+        [
+            report(1, 8, 60.0),
+            report(1, 8, 64.0),
+            report(1, 8, 62.0),
+            report(2, 8, 40.0),
+            report(2, 8, 30.0, done=5),
+            report(2, 8, 20.0, failed=1),
+            report(2, 4, 50.0),
+        ]
+    )
     assert groups[("slam +exp=x", 20, 2, 8)] == [40.0] and ("slam +exp=x", 20, 2, 4) in groups
     text, rows = table(groups)
     (two,) = [r for r in rows if (r["gpus"], r["jobs_per_gpu"]) == (2, 8)]

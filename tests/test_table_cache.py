@@ -72,7 +72,9 @@ def test_a_damaged_table_is_named_and_built_again(rng, builds, tmp_path):
     want = _table(_mcl(), nog)
     (path,) = (tmp_path / "cache" / "tables").glob("*.npy")
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])  # a copy cut short
-    with pytest.warns(UserWarning, match=rf"{path.name}: this cached nog_table cannot be read .*building the table again"):
+    with pytest.warns(
+        UserWarning, match=rf"{path.name}: this cached nog_table cannot be read .*building the table again"
+    ):
         got = _table(_mcl(), nog)
     assert np.array_equal(got, want) and len(builds) == 2
     np.save(path, np.zeros((3, 3), np.uint16))  # the right name, the wrong contents

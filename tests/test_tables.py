@@ -16,10 +16,14 @@ from runfakes import composed, fake_run
 
 
 def _synthesis(mae_nof, mae_grid):
-    metric = lambda mae: {"mae_m": mae, "median_error_m": mae / 2, "accuracy_pct": 90.0, "chamfer_m": 0.2,  # noqa: E731
-                          "fscore_pct": 97.0}
-    return {"dataset": "fr079", "split": "test", "methods": {
-        "NOF (fast)": {"kind": "nof", **metric(mae_nof)}, "OGM 5 cm": {"kind": "grid", **metric(mae_grid)}}}
+    def metric(mae):
+        return {"mae_m": mae, "median_error_m": mae / 2, "accuracy_pct": 90.0, "chamfer_m": 0.2, "fscore_pct": 97.0}
+
+    return {
+        "dataset": "fr079",
+        "split": "test",
+        "methods": {"NOF (fast)": {"kind": "nof", **metric(mae_nof)}, "OGM 5 cm": {"kind": "grid", **metric(mae_grid)}},
+    }
 
 
 FR079_FAST = ("+exp=fr079", "train=fast")
@@ -47,9 +51,16 @@ def test_an_experiment_past_the_file_size_goes_on_in_numbered_files(tmp_path):
     group = tmp_path / "results" / "nof"
     group.mkdir(parents=True)
     cfg = composed(*FR079_FAST)
-    recs = {f"synthesis/s{i:02d}-{i:010d}": {"stage": "synthesis", "id": f"{i:064d}", "label": f"s{i:02d}",
-                                              "config": {**cfg, "train": {**cfg["train"], "seed": i}},
-                                              "metrics": _synthesis(0.3 + i / 1000, 0.33)} for i in range(12)}
+    recs = {
+        f"synthesis/s{i:02d}-{i:010d}": {
+            "stage": "synthesis",
+            "id": f"{i:064d}",
+            "label": f"s{i:02d}",
+            "config": {**cfg, "train": {**cfg["train"], "seed": i}},
+            "metrics": _synthesis(0.3 + i / 1000, 0.33),
+        }
+        for i in range(12)
+    }
     doc = {"group": "nof", "exp": "fr079", "records": recs}
     one = len(json.dumps(recs["synthesis/s00-0000000000"], sort_keys=True, separators=(",", ":"))) + 8
     write_doc(group / "fr079.json", doc, max_bytes=4 * one)
@@ -81,11 +92,25 @@ def test_a_damaged_record_or_results_file_is_reported(tmp_path):
 
 
 def _loc(weighting, mode, n, successes, rmse, **summary):
-    return {"dataset": "fr079", "runs": [{"ms_per_scan": 1.0}],
-            "summary": {"weighting": weighting, "mode": mode, "num_particles": n, "starts": 10, "successes": successes,
-                        "time_to_converge_s_mean": 2.0, "location_rmse_cm_mean": rmse, "yaw_rmse_deg_mean": 1.5,
-                        "within_10cm_pct_mean": 80.0, "within_1deg_pct_mean": 50.0, "divergences": 0, **summary},
-            "settings": {"recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.2}}
+    return {
+        "dataset": "fr079",
+        "runs": [{"ms_per_scan": 1.0}],
+        "summary": {
+            "weighting": weighting,
+            "mode": mode,
+            "num_particles": n,
+            "starts": 10,
+            "successes": successes,
+            "time_to_converge_s_mean": 2.0,
+            "location_rmse_cm_mean": rmse,
+            "yaw_rmse_deg_mean": 1.5,
+            "within_10cm_pct_mean": 80.0,
+            "within_1deg_pct_mean": 50.0,
+            "divergences": 0,
+            **summary,
+        },
+        "settings": {"recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.2},
+    }
 
 
 def test_localization_table_takes_the_cells_from_the_settings_and_leaves_other_settings_out(tmp_path):
@@ -94,30 +119,68 @@ def test_localization_table_takes_the_cells_from_the_settings_and_leaves_other_s
     out = tmp_path / "outputs"
     cell = lambda *ov: composed("+exp=fr079", *ov)  # noqa: E731
     fake_run(out, "localize", cell("mcl.weighting=likelihood_field"), _loc("nog_raymarch", "global", 100000, 10, 6.3))
-    fake_run(out, "localize", cell("mcl.weighting=likelihood_field", "localize.mode=tracking", "mcl.num_particles=10000"),
-             _loc("nog_raymarch", "tracking", 10000, 9, 6.1))
-    fake_run(out, "localize", cell("mcl.weighting=likelihood_field", "mcl.map_resolution_m=0.1"),
-             _loc("likelihood_field", "global", 100000, 5, 5.6))
-    fake_run(out, "localize", cell("mcl.weighting=likelihood_field", "mcl.alphas=[0.2,0.02,0.2,0.02]"),
-             _loc("likelihood_field", "global", 100000, 1, 99.0))  # other motion noise: no cell of the table
-    fake_run(out, "localize", cell("mcl.weighting=likelihood_field", "localize.mode=tracking", "mcl.num_particles=10000",
-                                   "localize.kidnap_at_s=30", "mcl.recovery_alpha_slow=0.01", "mcl.recovery_alpha_fast=0.2"),
-             _loc("nog_raymarch", "tracking", 10000, 0, None, recovered=8, recovery_time_s_mean=7.04, kidnap_at_s=30.0))
+    fake_run(
+        out,
+        "localize",
+        cell("mcl.weighting=likelihood_field", "localize.mode=tracking", "mcl.num_particles=10000"),
+        _loc("nog_raymarch", "tracking", 10000, 9, 6.1),
+    )
+    fake_run(
+        out,
+        "localize",
+        cell("mcl.weighting=likelihood_field", "mcl.map_resolution_m=0.1"),
+        _loc("likelihood_field", "global", 100000, 5, 5.6),
+    )
+    fake_run(
+        out,
+        "localize",
+        cell("mcl.weighting=likelihood_field", "mcl.alphas=[0.2,0.02,0.2,0.02]"),
+        _loc("likelihood_field", "global", 100000, 1, 99.0),
+    )  # other motion noise: no cell of the table
+    fake_run(
+        out,
+        "localize",
+        cell(
+            "mcl.weighting=likelihood_field",
+            "localize.mode=tracking",
+            "mcl.num_particles=10000",
+            "localize.kidnap_at_s=30",
+            "mcl.recovery_alpha_slow=0.01",
+            "mcl.recovery_alpha_fast=0.2",
+        ),
+        _loc("nog_raymarch", "tracking", 10000, 0, None, recovered=8, recovery_time_s_mean=7.04, kidnap_at_s=30.0),
+    )
     runs = load(("localize",), None, out)
     lines = localization_table(runs).splitlines()
     assert len(lines) == 4, lines  # header, rule, the 5 cm row (global + tracking), the 10 cm row
-    assert lines[2].startswith("| fr079 | likelihood field | 5 cm | 100k | 10/10 | 2.0 | 6.3 / 1.50 | 80 / 50 | 10k | 9/10 |")
-    assert lines[3].startswith("| fr079 | likelihood field | 10 cm | 100k | 5/10 |") and lines[3].endswith("| - | - | - | - |")
+    assert lines[2].startswith(
+        "| fr079 | likelihood field | 5 cm | 100k | 10/10 | 2.0 | 6.3 / 1.50 | 80 / 50 | 10k | 9/10 |"
+    )
+    assert lines[3].startswith("| fr079 | likelihood field | 10 cm | 100k | 5/10 |") and lines[3].endswith(
+        "| - | - | - | - |"
+    )
     kid = kidnap_table(runs).splitlines()
     assert len(kid) == 3 and "| 30 | 0.01 / 0.2 | 8/10 | 7.0 |" in kid[2]
 
 
 def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     def run(seed, err, std=0.05, n=30):
-        return {"dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n, "seed": seed,
-                "device": "cuda:0", "wall_time_s": 10.0 + seed,
-                "relations": {"trans_abs_mean_m": err, "trans_abs_std_m": std, "rot_abs_mean_deg": 2.0,
-                              "relations_used": 100, "relations_unmatched": 0}}
+        return {
+            "dataset": "intel",
+            "proposal": "paper",
+            "resample": "selective",
+            "particles": n,
+            "seed": seed,
+            "device": "cuda:0",
+            "wall_time_s": 10.0 + seed,
+            "relations": {
+                "trans_abs_mean_m": err,
+                "trans_abs_std_m": std,
+                "rot_abs_mean_deg": 2.0,
+                "relations_used": 100,
+                "relations_unmatched": 0,
+            },
+        }
 
     out = tmp_path / "outputs"
     cfg = lambda seed, *ov: composed("+exp=gmapping_intel", f"slam.seed={seed}", *ov)  # noqa: E731
@@ -128,19 +191,25 @@ def test_slam_table_counts_converged_seeds_and_lists_the_references(tmp_path):
     partial = run(5, 0.04, n=60)  # scored on a fifth of the relations: the table says so
     partial["relations"] = {**partial["relations"], "relations_used": 20, "relations_unmatched": 80}
     fake_run(out, "slam", cfg(5, "slam.num_particles=60"), partial)
-    released = {("gmapping_intel", f"30p-seed{k}"): {**run(k, err), "settings": {"maxRange": 79.99}}
-                for k, err in enumerate([0.05, 0.5])}
+    released = {
+        ("gmapping_intel", f"30p-seed{k}"): {**run(k, err), "settings": {"maxRange": 79.99}}
+        for k, err in enumerate([0.05, 0.5])
+    }
     released[("gmapping_intel", "40")] = {**run(0, 0.06), "settings": {"maxRange": 79.99, "maxUrange": 40.0}}
     lines = slam_table(load(("slam",), None, out), released).splitlines()
     ours = [line for line in lines if "paper + selective" in line]
-    assert ours == ["| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |",
-                    "| intel | paper + selective [scored on 20 of 100 relations] | 60 | 1/1 | 0.040 +- 0.050 | 2.00 | "
-                    "0.040 | 15-15 s | H100 |",
-                    "| intel | paper + selective (line=dda) | 30 | 1/1 | 0.050 +- 0.050 | 2.00 | 0.050 | 14-14 s | H100 |"]
+    assert ours == [
+        "| intel | paper + selective | 30 | 2/3 | 0.060 +- 0.050 | 2.00 | 0.673 | 10-12 s | H100 |",
+        "| intel | paper + selective [scored on 20 of 100 relations] | 60 | 1/1 | 0.040 +- 0.050 | 2.00 | "
+        "0.040 | 15-15 s | H100 |",
+        "| intel | paper + selective (line=dda) | 30 | 1/1 | 0.050 +- 0.050 | 2.00 | 0.050 | 14-14 s | H100 |",
+    ]
     # the released code's rows come from its runs (eval.reference.gmapping), one per setting that differs from
     # the ROS wrapper's defaults (maxRange is taken from the log, not chosen)
-    assert "| intel | *released C++ (python -m eval.reference.gmapping)* | 30 | 1/2 | 0.050 +- 0.050 | 2.00 | 0.275 | " \
-           "10-11 s | 2-core CPU |" in lines
+    assert (
+        "| intel | *released C++ (python -m eval.reference.gmapping)* | 30 | 1/2 | 0.050 +- 0.050 | 2.00 | 0.275 | "
+        "10-11 s | 2-core CPU |" in lines
+    )
     assert any("eval.reference.gmapping; maxUrange=40)*" in line and "| 1/1 |" in line for line in lines)
     assert any("published GMapping (Kümmerle et al. 2009)" in line for line in lines)
 
@@ -151,11 +220,25 @@ def test_particles_vs_success_figure_only_for_datasets_with_scored_runs(tmp_path
     out = tmp_path / "outputs"
     for n in (5, 15):
         for s in range(3):
-            fake_run(out, "slam", composed("+exp=gmapping_intel", f"slam.num_particles={n}", f"slam.seed={s}"), {
-                "dataset": "intel", "proposal": "paper", "resample": "selective", "particles": n, "device": "cuda:0",
-                "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0}})
-    fake_run(out, "slam", composed("+exp=gmapping_fr079"), {"dataset": "fr079", "proposal": "paper",
-                                                           "resample": "selective", "particles": 30, "relations": "not scored"})
+            fake_run(
+                out,
+                "slam",
+                composed("+exp=gmapping_intel", f"slam.num_particles={n}", f"slam.seed={s}"),
+                {
+                    "dataset": "intel",
+                    "proposal": "paper",
+                    "resample": "selective",
+                    "particles": n,
+                    "device": "cuda:0",
+                    "relations": {"trans_abs_mean_m": 0.05 if s < n // 5 else 2.0},
+                },
+            )
+    fake_run(
+        out,
+        "slam",
+        composed("+exp=gmapping_fr079"),
+        {"dataset": "fr079", "proposal": "paper", "resample": "selective", "particles": 30, "relations": "not scored"},
+    )
     recs = load(("slam",), None, out)
     assert particles_vs_success(recs, "fr079", tmp_path / "fr079.png") is None
     made = particles_vs_success(recs, "intel", tmp_path / "intel.png")
@@ -167,7 +250,11 @@ def test_records_kept_before_a_setting_existed_read_at_its_default():
     with: its schema default, which every new setting takes so that the runs before it ran that way."""
     from eval.results.records import complete
 
-    config = {"mcl": {"weighting": "nog_raymarch", "num_particles": 10000}, "localize": {"mode": "tracking"}, "exp": "x"}
+    config = {
+        "mcl": {"weighting": "nog_raymarch", "num_particles": 10000},
+        "localize": {"mode": "tracking"},
+        "exp": "x",
+    }
     full = complete(config)
     assert full["mcl"]["motion"] == "odometry" and full["mcl"]["num_particles"] == 10000 and "slam" not in full
     assert "motion" not in config["mcl"]  # the kept record is left alone
@@ -175,6 +262,7 @@ def test_records_kept_before_a_setting_existed_read_at_its_default():
 
 
 # --- the claims registry ----------------------------------------------------------------------------------------
+
 
 def test_success_counts_are_compared_with_a_test_not_by_eye():
     verdict, reason, test = C.more_successes("the pipeline", 9, 10, "lidar-only", 7, 10)
@@ -197,10 +285,23 @@ def test_per_start_errors_are_compared_with_a_test(rng):
 
 def test_every_claim_the_audit_named_has_a_row():
     keys = {c.key for c in C.CLAIMS}
-    audit = {"irmcl.synthesis.fr079", "irmcl.synthesis.intel", "irmcl.synthesis.mit_csail", "irmcl.convergence.fr079",
-             "irmcl.tracking.fr079", "irmcl.online", "gmapping.particles.campus", "gmapping.particles.killian80",
-             "gmapping.fewer_particles", "gmapping.selective", "lidar_camera.lighting", "lidar_camera.moved_objects",
-             "lidar_camera.pnp", "lidar_camera.trigger", "lidar_camera.clustering"}
+    audit = {
+        "irmcl.synthesis.fr079",
+        "irmcl.synthesis.intel",
+        "irmcl.synthesis.mit_csail",
+        "irmcl.convergence.fr079",
+        "irmcl.tracking.fr079",
+        "irmcl.online",
+        "gmapping.particles.campus",
+        "gmapping.particles.killian80",
+        "gmapping.fewer_particles",
+        "gmapping.selective",
+        "lidar_camera.lighting",
+        "lidar_camera.moved_objects",
+        "lidar_camera.pnp",
+        "lidar_camera.trigger",
+        "lidar_camera.clustering",
+    }
     assert audit <= keys and len(keys) == len(C.CLAIMS)
     assert all(c.tolerance and c.where and c.statement for c in C.CLAIMS)
 

@@ -24,8 +24,9 @@ def _wall_nog(x_wall=2.0, res=0.05):
 
 def test_pose_two_metres_before_a_wall_renders_two_metres():
     nog = _wall_nog()
-    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=1, num_samples=256, near_m=0.0,
-                        far_m=10.0, device=DEVICE)
+    w = WEIGHTING.build(
+        "nog_raymarch", nog=nog, num_particles=1, num_beams=1, num_samples=256, near_m=0.0, far_m=10.0, device=DEVICE
+    )
     particles = wp.array(np.array([[0.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device=DEVICE)
     angles = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device=DEVICE)
     r = w.render(particles, (0.0, 0.0, 0.0), angles).numpy()[0, 0]
@@ -41,39 +42,65 @@ def _random_nog_grid(rng, kind):
     for _ in range(14):
         x0, y0 = rng.integers(0, 80), rng.integers(0, 60)
         if rng.uniform() < 0.5:
-            occ[y0, x0:x0 + rng.integers(5, 40)] = 1.0
+            occ[y0, x0 : x0 + rng.integers(5, 40)] = 1.0
         else:
-            occ[y0:y0 + rng.integers(5, 30), x0] = 1.0
+            occ[y0 : y0 + rng.integers(5, 30), x0] = 1.0
     return np.clip(gaussian_filter(occ, 0.8) * 2.5 + rng.uniform(0, 2e-3, occ.shape), 0, 1).astype(np.float32)
 
 
-@pytest.mark.parametrize("kind, t_min, empty_below, batch, beam_major", [
-    ("noise", 0.0, 0.0, 1, False), ("noise", 1e-3, 0.0, 4, True), ("noise", 0.0, 0.01, 1, True),
-    ("rooms", 0.0, 0.0, 4, False), ("rooms", 1e-3, 0.01, 1, True), ("rooms", 0.0, 0.05, 1, False),
-    ("rooms", 1e-3, 0.0, 3, False), ("rooms", 1e-3, 0.0, 1, True)])
+@pytest.mark.parametrize(
+    "kind, t_min, empty_below, batch, beam_major",
+    [
+        ("noise", 0.0, 0.0, 1, False),
+        ("noise", 1e-3, 0.0, 4, True),
+        ("noise", 0.0, 0.01, 1, True),
+        ("rooms", 0.0, 0.0, 4, False),
+        ("rooms", 1e-3, 0.01, 1, True),
+        ("rooms", 0.0, 0.05, 1, False),
+        ("rooms", 1e-3, 0.0, 3, False),
+        ("rooms", 1e-3, 0.0, 1, True),
+    ],
+)
 def test_kernel_matches_numpy_twin(rng, kind, t_min, empty_below, batch, beam_major):
     """Every sample in the twin; the kernel's grid clipping, jumps over empty space, batched node loads and
     thread order (by beam or by particle) must give the same."""
     occ = _random_nog_grid(rng, kind)
     nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
     P, B = 60, 16
-    particles = np.stack([rng.uniform(-3, 7, P), rng.uniform(-3, 5, P), rng.uniform(-np.pi, np.pi, P)], -1).astype(np.float32)
+    particles = np.stack([rng.uniform(-3, 7, P), rng.uniform(-3, 5, P), rng.uniform(-np.pi, np.pi, P)], -1).astype(
+        np.float32
+    )
     angles = np.linspace(-2.0, 2.0, B).astype(np.float32)
     T_bl = (0.1, -0.05, 0.02)
     measured = rng.uniform(0.5, 6.0, B).astype(np.float32)
     measured[3] = np.nan
-    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=P, num_beams=B, num_samples=128, near_m=0.02,
-                        far_m=12.0, t_min=t_min, sigma_m=0.5, empty_below=empty_below, batch=batch,
-                        beam_major=beam_major, device=DEVICE)
+    w = WEIGHTING.build(
+        "nog_raymarch",
+        nog=nog,
+        num_particles=P,
+        num_beams=B,
+        num_samples=128,
+        near_m=0.02,
+        far_m=12.0,
+        t_min=t_min,
+        sigma_m=0.5,
+        empty_below=empty_below,
+        batch=batch,
+        beam_major=beam_major,
+        device=DEVICE,
+    )
     pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
     aw = wp.array(angles, dtype=wp.float32, device=DEVICE)
     logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
     w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device=DEVICE), logw)
     ours = w.rendered.numpy()
-    twin = nog_render(occ, nog.origin_xy, nog.resolution_m, particles, T_bl, angles, 128, 0.02, 12.0, t_min,
-                      empty_below)
+    twin = nog_render(
+        occ, nog.origin_xy, nog.resolution_m, particles, T_bl, angles, 128, 0.02, 12.0, t_min, empty_below
+    )
     close = np.abs(ours - twin) < 1e-3
-    assert close.mean() > 0.99, f"seed {rng.seed}: {close.mean():.3f} of beams agree"  # float32 rounding at node borders
+    assert close.mean() > 0.99, (
+        f"seed {rng.seed}: {close.mean():.3f} of beams agree"
+    )  # float32 rounding at node borders
     assert (twin > 0.1).mean() > 0.15  # the case has walls to hit
     twin_logw = nog_log_weights(ours.astype(np.float64), measured.astype(np.float64), 0.5)
     assert np.allclose(logw.numpy(), twin_logw, rtol=1e-4, atol=1e-4), f"seed {rng.seed}"
@@ -85,11 +112,21 @@ def test_beam_count_mismatch_is_a_clear_error():
     w = WEIGHTING.build("nog_raymarch", nog=_wall_nog(), num_particles=2, num_beams=32, device=DEVICE)
     p = wp.zeros(2, dtype=wp.vec3, device=DEVICE)
     with pytest.raises(ValueError, match="31 measured ranges / 31 angles, built for 32 beams"):
-        w(p, (0, 0, 0), wp.zeros(31, dtype=wp.float32, device=DEVICE), wp.zeros(31, dtype=wp.float32, device=DEVICE),
-          wp.zeros(2, dtype=wp.float32, device=DEVICE))
+        w(
+            p,
+            (0, 0, 0),
+            wp.zeros(31, dtype=wp.float32, device=DEVICE),
+            wp.zeros(31, dtype=wp.float32, device=DEVICE),
+            wp.zeros(2, dtype=wp.float32, device=DEVICE),
+        )
     with pytest.raises(ValueError, match="NOG is empty"):
-        WEIGHTING.build("nog_raymarch", nog=NOG(np.zeros((0, 0), np.float32), (0, 0), 0.05), num_particles=1,
-                        num_beams=1, device=DEVICE)
+        WEIGHTING.build(
+            "nog_raymarch",
+            nog=NOG(np.zeros((0, 0), np.float32), (0, 0), 0.05),
+            num_particles=1,
+            num_beams=1,
+            device=DEVICE,
+        )
 
 
 class _Disc(torch.nn.Module):
@@ -141,19 +178,44 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     # +half a cell: end points inside the wall cell, not on its border (where float32 and float64 floor differ)
     measured = (caster.cast_numpy(true[None], angles)[0] + 0.05).astype(np.float32)
     measured[5] = np.nan
-    particles = np.vstack([true, true + [0.5, 0.0, 0.0], true + [0.0, 0.0, 0.3],
-                           np.column_stack([rng.uniform(1, 7, 20), rng.uniform(1, 5, 20), rng.uniform(-3, 3, 20)])]).astype(np.float32)
+    particles = np.vstack(
+        [
+            true,
+            true + [0.5, 0.0, 0.0],
+            true + [0.0, 0.0, 0.3],
+            np.column_stack([rng.uniform(1, 7, 20), rng.uniform(1, 5, 20), rng.uniform(-3, 3, 20)]),
+        ]
+    ).astype(np.float32)
     lf = WEIGHTING.build("likelihood_field", occupancy=occ, origin_xy=origin, resolution_m=res, device=DEVICE)
     out = wp.zeros(len(particles), dtype=wp.float32, device=DEVICE)
-    lf(wp.array(particles, dtype=wp.vec3, device=DEVICE), (0, 0, 0), wp.array(angles, dtype=wp.float32, device=DEVICE),
-       wp.array(measured, dtype=wp.float32, device=DEVICE), out)
+    lf(
+        wp.array(particles, dtype=wp.vec3, device=DEVICE),
+        (0, 0, 0),
+        wp.array(angles, dtype=wp.float32, device=DEVICE),
+        wp.array(measured, dtype=wp.float32, device=DEVICE),
+        out,
+    )
     ours = out.numpy()
-    twin = likelihood_field_log_weights(distance_to_occupied(occ, res, 0.65), origin, res, particles.astype(np.float64),
-                                        (0, 0, 0), angles, measured, 0.95, 0.05, 0.2, 30.0, 2.0)
+    twin = likelihood_field_log_weights(
+        distance_to_occupied(occ, res, 0.65),
+        origin,
+        res,
+        particles.astype(np.float64),
+        (0, 0, 0),
+        angles,
+        measured,
+        0.95,
+        0.05,
+        0.2,
+        30.0,
+        2.0,
+    )
     assert np.allclose(ours, twin, rtol=1e-4, atol=1e-3), f"seed {rng.seed}"
     assert ours[0] > ours[1] and ours[0] > ours[2] and ours[0] >= ours[3:].max()
     with pytest.raises(ValueError, match="map is empty"):
-        WEIGHTING.build("likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device=DEVICE)
+        WEIGHTING.build(
+            "likelihood_field", occupancy=np.zeros((5, 5)), origin_xy=origin, resolution_m=res, device=DEVICE
+        )
 
 
 def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
@@ -169,14 +231,42 @@ def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
     caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE)
     measured = (caster.cast_numpy(true[None], angles)[0] + rng.normal(0, 0.02, len(angles))).astype(np.float32)
     measured[4] = np.nan
-    particles = np.vstack([true, true + [0.4, 0.0, 0.0], true + [0.0, 0.0, 0.25],
-                           np.column_stack([rng.uniform(1, 4, 6), rng.uniform(1, 3, 6), rng.uniform(-3, 3, 6)])]).astype(np.float32)
-    bm = WEIGHTING.build("beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE)
+    particles = np.vstack(
+        [
+            true,
+            true + [0.4, 0.0, 0.0],
+            true + [0.0, 0.0, 0.25],
+            np.column_stack([rng.uniform(1, 4, 6), rng.uniform(1, 3, 6), rng.uniform(-3, 3, 6)]),
+        ]
+    ).astype(np.float32)
+    bm = WEIGHTING.build(
+        "beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE
+    )
     out = wp.zeros(len(particles), dtype=wp.float32, device=DEVICE)
-    bm(wp.array(particles, dtype=wp.vec3, device=DEVICE), (0, 0, 0), wp.array(angles, dtype=wp.float32, device=DEVICE),
-       wp.array(measured, dtype=wp.float32, device=DEVICE), out)
-    twin = beam_model_log_weights(occ, origin, res, particles.astype(np.float32), (0, 0, 0), angles, measured,
-                                  0.95, 0.1, 0.05, 0.05, 0.2, 0.1, 8.0, 0.5)
+    bm(
+        wp.array(particles, dtype=wp.vec3, device=DEVICE),
+        (0, 0, 0),
+        wp.array(angles, dtype=wp.float32, device=DEVICE),
+        wp.array(measured, dtype=wp.float32, device=DEVICE),
+        out,
+    )
+    twin = beam_model_log_weights(
+        occ,
+        origin,
+        res,
+        particles.astype(np.float32),
+        (0, 0, 0),
+        angles,
+        measured,
+        0.95,
+        0.1,
+        0.05,
+        0.05,
+        0.2,
+        0.1,
+        8.0,
+        0.5,
+    )
     assert np.allclose(out.numpy(), twin, rtol=1e-3, atol=1e-2), f"seed {rng.seed}"
     assert out.numpy()[0] > out.numpy()[1:].max()
 
@@ -193,8 +283,20 @@ def test_torch_formulation_of_the_bench_matches_the_twin(rng):
     measured = rng.uniform(0.5, 6.0, B)
     measured[2] = np.nan
     T_bl = (0.1, -0.05, 0.02)
-    ours = nog_log_weights_torch(torch.tensor(occ, dtype=torch.float64), origin, 0.1, torch.tensor(particles), T_bl,
-                                 torch.tensor(angles), torch.tensor(measured), 64, 0.02, 8.0, 0.5, chunk=10).numpy()
+    ours = nog_log_weights_torch(
+        torch.tensor(occ, dtype=torch.float64),
+        origin,
+        0.1,
+        torch.tensor(particles),
+        T_bl,
+        torch.tensor(angles),
+        torch.tensor(measured),
+        64,
+        0.02,
+        8.0,
+        0.5,
+        chunk=10,
+    ).numpy()
     twin = nog_log_weights(nog_render(occ, origin, 0.1, particles, T_bl, angles, 64, 0.02, 8.0), measured, 0.5)
     assert np.allclose(ours, twin, atol=1e-9), f"seed {rng.seed}"
     assert twin.std() > 0.01  # the particles are told apart
@@ -218,11 +320,26 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     measured[1] = np.nan
     T_bl = (0.1, 0.0, 0.05)
     twin_model = copy.deepcopy(model)  # nof_direct moves its model to the device it runs on
-    w = WEIGHTING.build("nof_direct", model=model, num_particles=P, num_beams=B, num_samples=S, near_m=0.02,
-                        far_m=6.0, sigma_m=0.5, chunk_rays=8, device=DEVICE)
+    w = WEIGHTING.build(
+        "nof_direct",
+        model=model,
+        num_particles=P,
+        num_beams=B,
+        num_samples=S,
+        near_m=0.02,
+        far_m=6.0,
+        sigma_m=0.5,
+        chunk_rays=8,
+        device=DEVICE,
+    )
     logw = wp.zeros(P, dtype=wp.float32, device=DEVICE)
-    w(wp.array(particles, dtype=wp.vec3, device=DEVICE), T_bl, wp.array(angles, dtype=wp.float32, device=DEVICE),
-      wp.array(measured, dtype=wp.float32, device=DEVICE), logw)
+    w(
+        wp.array(particles, dtype=wp.vec3, device=DEVICE),
+        T_bl,
+        wp.array(angles, dtype=wp.float32, device=DEVICE),
+        wp.array(measured, dtype=wp.float32, device=DEVICE),
+        logw,
+    )
     # twin: the same points, the MLP, composite_torch, the Gaussian on the mean L1 error
     yaw = particles[:, 2:3].astype(np.float64) + T_bl[2] + angles[None, :]
     c, s = np.cos(particles[:, 2]), np.sin(particles[:, 2])
@@ -232,17 +349,26 @@ def test_nof_direct_matches_its_twin_and_prefers_the_true_pose(rng):
     with torch.no_grad():
         occ = twin_model(torch.tensor(pts.reshape(-1, 2), dtype=torch.float32)).reshape(P * B, S)
         r = composite_torch(occ.double(), torch.tensor(z).expand(P * B, S))[0].numpy().reshape(P, B)
-    assert np.allclose(logw.numpy(), nog_log_weights(r, measured.astype(np.float64), 0.5), atol=1e-4), f"seed {rng.seed}"
+    assert np.allclose(logw.numpy(), nog_log_weights(r, measured.astype(np.float64), 0.5), atol=1e-4), (
+        f"seed {rng.seed}"
+    )
 
     class Wall(torch.nn.Module):  # p_occ = 1 beyond x = 2
         def forward(self, xy):
             return (xy[:, 0] > 2.0).float()
 
-    wall = WEIGHTING.build("nof_direct", model=Wall(), num_particles=2, num_beams=1, num_samples=256, near_m=0.0,
-                           far_m=10.0, device=DEVICE)
+    wall = WEIGHTING.build(
+        "nof_direct", model=Wall(), num_particles=2, num_beams=1, num_samples=256, near_m=0.0, far_m=10.0, device=DEVICE
+    )
     two = wp.array(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32), dtype=wp.vec3, device=DEVICE)
     lw = wp.zeros(2, dtype=wp.float32, device=DEVICE)
-    wall(two, (0, 0, 0), wp.zeros(1, dtype=wp.float32, device=DEVICE), wp.array([2.0], dtype=wp.float32, device=DEVICE), lw)
+    wall(
+        two,
+        (0, 0, 0),
+        wp.zeros(1, dtype=wp.float32, device=DEVICE),
+        wp.array([2.0], dtype=wp.float32, device=DEVICE),
+        lw,
+    )
     assert lw.numpy()[0] > -0.01 > lw.numpy()[1]  # 2 m before the wall: right; 1 m before: 1 m off
 
 
@@ -256,8 +382,19 @@ def test_range_table_matches_numpy_twin(rng, kind, t_min, empty_below):
     occ[[0, -1], :] = occ[:, [0, -1]] = 1.0  # a room around it all: most rays from inside meet a wall
     nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
     P, B, A, far = 70, 12, int(rng.integers(16, 40)), 8.0
-    w = WEIGHTING.build("nog_table", nog=nog, num_particles=P, num_beams=B, num_angles=A, num_samples=64,
-                        near_m=0.02, far_m=far, t_min=t_min, empty_below=empty_below, device=DEVICE)
+    w = WEIGHTING.build(
+        "nog_table",
+        nog=nog,
+        num_particles=P,
+        num_beams=B,
+        num_angles=A,
+        num_samples=64,
+        near_m=0.02,
+        far_m=far,
+        t_min=t_min,
+        empty_below=empty_below,
+        device=DEVICE,
+    )
     table = w.table.numpy()
     twin = nog_table_build(occ, nog.origin_xy, nog.resolution_m, A, 64, 0.02, far, t_min, empty_below)
     off = np.abs(table.astype(int) - twin.astype(int))
@@ -286,19 +423,32 @@ def test_range_table_reads_what_the_march_renders():
 
     nog, far = _wall_nog(x_wall=2.0), 10.0
     A = 72
-    table = WEIGHTING.build("nog_table", nog=nog, num_particles=64, num_beams=1, num_angles=A, num_samples=256,
-                            near_m=0.0, far_m=far, device=DEVICE)
-    march = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=64, num_beams=1, num_samples=256, near_m=0.0,
-                            far_m=far, device=DEVICE)
+    table = WEIGHTING.build(
+        "nog_table",
+        nog=nog,
+        num_particles=64,
+        num_beams=1,
+        num_angles=A,
+        num_samples=256,
+        near_m=0.0,
+        far_m=far,
+        device=DEVICE,
+    )
+    march = WEIGHTING.build(
+        "nog_raymarch", nog=nog, num_particles=64, num_beams=1, num_samples=256, near_m=0.0, far_m=far, device=DEVICE
+    )
     beam = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device=DEVICE)
-    at_nodes = np.array([[x, y, h] for x, y in [(0.0, 0.0), (0.5, -0.3), (1.2, 0.65)] for h in table_headings(A)[[0, 3, 69]]],
-                        np.float32)
+    at_nodes = np.array(
+        [[x, y, h] for x, y in [(0.0, 0.0), (0.5, -0.3), (1.2, 0.65)] for h in table_headings(A)[[0, 3, 69]]],
+        np.float32,
+    )
     pw = wp.array(at_nodes, dtype=wp.vec3, device=DEVICE)
     got, want = table.render(pw, (0, 0, 0), beam).numpy()[:9, 0], march.render(pw, (0, 0, 0), beam).numpy()[:9, 0]
     assert np.all(np.abs(got - want) <= far / TABLE_LEVELS), (got, want)
     xs = np.linspace(0.0, 0.5, 41)  # along the beam (heading 0) through nodes and between them
-    along = wp.array(np.stack([xs, np.full_like(xs, 0.01), np.zeros_like(xs)], -1).astype(np.float32), dtype=wp.vec3,
-                     device=DEVICE)
+    along = wp.array(
+        np.stack([xs, np.full_like(xs, 0.01), np.zeros_like(xs)], -1).astype(np.float32), dtype=wp.vec3, device=DEVICE
+    )
     r = table.render(along, (0, 0, 0), beam).numpy()[:41, 0]
     assert np.all(np.abs(r - (2.0 - xs)) < 0.05), np.abs(r - (2.0 - xs)).max()
     assert np.all(np.diff(r) < 0)  # smooth: the march itself moves in steps of its samples

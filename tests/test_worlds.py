@@ -7,8 +7,17 @@ import numpy as np
 import pytest
 
 from irmcl_warp.config import MCLConfig, compose_config
-from irmcl_warp.mcl.confidence import (FEATURES, Confidence, FeatureTracker, ScanAgreement, auroc, fit_logistic, modes,
-                                       reliability, right)
+from irmcl_warp.mcl.confidence import (
+    FEATURES,
+    Confidence,
+    FeatureTracker,
+    ScanAgreement,
+    auroc,
+    fit_logistic,
+    modes,
+    reliability,
+    right,
+)
 from irmcl_warp.mcl.track import follow
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
 from irmcl_warp.sim import drive_log, floors
@@ -17,6 +26,7 @@ from tests.devices import DEVICE
 
 
 # --- floors ----------------------------------------------------------------------------------------------
+
 
 def test_the_split_keeps_tuning_and_test_worlds_apart():
     tuning, test = set(floors.SPLIT["tuning"]), set(floors.SPLIT["test"])
@@ -44,7 +54,7 @@ def test_every_kind_of_floor_gets_a_drive_clear_of_its_walls(kind):
 def test_a_twin_floors_walls_repeat_after_a_half_turn():
     world = floors.build("twin-1003")
     W, H = world.width_m, world.height_m
-    walls = world.segments[:world.n_walls]
+    walls = world.segments[: world.n_walls]
     turned = np.column_stack([W - walls[:, 0], H - walls[:, 1], W - walls[:, 2], H - walls[:, 3]])
     probe = np.random.default_rng(0).uniform([0, 0], [W, H], (300, 2))
     assert np.allclose(floors.distance_to_segments(probe, walls), floors.distance_to_segments(probe, turned))
@@ -52,12 +62,13 @@ def test_a_twin_floors_walls_repeat_after_a_half_turn():
 
 def test_a_loop_drive_never_enters_the_closed_core():
     world = floors.build("loop-1001")
-    (x0, y0, x1, y1), = world.solid
+    ((x0, y0, x1, y1),) = world.solid
     pts = floors.drive(world, np.random.default_rng(3), 120.0)
     assert not np.any((pts[:, 0] > x0) & (pts[:, 0] < x1) & (pts[:, 1] > y0) & (pts[:, 1] < y1))
 
 
 # --- the confidence's parts -------------------------------------------------------------------------------
+
 
 def test_modes_find_two_clouds_with_their_weights_and_poses():
     rng = np.random.default_rng()
@@ -101,7 +112,9 @@ def test_refining_a_hypothesis_brings_it_back_onto_the_scan():
     refined, score = agree.refine(off, r, angles, T)
     assert score > 0.95 > agree(off, r, angles, T)
     assert np.hypot(*(refined[:2] - pose[:2])) < 0.08 and abs(refined[2] - pose[2]) < 0.03
-    assert np.allclose(agree.many(np.vstack([pose, off]), r, angles, T), [agree(pose, r, angles, T), agree(off, r, angles, T)])
+    assert np.allclose(
+        agree.many(np.vstack([pose, off]), r, angles, T), [agree(pose, r, angles, T), agree(off, r, angles, T)]
+    )
 
 
 def test_the_scan_agrees_with_the_map_at_the_true_pose_and_not_beside_it():
@@ -156,6 +169,7 @@ def test_right_means_within_half_a_metre_and_ten_degrees():
 
 # --- the filter's AMCL habits ------------------------------------------------------------------------------
 
+
 def _filter(**mcl):
     occ, origin, res = _box_map()
     cfg = MCLConfig(num_particles=2000, num_beams=30, resample_threshold=0.0, **mcl)
@@ -207,7 +221,9 @@ def test_the_first_update_waits_for_motion_when_asked():
     m_scan = MCLConfig(update_min_trans_m=0.22, first_update="scan")
     pf = _filter(weighting="likelihood_field", update_min_trans_m=0.22)
     pf.init_uniform()
-    assert np.isfinite(follow(pf, log, np.arange(len(log.stamps)), m_scan)).all()  # IR-MCL's code: the first scan at once
+    assert np.isfinite(
+        follow(pf, log, np.arange(len(log.stamps)), m_scan)
+    ).all()  # IR-MCL's code: the first scan at once
 
 
 def test_feature_tracker_gives_every_feature_and_resets():
@@ -224,17 +240,37 @@ def test_feature_tracker_gives_every_feature_and_resets():
 
 # --- the stage ----------------------------------------------------------------------------------------------
 
+
 def _worlds_cfg(*extra):
-    return compose_config(["+exp=worlds", "worlds.split=hall-5", "worlds.runs=1", "worlds.run_s=12",
-                           "worlds.map_drive_m=60", "mcl.num_particles=3000", f"device={DEVICE}", *extra])
+    return compose_config(
+        [
+            "+exp=worlds",
+            "worlds.split=hall-5",
+            "worlds.runs=1",
+            "worlds.run_s=12",
+            "worlds.map_drive_m=60",
+            "mcl.num_particles=3000",
+            f"device={DEVICE}",
+            *extra,
+        ]
+    )
 
 
 def _fake_calibration(path):
     """A calibration that trusts the scan's agreement alone (for the stage's bookkeeping, not a fitted one)."""
     coef = np.zeros(len(FEATURES))
     coef[FEATURES.index("agreement")] = 6.0
-    path.write_text(json.dumps({"features": list(FEATURES), "coef": coef.tolist(), "intercept": 0.0,
-                                "mean": [0.0] * len(FEATURES), "scale": [1.0] * len(FEATURES)}))
+    path.write_text(
+        json.dumps(
+            {
+                "features": list(FEATURES),
+                "coef": coef.tolist(),
+                "intercept": 0.0,
+                "mean": [0.0] * len(FEATURES),
+                "scale": [1.0] * len(FEATURES),
+            }
+        )
+    )
     return path
 
 
@@ -268,9 +304,20 @@ def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
     cal = _fake_calibration(tmp_path / "cal.json")
     out = run_worlds(_worlds_cfg(f"worlds.calibration={cal}", "worlds.split=hall-1005+loop-1004"))
     doc = json.loads((out / "metrics.json").read_text())
-    rec = runs.Record(doc, "worlds", "worlds", "x" * 64, json.loads(json.dumps(
-        {"worlds": {"split": "test", "kidnap_at_s": 0.0}, "mcl": {"weighting": "likelihood_field",
-                                                                  "num_particles": 3000}})))
+    rec = runs.Record(
+        doc,
+        "worlds",
+        "worlds",
+        "x" * 64,
+        json.loads(
+            json.dumps(
+                {
+                    "worlds": {"split": "test", "kidnap_at_s": 0.0},
+                    "mcl": {"weighting": "likelihood_field", "num_particles": 3000},
+                }
+            )
+        ),
+    )
     row = worlds_table([rec]).splitlines()[-1]
     s = doc["summary"]
     assert f"| {s['successes']}/2 | {s['right_at_end']}/2 | {s['localized_at_end']}/2 |" in row
@@ -284,8 +331,14 @@ def test_the_stage_searches_for_rivals_when_asked(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     cal = _fake_calibration(tmp_path / "cal.json")
-    out = run_worlds(_worlds_cfg(f"worlds.calibration={cal}", "worlds.split=twin-9", "worlds.search_rivals_every=2",
-                                 "worlds.refine_rivals=true"))
+    out = run_worlds(
+        _worlds_cfg(
+            f"worlds.calibration={cal}",
+            "worlds.split=twin-9",
+            "worlds.search_rivals_every=2",
+            "worlds.refine_rivals=true",
+        )
+    )
     z = np.load(out / "twin-9-run1.npz")
     margin = z["features"][z["updated"], FEATURES.index("rival_margin")]
     assert np.isfinite(margin).all() and (margin < 0.5).any()  # a half-turn floor: some place fits as well
@@ -299,15 +352,21 @@ def test_the_worlds_stage_refuses_a_nof_weighting_it_cannot_train(tmp_path, monk
         run_worlds(_worlds_cfg("mcl.weighting=nog_raymarch"))
 
 
-@pytest.mark.parametrize("side,world,refused", [("tuning", "office-1001", "test world"),  # fit: tuning only
-                                                 ("test", "office-3", "tuning world")])  # judge: test only
+@pytest.mark.parametrize(
+    "side,world,refused",
+    [
+        ("tuning", "office-1001", "test world"),  # fit: tuning only
+        ("test", "office-3", "tuning world"),
+    ],
+)  # judge: test only
 def test_calibration_is_fitted_on_tuning_worlds_and_judged_on_test_worlds_only(tmp_path, side, world, refused):
     from eval.confidence import samples
 
     run = tmp_path / "run"
     run.mkdir()
-    (run / "metrics.json").write_text(json.dumps({"summary": {"weighting": "likelihood_field"},
-                                                  "runs": [{"world": world, "run": 1}]}))
+    (run / "metrics.json").write_text(
+        json.dumps({"summary": {"weighting": "likelihood_field"}, "runs": [{"world": world, "run": 1}]})
+    )
     with pytest.raises(ValueError, match=refused):
         samples([run], side)
 
@@ -381,10 +440,16 @@ def test_the_search_finds_a_twin_floors_look_alike_place():
 
     cfg = compose_config([])
     world = floors.build("twin-7")
-    world.segments = world.segments[:world.n_walls]  # walls only: the twin is exact
+    world.segments = world.segments[: world.n_walls]  # walls only: the twin is exact
     mapping = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(0), 150.0), 0, device=DEVICE)
-    grid = integrate_scans(compose(mapping.ground_truth, mapping.T_base_laser), mapping.ranges_m,
-                           mapping.info.angles_rad, resolution_m=0.05, max_range_m=20.0, device=DEVICE)
+    grid = integrate_scans(
+        compose(mapping.ground_truth, mapping.T_base_laser),
+        mapping.ranges_m,
+        mapping.info.angles_rad,
+        resolution_m=0.05,
+        max_range_m=20.0,
+        device=DEVICE,
+    )
     agree = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
     log = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(5), 15.0), 5, device=DEVICE)
     i = len(log.stamps) // 2

@@ -36,5 +36,7 @@ def test_yaw_profile_of_the_likelihood_field_peaks_at_the_truth_and_narrows_with
     wide = yaw_profile(run, every=5, overrides=["mcl.num_beams=8"])
     narrow = yaw_profile(run, every=5, overrides=["mcl.num_beams=64"])
     assert abs(narrow["peak_deg_median"]) <= 0.5 and abs(wide["peak_deg_median"]) <= 0.75
-    assert narrow["sigma_deg_per_scan"] < 0.6 * wide["sigma_deg_per_scan"], (narrow["sigma_deg_per_scan"],
-                                                                           wide["sigma_deg_per_scan"])
+    assert narrow["sigma_deg_per_scan"] < 0.6 * wide["sigma_deg_per_scan"], (
+        narrow["sigma_deg_per_scan"],
+        wide["sigma_deg_per_scan"],
+    )

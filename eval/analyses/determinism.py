@@ -56,12 +56,21 @@ def main(argv=None) -> dict:
             eager, graph, again = (run(log, nog, maps, weighting, seed, g, device)[0] for g in ("off", "on", "off"))
             same_graph += np.array_equal(eager, graph)
             same_eager += np.array_equal(eager, again)
-            worst = max(worst, float(np.abs(eager[:, :2] - graph[:, :2]).max()),
-                        float(np.abs(eager[:, :2] - again[:, :2]).max()))
-        report[weighting] = {"graph_equals_eager": same_graph, "eager_equals_eager": same_eager, "seeds": a.seeds,
-                             "largest_position_difference_m": worst}
-        print(f"{device} {weighting}: graph == eager bit for bit in {same_graph}/{a.seeds} seeds, eager == eager "
-              f"in {same_eager}/{a.seeds}; largest position difference {worst:.2e} m")
+            worst = max(
+                worst,
+                float(np.abs(eager[:, :2] - graph[:, :2]).max()),
+                float(np.abs(eager[:, :2] - again[:, :2]).max()),
+            )
+        report[weighting] = {
+            "graph_equals_eager": same_graph,
+            "eager_equals_eager": same_eager,
+            "seeds": a.seeds,
+            "largest_position_difference_m": worst,
+        }
+        print(
+            f"{device} {weighting}: graph == eager bit for bit in {same_graph}/{a.seeds} seeds, eager == eager "
+            f"in {same_eager}/{a.seeds}; largest position difference {worst:.2e} m"
+        )
     return report
 
 

@@ -35,8 +35,17 @@ from typing import Callable
 
 import numpy as np
 
-from irmcl_warp.io import (LogDefectWarning, LogFormatError, read_carmen, read_carmen_poses, read_g2o, read_matched_csv,
-                           read_relations, read_splits, read_tum)
+from irmcl_warp.io import (
+    LogDefectWarning,
+    LogFormatError,
+    read_carmen,
+    read_carmen_poses,
+    read_g2o,
+    read_matched_csv,
+    read_relations,
+    read_splits,
+    read_tum,
+)
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.services.cli import guard
@@ -60,23 +69,37 @@ def carmen_text(n=8, beams=7):
 def tum_text(n=12):
     return "# stamp x y z qx qy qz qw\n" + "".join(
         f"{10 + 0.5 * k:.6f} {0.3 * k:.4f} {-0.2 * k:.4f} 0 0 0 {np.sin(0.1 * k):.6f} {np.cos(0.1 * k):.6f}\n"
-        for k in range(n))
+        for k in range(n)
+    )
 
 
 def csv_text(n=12):
     return "bag_scan_index,ipc_stamp,x,y,theta\n" + "".join(
-        f"{3 * k},{500 + 0.4 * k:.6f},{0.5 * k:.4f},{-1.5 + 0.1 * k:.4f},{-0.3 + 0.05 * k:.4f}\n" for k in range(n))
+        f"{3 * k},{500 + 0.4 * k:.6f},{0.5 * k:.4f},{-1.5 + 0.1 * k:.4f},{-0.3 + 0.05 * k:.4f}\n" for k in range(n)
+    )
 
 
 def relations_text(n=12):
-    return "".join(f"{100 + k:.6f} {102.5 + k:.6f} {0.4 + 0.01 * k:.6f} {-0.2:.6f} 0 0 0 {0.1 - 0.02 * k:.6f}\n"
-                   for k in range(n))
+    return "".join(
+        f"{100 + k:.6f} {102.5 + k:.6f} {0.4 + 0.01 * k:.6f} {-0.2:.6f} 0 0 0 {0.1 - 0.02 * k:.6f}\n" for k in range(n)
+    )
 
 
 def splits_text():
     stamps = [round(100 + 0.2 * k, 6) for k in range(30)]
-    return json.dumps({"source": "fuzz", "train": stamps[:20], "val": stamps[20:25], "test": stamps[25:],
-                       "test_block": stamps[24:]}, indent=1) + "\n"
+    return (
+        json.dumps(
+            {
+                "source": "fuzz",
+                "train": stamps[:20],
+                "val": stamps[20:25],
+                "test": stamps[25:],
+                "test_block": stamps[24:],
+            },
+            indent=1,
+        )
+        + "\n"
+    )
 
 
 def g2o_text(n=6):
@@ -87,14 +110,18 @@ def g2o_text(n=6):
         lines.append(f"EDGE_SE2 {k} {k + 1} 0.5000 0.1000 0.0500 100 0 0 100 0 1000\n")
     for k in range(n):
         r = " ".join(f"{2 + 0.1 * b:.2f}" for b in range(5))
-        lines.append(f"ROBOTLASER1 0 -1.5708 3.1416 0.7854 50 0.01 0 5 {r} 0 0 0 0 0 0 0 0 0 0 0 0 "
-                     f"{200 + k:.6f} host {200 + k:.6f}\n")
+        lines.append(
+            f"ROBOTLASER1 0 -1.5708 3.1416 0.7854 50 0.01 0 5 {r} 0 0 0 0 0 0 0 0 0 0 0 0 "
+            f"{200 + k:.6f} host {200 + k:.6f}\n"
+        )
     return "".join(lines)
 
 
 def map_yaml_text():
-    return ("image: m.pgm\nresolution: 0.05\norigin: [-1.5, -2.25, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
-            "free_thresh: 0.196\nmode: trinary\n")
+    return (
+        "image: m.pgm\nresolution: 0.05\norigin: [-1.5, -2.25, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+        "free_thresh: 0.196\nmode: trinary\n"
+    )
 
 
 def pgm_bytes():
@@ -104,15 +131,20 @@ def pgm_bytes():
     return b"P5\n# a comment\n8 6\n255\n" + img.tobytes()
 
 
-
 def _arrays(x):
     if isinstance(x, tuple):
         return [a for item in x for a in _arrays(item)]
     if isinstance(x, dict):
         return [np.asarray(sorted(x))] + [np.asarray(x[k]) for k in sorted(x)]
     if hasattr(x, "ranges_m"):  # LaserLog
-        return [x.stamps, x.ranges_m, x.odom, np.asarray(x.info.angles_rad), np.asarray([x.info.no_return_m]),
-                x.T_base_laser]
+        return [
+            x.stamps,
+            x.ranges_m,
+            x.odom,
+            np.asarray(x.info.angles_rad),
+            np.asarray([x.info.no_return_m]),
+            x.T_base_laser,
+        ]
     if hasattr(x, "motion"):  # Relations
         return [x.t1, x.t2, x.motion]
     if hasattr(x, "vertex_ids"):  # G2oGraph
@@ -124,8 +156,9 @@ def _arrays(x):
 
 def same(a, b) -> bool:
     A, B = _arrays(a), _arrays(b)
-    return len(A) == len(B) and all(x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f")
-                                    for x, y in zip(A, B))
+    return len(A) == len(B) and all(
+        x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f") for x, y in zip(A, B)
+    )
 
 
 @dataclass
@@ -235,7 +268,7 @@ def corrupt(reader: Reader, kind: str, pick) -> tuple[bytes, bytes | None, str]:
     if kind in ("replaced", "inserted"):
         junk_set = GARBAGE if kind == "replaced" else INSERTED
         pos, junk = pick(len(raw)), junk_set[pick(len(junk_set))]
-        text = raw[:pos] + junk + raw[pos + (1 if kind == "replaced" else 0):]
+        text = raw[:pos] + junk + raw[pos + (1 if kind == "replaced" else 0) :]
         return encode(reader, text), blob, f"{kind} {junk!r} at {pos}"
     if kind == "archive":
         flipped = bytearray(blob)
@@ -259,7 +292,7 @@ def verdict(reader: Reader, folder: Path, kind: str, pick) -> tuple[str, str]:
         return "unexpected", f"{what}: {problem}"
     if got.error is not None:
         return "error", what
-    unfinished = kind == "cut" and reader.lines and not reader.compress and data[len(equal_to):].strip() != b""
+    unfinished = kind == "cut" and reader.lines and not reader.compress and data[len(equal_to) :].strip() != b""
     if equal_to is None:
         return ("warning", what) if got.warnings else ("silent wrong", f"{what}: random bytes read as data")
     ref = read(reader, folder / f"ref{reader.suffix}", equal_to)
@@ -329,10 +362,13 @@ def main(argv=None):
     for key, what in result["failures"].items():
         print(f"FAILED {key}: {what}")
     if args.write:
-        atomic_write_bytes(REPO / "results" / "readers" / "fuzz.json",
-                           (json.dumps(result, indent=1, sort_keys=True) + "\n").encode())
-        doc = (DOC_HEAD + f"\nMade by `python -m eval.analyses.fuzz --cases {args.cases} --seed {args.seed} --write` "
-               f"(2-core CPU).\n\n" + table + "\n")
+        atomic_write_bytes(
+            REPO / "results" / "readers" / "fuzz.json", (json.dumps(result, indent=1, sort_keys=True) + "\n").encode()
+        )
+        doc = (
+            DOC_HEAD + f"\nMade by `python -m eval.analyses.fuzz --cases {args.cases} --seed {args.seed} --write` "
+            f"(2-core CPU).\n\n" + table + "\n"
+        )
         atomic_write_bytes(REPO / "docs" / "reader-fuzz.md", doc.encode())
     return 1 if result["failures"] else 0
 

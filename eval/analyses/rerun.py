@@ -59,8 +59,10 @@ def kept_jobs(exps=None, results: Path = REPO / "results") -> list[list[str]]:
         line = overrides(rec.exp, rec.config, bases[rec.exp])
         cfg = OmegaConf.to_container(compose_config(line), resolve=True)
         if runs.settings_id(cfg, "slam") != rec.settings_id:
-            raise ValueError(f"{results}/slam/{rec.exp}.json: kept record {rec.label} would run again with other "
-                             f"settings with {line}")
+            raise ValueError(
+                f"{results}/slam/{rec.exp}.json: kept record {rec.label} would run again with other "
+                f"settings with {line}"
+            )
         jobs.append(line)
     return jobs
 
@@ -90,8 +92,10 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.compare:
         same, differ, not_kept = compare(Path(a.compare))
-        print(f"{len(same)} of {len(same) + len(differ)} runs give their kept runs' relations and trajectory errors to "
-              f"the last digit" + (f"; {len(not_kept)} not kept: {', '.join(not_kept)}" if not_kept else ""))
+        print(
+            f"{len(same)} of {len(same) + len(differ)} runs give their kept runs' relations and trajectory errors to "
+            f"the last digit" + (f"; {len(not_kept)} not kept: {', '.join(not_kept)}" if not_kept else "")
+        )
         for name in differ:
             print(f"differs: {name}")
         return 1 if differ or not (same or differ) else 0

@@ -52,11 +52,16 @@ def rescore(run: Path) -> dict:
     runs = []
     for old, (stamps, est, gt) in zip(doc["runs"], starts):
         new = localization_metrics(stamps, est, gt)
-        runs.append({**{key: old[key] for key in ("start_s", "ms_per_scan", "steps", "ms_per_step_median")
-                        if key in old}, **new})
+        runs.append(
+            {
+                **{key: old[key] for key in ("start_s", "ms_per_scan", "steps", "ms_per_step_median") if key in old},
+                **new,
+            }
+        )
     summary = {**doc["summary"], **summarise(runs, doc["settings"], doc["summary"].get("device", "?"))}
-    changed = {key: (doc["summary"].get(key), value) for key, value in summary.items()
-               if doc["summary"].get(key) != value}
+    changed = {
+        key: (doc["summary"].get(key), value) for key, value in summary.items() if doc["summary"].get(key) != value
+    }
     amend(run, {**doc, "summary": summary, "runs": runs}, "eval.analyses.rescore: today's localization metrics")
     return changed
 

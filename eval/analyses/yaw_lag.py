@@ -48,21 +48,33 @@ def heading_errors(stamps, est_yaw, gt_yaw, after_s=20.0) -> tuple[np.ndarray, n
 def summarise(e: np.ndarray, w: np.ndarray, straight: float = 0.1, turning: float = 0.3) -> dict:
     """RMS heading error (deg) overall, straight and turning, and the lag (s) of the fit e = -lag * w."""
     rms = lambda m: float(np.degrees(np.sqrt(np.mean(e[m] ** 2)))) if m.any() else None  # noqa: E731
-    return {"scans": int(len(e)), "rms_deg": rms(np.ones_like(e, bool)), "straight_rms_deg": rms(np.abs(w) < straight),
-            "turning_rms_deg": rms(np.abs(w) > turning),
-            "lag_s": float(-np.sum(e * w) / np.sum(w * w)) if np.sum(w * w) > 0 else None}
+    return {
+        "scans": int(len(e)),
+        "rms_deg": rms(np.ones_like(e, bool)),
+        "straight_rms_deg": rms(np.abs(w) < straight),
+        "turning_rms_deg": rms(np.abs(w) > turning),
+        "lag_s": float(-np.sum(e * w) / np.sum(w * w)) if np.sum(w * w) > 0 else None,
+    }
 
 
 def analyse(run: Path, after_s: float, straight: float, turning: float) -> dict:
     _, starts = run_trajectories(run)
     metrics = run / "metrics.json"  # a start that never converged has no heading to lag: left out, as from its RMSE
     ok = [r["success"] for r in json.loads(metrics.read_text())["runs"]] if metrics.is_file() else [True] * len(starts)
-    pairs = [heading_errors(stamps, est[:, 2], gt[:, 2], after_s) for (stamps, est, gt), good in zip(starts, ok) if good]
+    pairs = [
+        heading_errors(stamps, est[:, 2], gt[:, 2], after_s) for (stamps, est, gt), good in zip(starts, ok) if good
+    ]
     if not pairs:
         raise ValueError(f"{run}: no start converged")
     e, w = (np.concatenate(a) for a in zip(*pairs))
-    return {"run": run.name, "starts": len(pairs), **summarise(e, w, straight, turning),
-            "after_s": after_s, "straight_rad_s": straight, "turning_rad_s": turning}
+    return {
+        "run": run.name,
+        "starts": len(pairs),
+        **summarise(e, w, straight, turning),
+        "after_s": after_s,
+        "straight_rad_s": straight,
+        "turning_rad_s": turning,
+    }
 
 
 def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 41, overrides=()) -> dict:
@@ -76,8 +88,11 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
     cfg = OmegaConf.merge(OmegaConf.load(run / "config.yaml"), OmegaConf.from_dotlist(list(overrides)))
     device = "cpu"
     log = load_stream(cfg)
-    up = json.loads((run / "manifest.json").read_text()).get("upstream", {}).get("train") \
-        if (run / "manifest.json").is_file() else None  # the field the run read (a NOF weighting)
+    up = (
+        json.loads((run / "manifest.json").read_text()).get("upstream", {}).get("train")
+        if (run / "manifest.json").is_file()
+        else None
+    )  # the field the run read (a NOF weighting)
     view, maps, _ = build_maps(cfg, device, run.parents[2] / up["run"] / "nof.pt" if up else None)
     far = far_bound_m(cfg)
     m = OmegaConf.merge(cfg.mcl, {"num_particles": steps, "step_graph": "off"})
@@ -97,23 +112,31 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
     mean = np.mean(curves, axis=0)
     near = np.abs(np.degrees(offsets)) <= 2.0
     a = np.polyfit(offsets[near], mean[near], 2)[0]
-    return {"run": run.name + "".join(f" {o}" for o in overrides), "weighting": cfg.mcl.weighting,
-            "scans": int(len(scans)),
-            "peak_deg_median": float(np.median(peaks)), "peak_deg_iqr": [float(np.percentile(peaks, 25)),
-                                                                        float(np.percentile(peaks, 75))],
-            "sigma_deg_per_scan": float(np.degrees(np.sqrt(-1.0 / (2 * a)))) if a < 0 else None,
-            "offsets_deg": np.degrees(offsets).tolist(), "mean_log_likelihood": mean.tolist()}
+    return {
+        "run": run.name + "".join(f" {o}" for o in overrides),
+        "weighting": cfg.mcl.weighting,
+        "scans": int(len(scans)),
+        "peak_deg_median": float(np.median(peaks)),
+        "peak_deg_iqr": [float(np.percentile(peaks, 25)), float(np.percentile(peaks, 75))],
+        "sigma_deg_per_scan": float(np.degrees(np.sqrt(-1.0 / (2 * a)))) if a < 0 else None,
+        "offsets_deg": np.degrees(offsets).tolist(),
+        "mean_log_likelihood": mean.tolist(),
+    }
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(prog="python -m eval.analyses.yaw_lag", description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path, help="localize run folders (outputs/<exp>/localize-...)")
-    ap.add_argument("--after-s", type=float, default=20.0, help="skip this much of each start (IR-MCL scores after 20 s)")
+    ap.add_argument(
+        "--after-s", type=float, default=20.0, help="skip this much of each start (IR-MCL scores after 20 s)"
+    )
     ap.add_argument("--straight", type=float, default=0.1, help="|turn rate| below this (rad/s) counts as straight")
     ap.add_argument("--turning", type=float, default=0.3, help="|turn rate| above this (rad/s) counts as turning")
     ap.add_argument("--profile", action="store_true", help="the observation model's heading profile at the true poses")
     ap.add_argument("--every", type=int, default=10, help="--profile: every n-th scan with ground truth")
-    ap.add_argument("--set", action="append", default=[], help="--profile: a setting over the run's, e.g. mcl.sigma_m=0.25")
+    ap.add_argument(
+        "--set", action="append", default=[], help="--profile: a setting over the run's, e.g. mcl.sigma_m=0.25"
+    )
     a = ap.parse_args(argv)
     if a.profile:
         print("| run | weighting | scans | peak heading (deg): median [IQR] | heading sigma per scan (deg) |")
@@ -122,8 +145,11 @@ def main(argv=None) -> None:
             r = yaw_profile(run, a.every, overrides=a.set)
             write_json(run / ("yaw_profile" + "".join(f"-{o}" for o in a.set) + ".json"), r)
             sig = f"{r['sigma_deg_per_scan']:.2f}" if r["sigma_deg_per_scan"] else "flat"
-            print(f"| {r['run']} | {r['weighting']} | {r['scans']} | {r['peak_deg_median']:+.2f} "
-                  f"[{r['peak_deg_iqr'][0]:+.2f}, {r['peak_deg_iqr'][1]:+.2f}] | {sig} |", flush=True)
+            print(
+                f"| {r['run']} | {r['weighting']} | {r['scans']} | {r['peak_deg_median']:+.2f} "
+                f"[{r['peak_deg_iqr'][0]:+.2f}, {r['peak_deg_iqr'][1]:+.2f}] | {sig} |",
+                flush=True,
+            )
         return
     rows = []
     for run in a.runs:
@@ -133,8 +159,10 @@ def main(argv=None) -> None:
     print("| run | starts | scans | yaw RMS (deg) | straight | turning | fitted lag (s) |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['run']} | {r['starts']} | {r['scans']} | {r['rms_deg']:.2f} | {r['straight_rms_deg']:.2f} | "
-              f"{r['turning_rms_deg']:.2f} | {r['lag_s']:.3f} |")
+        print(
+            f"| {r['run']} | {r['starts']} | {r['scans']} | {r['rms_deg']:.2f} | {r['straight_rms_deg']:.2f} | "
+            f"{r['turning_rms_deg']:.2f} | {r['lag_s']:.3f} |"
+        )
 
 
 if __name__ == "__main__":

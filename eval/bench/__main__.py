@@ -20,8 +20,12 @@ def main(argv=None):
             ap.error("--exp needs --init <trained nof.pt>")
         train.run_train_bench(a)
     else:
-        {"mcl": mcl.run_mcl_bench, "slam": slam.run_slam_bench, "globloc": globloc.run_globloc_bench,
-         "sweeps": sweeps.run_sweeps_bench}[a.what](a)
+        {
+            "mcl": mcl.run_mcl_bench,
+            "slam": slam.run_slam_bench,
+            "globloc": globloc.run_globloc_bench,
+            "sweeps": sweeps.run_sweeps_bench,
+        }[a.what](a)
 
 
 if __name__ == "__main__":

@@ -35,8 +35,9 @@ def add_parser(sub) -> None:
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--keyframes", type=int, default=1000)
     p.add_argument("--render-batch", type=int, default=256)
-    p.add_argument("--render-only", action="store_true",
-                   help="rendering and the Gist only (no OpenCV needed, e.g. on a GPU box)")
+    p.add_argument(
+        "--render-only", action="store_true", help="rendering and the Gist only (no OpenCV needed, e.g. on a GPU box)"
+    )
     p.add_argument("--out", default="outputs/bench")
 
 
@@ -55,13 +56,16 @@ def run_globloc_bench(a) -> dict:
     t = time.perf_counter()
     rgb, depth = camera.render(mapping[kf], Session(seed=s.seed), batch=a.render_batch)
     render_s = time.perf_counter() - t
-    gist = Gist(tuple(g.gist_size), g.gist_blocks, tuple(g.gist_orientations),
-                device="cuda" if device.startswith("cuda") else "cpu")
+    gist = Gist(
+        tuple(g.gist_size),
+        g.gist_blocks,
+        tuple(g.gist_orientations),
+        device="cuda" if device.startswith("cuda") else "cpu",
+    )
     t = time.perf_counter()
     db = build_database(mapping[kf], rgb, depth, gist)
     db_s = time.perf_counter() - t
     import warp as wp
-
 
     cams = compose_se2(mapping[kf][: a.render_batch], camera.T_base_cam)
     camera.kernel.render(cams, on_device=True)
@@ -71,11 +75,20 @@ def run_globloc_bench(a) -> dict:
         camera.kernel.render(cams, on_device=True)
     wp.synchronize_device(device)
     device_fps = 5 * len(cams) / (time.perf_counter() - t)
-    print(f"rendering kept on {device}: {device_fps:.0f} frames/s in batches of {len(cams)} "
-          f"(with the copy to host memory: {len(kf) / render_s:.0f})")
-    base = {"exp": a.exp, "device": device, "host": platform.processor() or platform.machine(), "keyframes": len(db),
-            "image": f"{camera.size_hw[1]}x{camera.size_hw[0]}", "render_fps": len(kf) / render_s,
-            "render_fps_on_device": device_fps, "database_build_s": db_s}
+    print(
+        f"rendering kept on {device}: {device_fps:.0f} frames/s in batches of {len(cams)} "
+        f"(with the copy to host memory: {len(kf) / render_s:.0f})"
+    )
+    base = {
+        "exp": a.exp,
+        "device": device,
+        "host": platform.processor() or platform.machine(),
+        "keyframes": len(db),
+        "image": f"{camera.size_hw[1]}x{camera.size_hw[0]}",
+        "render_fps": len(kf) / render_s,
+        "render_fps_on_device": device_fps,
+        "database_build_s": db_s,
+    }
     if a.render_only:
         one = rgb[:1]
         describe(one, gist)
@@ -83,8 +96,10 @@ def run_globloc_bench(a) -> dict:
         for _ in range(20):
             describe(one, gist)
         row = {**base, "gist_ms": 1e3 * (time.perf_counter() - t) / 20}
-        print(f"rendering on {device}: {row['render_fps']:.0f} frames/s ({row['image']}, batches of {a.render_batch}); "
-              f"Gist of one query {row['gist_ms']:.1f} ms; database of {len(db)} built in {db_s:.1f} s")
+        print(
+            f"rendering on {device}: {row['render_fps']:.0f} frames/s ({row['image']}, batches of {a.render_batch}); "
+            f"Gist of one query {row['gist_ms']:.1f} ms; database of {len(db)} built in {db_s:.1f} s"
+        )
         return _save(a, row, record_path("", "globloc", device, "render", a.exp).name)
     hyp = Hypotheses(cfg, db, camera, Scan2Map(grid, origin, g.map_resolution_m, g.scan2map))
     st = make_stream(cfg, world, look, np.random.default_rng(1), 0, device)
@@ -103,14 +118,25 @@ def run_globloc_bench(a) -> dict:
     t = time.perf_counter()
     s2m(poses, (s.laser_x_m, 0.0, 0.0), st.ranges[0], laser_angles(cfg))
     s2m_ms = 1e3 * (time.perf_counter() - t) / len(poses)
-    row = {**base, "decision_ms": decision_ms, "gist_ms": per["gist"],
-           "retrieval_ms": per["retrieval"], "pnp_ms_per_keyframe": 1e3 * hyp.timing["pnp"] / max(pnp_tries, 1),
-           "scan2map_ms_per_candidate": s2m_ms, "frames": frames, "accepted_candidates_per_frame": candidates / frames}
+    row = {
+        **base,
+        "decision_ms": decision_ms,
+        "gist_ms": per["gist"],
+        "retrieval_ms": per["retrieval"],
+        "pnp_ms_per_keyframe": 1e3 * hyp.timing["pnp"] / max(pnp_tries, 1),
+        "scan2map_ms_per_candidate": s2m_ms,
+        "frames": frames,
+        "accepted_candidates_per_frame": candidates / frames,
+    }
     print(f"lidar + camera relocalization on {device}, {a.exp}, {len(db)} keyframes, images {row['image']}")
-    print("| render (frames/s) | Gist of a query (ms) | retrieval (ms) | ORB + PnP per keyframe (ms) | "
-          "Scan2Map per candidate (ms) | whole decision (ms) |\n|---|---|---|---|---|---|")
-    print(f"| {row['render_fps']:.0f} | {row['gist_ms']:.1f} | {row['retrieval_ms']:.2f} | {row['pnp_ms_per_keyframe']:.1f} "
-          f"| {row['scan2map_ms_per_candidate']:.3f} | {row['decision_ms']:.1f} |")
+    print(
+        "| render (frames/s) | Gist of a query (ms) | retrieval (ms) | ORB + PnP per keyframe (ms) | "
+        "Scan2Map per candidate (ms) | whole decision (ms) |\n|---|---|---|---|---|---|"
+    )
+    print(
+        f"| {row['render_fps']:.0f} | {row['gist_ms']:.1f} | {row['retrieval_ms']:.2f} | {row['pnp_ms_per_keyframe']:.1f} "
+        f"| {row['scan2map_ms_per_candidate']:.3f} | {row['decision_ms']:.1f} |"
+    )
     return _save(a, row, record_path("", "globloc", device, a.exp).name)
 
 

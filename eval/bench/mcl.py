@@ -61,8 +61,9 @@ VARIANTS = {
     "likelihood_field": dict(weighting="likelihood_field"),
     "beam_model": dict(weighting="beam_model"),
 }
-DEFAULT_VARIANT = next((name for name, v in VARIANTS.items()
-                        if all(getattr(MCLConfig, k) == value for k, value in v.items())), None)
+DEFAULT_VARIANT = next(
+    (name for name, v in VARIANTS.items() if all(getattr(MCLConfig, k) == value for k, value in v.items())), None
+)
 
 
 def simulator_nog(resolution_m: float = 0.05, device: str = "cpu") -> NOG:
@@ -72,8 +73,9 @@ def simulator_nog(resolution_m: float = 0.05, device: str = "cpu") -> NOG:
     hi = world.segments.reshape(-1, 2).max(0) + 1.0
     shape = tuple(np.ceil((hi - lo) / resolution_m).astype(int)[::-1])
     walls = SIM.build("rasterize", device=device)(world.segments, tuple(lo), resolution_m, shape) > 0
-    return NOG(walls.astype(np.float32), (float(lo[0] + resolution_m / 2), float(lo[1] + resolution_m / 2)),
-               resolution_m)
+    return NOG(
+        walls.astype(np.float32), (float(lo[0] + resolution_m / 2), float(lo[1] + resolution_m / 2)), resolution_m
+    )
 
 
 def _sync(device: str) -> None:
@@ -115,30 +117,64 @@ def device_profile(fn, steps: int, what: str) -> dict:
     kernels = {}
     for e in prof.events():
         if e.device_type.name == "CUDA":
-            kernels.setdefault(e.name[:60], []).append(e.device_time_total if hasattr(e, "device_time_total") else e.cuda_time_total)
+            kernels.setdefault(e.name[:60], []).append(
+                e.device_time_total if hasattr(e, "device_time_total") else e.cuda_time_total
+            )
     per_step = {k: sum(v) / steps / 1e3 for k, v in kernels.items()}  # us -> ms
     busy = sum(per_step.values())
-    print(f"device profile ({what}, {steps} steps): wall {1e3 * wall:.3f} ms per step, kernels and copies "
-          f"{busy:.3f} ms, {sum(len(v) for v in kernels.values()) / steps:.0f} per step")
+    print(
+        f"device profile ({what}, {steps} steps): wall {1e3 * wall:.3f} ms per step, kernels and copies "
+        f"{busy:.3f} ms, {sum(len(v) for v in kernels.values()) / steps:.0f} per step"
+    )
     for k, ms in sorted(per_step.items(), key=lambda kv: -kv[1])[:14]:
         print(f"  {ms * 1e3:8.1f} us  x{len(kernels[k]) / steps:.0f}  {k}")
-    return {"wall_ms": 1e3 * wall, "device_ms": busy, "per_step_us": {k: 1e3 * v for k, v in per_step.items()},
-            "launches_per_step": sum(len(v) for v in kernels.values()) / steps}
+    return {
+        "wall_ms": 1e3 * wall,
+        "device_ms": busy,
+        "per_step_us": {k: 1e3 * v for k, v in per_step.items()},
+        "launches_per_step": sum(len(v) for v in kernels.values()) / steps,
+    }
 
 
-def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, repeats=5, graph="on",
-                 profile=False, around=None, cuda_trace=False) -> dict:
+def bench_filter(
+    nog,
+    variant,
+    n,
+    device,
+    steps,
+    far,
+    angles,
+    measured,
+    seed=0,
+    repeats=5,
+    graph="on",
+    profile=False,
+    around=None,
+    cuda_trace=False,
+) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
     half = nog.resolution_m / 2  # the grid models read the NOG's nodes as cell centres
-    maps = WeightingMaps(nog=nog, occupancy=nog.occupancy, resolution_m=nog.resolution_m,
-                         origin_xy=(nog.origin_xy[0] - half, nog.origin_xy[1] - half))
+    maps = WeightingMaps(
+        nog=nog,
+        occupancy=nog.occupancy,
+        resolution_m=nog.resolution_m,
+        origin_xy=(nog.origin_xy[0] - half, nog.origin_xy[1] - half),
+    )
     cached = None
     if cfg.weighting == "nog_table":  # was its table on disk already (irmcl_warp/services/table_cache.py)?
-        march = dict(num_angles=cfg.table_angles, num_samples=cfg.num_samples, near_m=cfg.near_m, far_m=far,
-                     t_min=cfg.t_min, empty_below=cfg.empty_below)
-        cached = table_cache.cache_dir() is not None and (
-            table_cache.cache_dir() / table_cache.table_name(nog, march, pick_device(device))).is_file()
+        march = dict(
+            num_angles=cfg.table_angles,
+            num_samples=cfg.num_samples,
+            near_m=cfg.near_m,
+            far_m=far,
+            t_min=cfg.t_min,
+            empty_below=cfg.empty_below,
+        )
+        cached = (
+            table_cache.cache_dir() is not None
+            and (table_cache.cache_dir() / table_cache.table_name(nog, march, pick_device(device))).is_file()
+        )
     started = time.perf_counter()
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, maps)
     _sync(device)
@@ -164,11 +200,21 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
         "read back": lambda: pf.weights.summary(),
     }
     part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
-    row = {"method": f"{variant} {'graph' if pf.use_graph else 'eager'}", "variant": variant, "graph": pf.use_graph,
-           "particles": n, "step_ms": 1e3 * step["median"], "step_ms_min": 1e3 * step["min"],
-           "step_ms_max": 1e3 * step["max"], "step_ms_all": [1e3 * t for t in step["all"]], "repeats": repeats,
-           "weighting_ms": part_ms["weighting"], "parts_ms": part_ms, "build_s": build_s,
-           "table_from_cache": cached}
+    row = {
+        "method": f"{variant} {'graph' if pf.use_graph else 'eager'}",
+        "variant": variant,
+        "graph": pf.use_graph,
+        "particles": n,
+        "step_ms": 1e3 * step["median"],
+        "step_ms_min": 1e3 * step["min"],
+        "step_ms_max": 1e3 * step["max"],
+        "step_ms_all": [1e3 * t for t in step["all"]],
+        "repeats": repeats,
+        "weighting_ms": part_ms["weighting"],
+        "parts_ms": part_ms,
+        "build_s": build_s,
+        "table_from_cache": cached,
+    }
     if trace is not None:
         row["device_profile"] = trace
     if cfg.weighting == "nog_table":
@@ -179,14 +225,27 @@ def bench_filter(nog, variant, n, device, steps, far, angles, measured, seed=0, 
 def table_error(pf, nog, cfg, far, device) -> dict:
     """|table range - march range| over the filter's particles and beams where both see a wall: median, 90th
     percentile, maximum (m)."""
-    march = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=pf.num_particles, num_beams=len(pf.beam_index),
-                            num_samples=cfg.num_samples, near_m=cfg.near_m, far_m=far, t_min=cfg.t_min, device=device)
+    march = WEIGHTING.build(
+        "nog_raymarch",
+        nog=nog,
+        num_particles=pf.num_particles,
+        num_beams=len(pf.beam_index),
+        num_samples=cfg.num_samples,
+        near_m=cfg.near_m,
+        far_m=far,
+        t_min=cfg.t_min,
+        device=device,
+    )
     want = march.render(pf.particles, pf.T_base_laser, pf.angles).numpy()
     got = pf.weighting.render(pf.particles, pf.T_base_laser, pf.angles).numpy()
     both = (want > 0) & (got > 0)
     off = np.abs(got - want)[both]
-    return {"median": float(np.median(off)), "p90": float(np.quantile(off, 0.9)), "max": float(off.max()),
-            "rays": int(both.sum())}
+    return {
+        "median": float(np.median(off)),
+        "p90": float(np.quantile(off, 0.9)),
+        "max": float(off.max()),
+        "rays": int(both.sum()),
+    }
 
 
 def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
@@ -201,8 +260,9 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
     m = torch.tensor(measured[beams], device=dev)
 
     def once():
-        return nog_log_weights_torch(grid, nog.origin_xy, nog.resolution_m, particles, (0.0, 0.0, 0.0), a, m, 256,
-                                     0.02, far, 0.5, chunk=500)
+        return nog_log_weights_torch(
+            grid, nog.origin_xy, nog.resolution_m, particles, (0.0, 0.0, 0.0), a, m, 256, 0.02, far, 0.5, chunk=500
+        )
 
     with torch.no_grad():
         s = time_per_call(once, lambda: _sync(device), steps, warmup=1)
@@ -216,8 +276,11 @@ def measured_scan(nog, far, device, seed=0, with_pose=False):
     pose = np.append(free[rng.integers(len(free))], rng.uniform(-np.pi, np.pi)).astype(np.float32)
     angles = np.linspace(-np.pi / 2, np.pi / 2, 360).astype(np.float32)
     w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=360, far_m=far, device=device)
-    r = w.render(wp.array(pose[None], dtype=wp.vec3, device=w.device), (0, 0, 0),
-                 wp.array(angles, dtype=wp.float32, device=w.device)).numpy()[0]
+    r = w.render(
+        wp.array(pose[None], dtype=wp.vec3, device=w.device),
+        (0, 0, 0),
+        wp.array(angles, dtype=wp.float32, device=w.device),
+    ).numpy()[0]
     r = r + rng.normal(0, 0.02, r.shape)
     scan = np.where((r > 0.05) & (r < far - 0.5), r, np.nan).astype(np.float32)
     return (angles, scan, pose) if with_pose else (angles, scan)
@@ -232,9 +295,24 @@ def run_mcl_bench(a) -> list[dict]:
     rows = []
     for n in a.particles:
         for v in a.variants:
-            for graph in (["on", "off"] if a.step_graph == "both" else [a.step_graph]):
-                rows.append(bench_filter(nog, v, n, device, a.steps, far, angles, measured, repeats=a.repeats,
-                                         graph=graph, profile=a.profile, around=around, cuda_trace=a.cuda_trace))
+            for graph in ["on", "off"] if a.step_graph == "both" else [a.step_graph]:
+                rows.append(
+                    bench_filter(
+                        nog,
+                        v,
+                        n,
+                        device,
+                        a.steps,
+                        far,
+                        angles,
+                        measured,
+                        repeats=a.repeats,
+                        graph=graph,
+                        profile=a.profile,
+                        around=around,
+                        cuda_trace=a.cuda_trace,
+                    )
+                )
                 print(rows[-1], flush=True)
         if n <= a.torch_max:
             rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
@@ -246,28 +324,50 @@ def run_mcl_bench(a) -> list[dict]:
     name = torch.cuda.get_device_name() if device.startswith("cuda") else platform.processor() or "cpu"
     src = a.nog or "simulator walls (5 cm)"
     print(f"\nMCL step on {name} ({device}), NOG {src} {nog.shape}, 32 beams x 256 samples, far {far} m")
-    print("| method | particles | full step (ms): median of repeats [min-max] | weighting (ms) | x faster than torch "
-          "(full step vs its weighting) |")
+    print(
+        "| method | particles | full step (ms): median of repeats [min-max] | weighting (ms) | x faster than torch "
+        "(full step vs its weighting) |"
+    )
     print("|---|---|---|---|---|")
     for r in rows:
-        step = (f"{r['step_ms']:.3f} [{r['step_ms_min']:.3f}-{r['step_ms_max']:.3f}]" if r["step_ms"] is not None
-                else "-")
+        step = (
+            f"{r['step_ms']:.3f} [{r['step_ms_min']:.3f}-{r['step_ms_max']:.3f}]" if r["step_ms"] is not None else "-"
+        )
         sp = f"{r['speedup_vs_torch']:.0f}" if "speedup_vs_torch" in r else "-"
         print(f"| {r['method']} | {r['particles']:,} | {step} | {r['weighting_ms']:.3f} | {sp} |")
     for r in rows:
         if "table_vs_march_m" in r:
             e = r["table_vs_march_m"]
             how = "read from the disk cache" if r.get("table_from_cache") else "built"
-            print(f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; |table - march| median "
-                  f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays")
-    print("\nparts of a step alone (ms): " + ", ".join(f"{r['method']} {r['particles']:,}: " + " ".join(
-        f"{k} {v:.3f}" for k, v in r["parts_ms"].items()) for r in rows if "parts_ms" in r))
+            print(
+                f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; |table - march| median "
+                f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays"
+            )
+    print(
+        "\nparts of a step alone (ms): "
+        + ", ".join(
+            f"{r['method']} {r['particles']:,}: " + " ".join(f"{k} {v:.3f}" for k, v in r["parts_ms"].items())
+            for r in rows
+            if "parts_ms" in r
+        )
+    )
     out = record_path(a.out, "mcl", device)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(out, {"device": device, "device_name": name, "nog": src, "nog_shape": list(nog.shape), "far_m": far,
-                     "particles_start": "uniform over the free cells" if around is None else
-                     f"Gaussian around the scan's pose, std {list(a.around)}",
-                     "argv": vars(a), "rows": rows})
+    write_json(
+        out,
+        {
+            "device": device,
+            "device_name": name,
+            "nog": src,
+            "nog_shape": list(nog.shape),
+            "far_m": far,
+            "particles_start": "uniform over the free cells"
+            if around is None
+            else f"Gaussian around the scan's pose, std {list(a.around)}",
+            "argv": vars(a),
+            "rows": rows,
+        },
+    )
     print(f"-> {out}")
     return rows
 
@@ -278,16 +378,28 @@ def add_parser(sub) -> None:
     p.add_argument("--particles", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     p.add_argument("--torch-max", type=int, default=1_000_000, help="largest particle count for the torch reference")
-    p.add_argument("--step-graph", default="both", choices=["both", "on", "off"],
-                   help="a step replayed as one captured graph (on), launched one by one (off), or both side by side")
+    p.add_argument(
+        "--step-graph",
+        default="both",
+        choices=["both", "on", "off"],
+        help="a step replayed as one captured graph (on), launched one by one (off), or both side by side",
+    )
     p.add_argument("--profile", action="store_true", help="also print where the host time of a step goes (cProfile)")
-    p.add_argument("--cuda-trace", action="store_true",
-                   help="also list the CUDA kernels of a step with their device times (torch.profiler / CUPTI)")
+    p.add_argument(
+        "--cuda-trace",
+        action="store_true",
+        help="also list the CUDA kernels of a step with their device times (torch.profiler / CUPTI)",
+    )
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", type=float, default=40.0)
-    p.add_argument("--around", type=float, nargs=3, metavar=("SX", "SY", "SYAW"),
-                   help="start the particles as a Gaussian (std in m, m, rad) around the pose the scan was taken from, "
-                        "as a converged filter holds them, instead of uniform over the free cells")
+    p.add_argument(
+        "--around",
+        type=float,
+        nargs=3,
+        metavar=("SX", "SY", "SYAW"),
+        help="start the particles as a Gaussian (std in m, m, rad) around the pose the scan was taken from, "
+        "as a converged filter holds them, instead of uniform over the free cells",
+    )
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--repeats", type=int, default=5, help="timings of --steps steps each; the table shows their median")
     p.add_argument("--out", default="outputs/bench")

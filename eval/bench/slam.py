@@ -44,16 +44,28 @@ def run_one(exp: str, particles: int, device: str, scans: int | None, overrides=
     t0 = time.perf_counter()
     processed = sum(rbpf.step(k, odom[k], log.ranges_m[k], float(log.stamps[k])).processed for k in range(1, n))
     wall = time.perf_counter() - t0
-    return {"exp": exp, "particles": particles, "device": rbpf.device, "scans": n, "processed_scans": processed,
-            "wall_s": wall, "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()}}
+    return {
+        "exp": exp,
+        "particles": particles,
+        "device": rbpf.device,
+        "scans": n,
+        "processed_scans": processed,
+        "wall_s": wall,
+        "ms_per_processed_scan": {k: 1e3 * v / max(processed, 1) for k, v in rbpf.timing.items()},
+    }
 
 
 def repeat_runs(runs: list[dict]) -> dict:
     """The run of median wall time among repeats of the same run, with every repeat's wall time beside it."""
     walls = sorted(r["wall_s"] for r in runs)
     median = next(r for r in runs if r["wall_s"] == walls[(len(walls) - 1) // 2])
-    return {**median, "wall_s_all": [r["wall_s"] for r in runs], "wall_s_min": walls[0], "wall_s_max": walls[-1],
-            "repeats": len(runs)}
+    return {
+        **median,
+        "wall_s_all": [r["wall_s"] for r in runs],
+        "wall_s_min": walls[0],
+        "wall_s_max": walls[-1],
+        "repeats": len(runs),
+    }
 
 
 def run_released(exp: str, particles: int, scans: int | None) -> float:
@@ -64,8 +76,10 @@ def run_released(exp: str, particles: int, scans: int | None) -> float:
     from eval.reference import gmapping as ref
 
     if not ref.BINARY.is_file():
-        raise FileNotFoundError(f"{ref.BINARY}: --released needs the released code: bash eval/reference/build_gmapping.sh "
-                                "<openslam_gmapping clone>")
+        raise FileNotFoundError(
+            f"{ref.BINARY}: --released needs the released code: bash eval/reference/build_gmapping.sh "
+            "<openslam_gmapping clone>"
+        )
     cfg = compose_config([f"+exp={exp}"])
     log = load_stream(cfg)
     if scans is not None:
@@ -111,8 +125,10 @@ def run_match_bench(a, device: str) -> dict:
             t0 = time.perf_counter()
             rbpf.match(caught[0], how=w)
             times[w].append(1e3 * (time.perf_counter() - t0))
-    print(f"\nGMapping hill climb of {a.particles[0]} particles at scan {k - 1} of {a.exp} ({device}: its motion-model samples, on "
-          f"the maps as the filter left them after that scan), {a.match_repeats} repeats per way, alternating")
+    print(
+        f"\nGMapping hill climb of {a.particles[0]} particles at scan {k - 1} of {a.exp} ({device}: its motion-model samples, on "
+        f"the maps as the filter left them after that scan), {a.match_repeats} repeats per way, alternating"
+    )
     print("| way (RBPF.match how=) | ms: median [min-max] | rounds | md5 of poses and scores |")
     print("|---|---|---|---|")
     for w in ways:
@@ -150,19 +166,25 @@ def run_slam_bench(a) -> list[dict]:
 
         name = torch.cuda.get_device_name()
     print(f"\nGMapping RBPF on {name} ({device}), {a.exp}, {rows[0]['scans']} scans")
-    print(f"| particles | processed scans | wall (s): median of {a.repeats} [min-max] | matching | motion | "
-          "weights + resampling | integration |  (ms per processed scan, of the median run)")
+    print(
+        f"| particles | processed scans | wall (s): median of {a.repeats} [min-max] | matching | motion | "
+        "weights + resampling | integration |  (ms per processed scan, of the median run)"
+    )
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         t = r["ms_per_processed_scan"]
-        print(f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} [{r['wall_s_min']:.1f}-{r['wall_s_max']:.1f}] | "
-              f"{t['matching']:.1f} | {t['motion']:.1f} | {t['weights_resampling']:.1f} | {t['integration']:.1f} |")
+        print(
+            f"| {r['particles']} | {r['processed_scans']} | {r['wall_s']:.1f} [{r['wall_s_min']:.1f}-{r['wall_s_max']:.1f}] | "
+            f"{t['matching']:.1f} | {t['motion']:.1f} | {t['weights_resampling']:.1f} | {t['integration']:.1f} |"
+        )
     for r in rows:
         if "released_wall_s" in r:
-            print(f"released C++ ({r['particles']} particles, one core), each repeat right after ours: "
-                  f"{r['released_wall_s']:.1f} s median [{min(r['released_wall_s_all']):.1f}-"
-                  f"{max(r['released_wall_s_all']):.1f}]; released / ours {r['released_over_ours']:.2f} median "
-                  f"[{min(r['released_over_ours_all']):.2f}-{max(r['released_over_ours_all']):.2f}]")
+            print(
+                f"released C++ ({r['particles']} particles, one core), each repeat right after ours: "
+                f"{r['released_wall_s']:.1f} s median [{min(r['released_wall_s_all']):.1f}-"
+                f"{max(r['released_wall_s_all']):.1f}]; released / ours {r['released_over_ours']:.2f} median "
+                f"[{min(r['released_over_ours_all']):.2f}-{max(r['released_over_ours_all']):.2f}]"
+            )
     out = record_path(a.out, "slam", device, a.exp)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json(out, {"device": device, "device_name": name, "argv": vars(a), "rows": rows})
@@ -178,9 +200,16 @@ def add_parser(sub) -> None:
     p.add_argument("--scans", type=int, default=None, help="only the first N scans")
     p.add_argument("--override", nargs="*", default=[], help="more Hydra overrides, e.g. sim.duration_s=60")
     p.add_argument("--repeats", type=int, default=5, help="runs per particle count; the table shows the median run")
-    p.add_argument("--released", action="store_true",
-                   help="time the released C++ on the same log after each repeat (eval/reference/build_gmapping.sh)")
-    p.add_argument("--match-at", type=int, default=None,
-                   help="time the hill climb alone, in each way, at the first processed scan after scan N")
+    p.add_argument(
+        "--released",
+        action="store_true",
+        help="time the released C++ on the same log after each repeat (eval/reference/build_gmapping.sh)",
+    )
+    p.add_argument(
+        "--match-at",
+        type=int,
+        default=None,
+        help="time the hill climb alone, in each way, at the first processed scan after scan N",
+    )
     p.add_argument("--match-repeats", type=int, default=15, help="with --match-at: timings per way")
     p.add_argument("--out", default="outputs/bench")

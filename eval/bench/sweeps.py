@@ -41,16 +41,30 @@ def table(groups: dict) -> tuple[str, list[dict]]:
     rows = []
     for (what, jobs, gpus, per), walls in sorted(groups.items()):
         base = groups.get((what, jobs, 1, per))
-        rows.append({"sweeps": what, "jobs": jobs, "gpus": gpus, "jobs_per_gpu": per, "processes": gpus * per,
-                     "repeats": len(walls), "wall_s_median": float(np.median(walls)), "wall_s_all": walls,
-                     "speedup_vs_1gpu_same_jobs_per_gpu": float(np.median(base) / np.median(walls)) if base else None})
-    lines = ["| sweeps | jobs | GPUs x jobs per GPU | repeats | wall (s), median [min-max] | against 1 GPU, same jobs per GPU |",
-             "|---|---|---|---|---|---|"]
+        rows.append(
+            {
+                "sweeps": what,
+                "jobs": jobs,
+                "gpus": gpus,
+                "jobs_per_gpu": per,
+                "processes": gpus * per,
+                "repeats": len(walls),
+                "wall_s_median": float(np.median(walls)),
+                "wall_s_all": walls,
+                "speedup_vs_1gpu_same_jobs_per_gpu": float(np.median(base) / np.median(walls)) if base else None,
+            }
+        )
+    lines = [
+        "| sweeps | jobs | GPUs x jobs per GPU | repeats | wall (s), median [min-max] | against 1 GPU, same jobs per GPU |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
         w = r["wall_s_all"]
         speed = r["speedup_vs_1gpu_same_jobs_per_gpu"]
-        lines.append(f"| {r['sweeps']} | {r['jobs']} | {r['gpus']} x {r['jobs_per_gpu']} | {r['repeats']} | "
-                     f"{np.median(w):.0f} [{min(w):.0f}-{max(w):.0f}] | {'-' if speed is None or r['gpus'] == 1 else f'{speed:.2f}x'} |")
+        lines.append(
+            f"| {r['sweeps']} | {r['jobs']} | {r['gpus']} x {r['jobs_per_gpu']} | {r['repeats']} | "
+            f"{np.median(w):.0f} [{min(w):.0f}-{max(w):.0f}] | {'-' if speed is None or r['gpus'] == 1 else f'{speed:.2f}x'} |"
+        )
     return "\n".join(lines), rows
 
 
@@ -61,8 +75,15 @@ def run_sweeps_bench(a) -> Path:
     print(text)
     kind = "h100" if any("H100" in n for n in names) else "h200" if any("H200" in n for n in names) else "gpu"
     path = Path(a.out) / f"sweeps-{kind}x{max(len(r.get('gpu_names', [])) for r in reports)}.json"
-    atomic_write_json(path, {"what": "eval.reproduce wall time by GPU layout", "gpu_names": names,
-                             "host_cores": sorted({r["host_cores"] for r in reports}), "rows": rows,
-                             "reports": [str(p) for p in a.reports]})
+    atomic_write_json(
+        path,
+        {
+            "what": "eval.reproduce wall time by GPU layout",
+            "gpu_names": names,
+            "host_cores": sorted({r["host_cores"] for r in reports}),
+            "rows": rows,
+            "reports": [str(p) for p in a.reports],
+        },
+    )
     print(f"-> {path}")
     return path

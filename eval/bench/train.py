@@ -27,8 +27,11 @@ from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
 from irmcl_warp.nof.trainer import opacity_regulariser
 from irmcl_warp.services.outputs import write_json
 
-MODELS = {"paper": ModelConfig(), "cpu": ModelConfig(width=128, depth=4, skip_after=2),
-          "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8)}
+MODELS = {
+    "paper": ModelConfig(),
+    "cpu": ModelConfig(width=128, depth=4, skip_after=2),
+    "quick": ModelConfig(width=64, depth=4, skip_after=2, num_freqs=8),
+}
 
 
 def _sync(device):
@@ -38,8 +41,14 @@ def _sync(device):
 
 def _timing(r: dict, batch: int) -> dict:
     """The median of the repeats (and their spread) in ms per step, and rays/s at the median."""
-    return {"step_ms": 1e3 * r["median"], "step_ms_min": 1e3 * r["min"], "step_ms_max": 1e3 * r["max"],
-            "step_ms_all": [1e3 * t for t in r["all"]], "repeats": len(r["all"]), "rays_per_s": batch / r["median"]}
+    return {
+        "step_ms": 1e3 * r["median"],
+        "step_ms_min": 1e3 * r["min"],
+        "step_ms_max": 1e3 * r["max"],
+        "step_ms_all": [1e3 * t for t in r["all"]],
+        "repeats": len(r["all"]),
+        "rays_per_s": batch / r["median"],
+    }
 
 
 def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False, repeats=5) -> dict:
@@ -63,8 +72,15 @@ def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=Fal
         opt.step()
 
     r = repeated(step, lambda: _sync(device), steps, repeats)
-    return {"what": "train step", "model": model_name, "renderer": renderer_name, "amp": "bf16" if amp else "off",
-            "batch_rays": batch, "samples": samples, **_timing(r, batch)}
+    return {
+        "what": "train step",
+        "model": model_name,
+        "renderer": renderer_name,
+        "amp": "bf16" if amp else "off",
+        "batch_rays": batch,
+        "samples": samples,
+        **_timing(r, batch),
+    }
 
 
 def bench_composite(renderer_name, batch, samples, steps, device, repeats=5) -> dict:
@@ -80,8 +96,15 @@ def bench_composite(renderer_name, batch, samples, steps, device, repeats=5) -> 
         (r * g).sum().backward()
 
     r = repeated(step, lambda: _sync(device), steps, repeats)
-    return {"what": "composite fwd+bwd", "model": "-", "renderer": renderer_name, "amp": "off", "batch_rays": batch,
-            "samples": samples, **_timing(r, batch)}
+    return {
+        "what": "composite fwd+bwd",
+        "model": "-",
+        "renderer": renderer_name,
+        "amp": "off",
+        "batch_rays": batch,
+        "samples": samples,
+        **_timing(r, batch),
+    }
 
 
 def bench_trainer_steps(a, device) -> list[dict]:
@@ -97,19 +120,32 @@ def bench_trainer_steps(a, device) -> list[dict]:
     rows, sets = [], None
     for variant in a.variants:
         sets_ = [f"train.{kv}" for kv in variant.split(",")]
-        cfg = compose_config([f"+exp={a.exp}", f"train={a.preset}", *sets_, f"train.batch_rays={a.batch[0]}",
-                              f"device={device}"])
+        cfg = compose_config(
+            [f"+exp={a.exp}", f"train={a.preset}", *sets_, f"train.batch_rays={a.batch[0]}", f"device={device}"]
+        )
         sets = sets or {"train": prepare_beams(cfg)["train"]}  # the rays do not depend on train= settings
         model, meta = load_nof(a.init, device)
         if ModelConfig(**meta["model_config"]) != ModelConfig(**cfg.model):
             raise ValueError(f"{a.init}: made with another network than model= of +exp={a.exp}")
         torch.manual_seed(0)
         with tempfile.TemporaryDirectory() as tmp:
-            tr = Trainer(model.train(), sets, cfg.train, cfg.render, cfg.render.near_m, far_bound_m(cfg), device,
-                         Path(tmp), "bench", lambda m: {}, {})
+            tr = Trainer(
+                model.train(),
+                sets,
+                cfg.train,
+                cfg.render,
+                cfg.render.near_m,
+                far_bound_m(cfg),
+                device,
+                Path(tmp),
+                "bench",
+                lambda m: {},
+                {},
+            )
             gen = torch.Generator().manual_seed(0)
-            batches = [torch.randint(len(tr.ranges), (cfg.train.batch_rays,), generator=gen).to(device)
-                       for _ in range(a.steps)]
+            batches = [
+                torch.randint(len(tr.ranges), (cfg.train.batch_rays,), generator=gen).to(device) for _ in range(a.steps)
+            ]
             it = iter(range(1 << 30))
 
             def step():
@@ -134,15 +170,27 @@ def bench_trainer_steps(a, device) -> list[dict]:
                 key = "cuda_time_total" if device.type == "cuda" else "cpu_time_total"
                 print(prof.key_averages().table(sort_by=key, row_limit=25))
         flop = model.flops_per_point() * (3 * kept + read) * cfg.train.batch_rays
-        rows.append({"what": f"Trainer.step {a.exp}", "model": a.preset, "renderer": f"{cfg.render.name}, {variant}",
-                     "amp": cfg.train.amp, "batch_rays": cfg.train.batch_rays, "samples": cfg.train.num_samples,
-                     "samples_with_grad": kept, "samples_read": read, "mlp_gflop_per_step": flop / 1e9,
-                     **_timing(r, cfg.train.batch_rays)})
+        rows.append(
+            {
+                "what": f"Trainer.step {a.exp}",
+                "model": a.preset,
+                "renderer": f"{cfg.render.name}, {variant}",
+                "amp": cfg.train.amp,
+                "batch_rays": cfg.train.batch_rays,
+                "samples": cfg.train.num_samples,
+                "samples_with_grad": kept,
+                "samples_read": read,
+                "mlp_gflop_per_step": flop / 1e9,
+                **_timing(r, cfg.train.batch_rays),
+            }
+        )
         rows[-1]["mlp_tflop_per_s"] = flop / (1e-3 * rows[-1]["step_ms"]) / 1e12
     for x in rows:
-        print(f"{x['renderer']}: {x['step_ms']:.2f} ms/step [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}], "
-              f"{x['samples_with_grad']:.1f} samples per beam with gradient, {x['samples_read']:.1f} read without, "
-              f"{x['mlp_gflop_per_step']:.0f} GFLOP per step, {x['mlp_tflop_per_s']:.1f} TFLOP/s")
+        print(
+            f"{x['renderer']}: {x['step_ms']:.2f} ms/step [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}], "
+            f"{x['samples_with_grad']:.1f} samples per beam with gradient, {x['samples_read']:.1f} read without, "
+            f"{x['mlp_gflop_per_step']:.0f} GFLOP per step, {x['mlp_tflop_per_s']:.1f} TFLOP/s"
+        )
     return rows
 
 
@@ -154,8 +202,9 @@ def run_train_bench(a) -> list[dict]:
         rows = bench_trainer_steps(a, device)
         name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
         out = record_path(a.out, "train", device.type, "steps", a.exp)
-        write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a),
-                         "rows": rows})
+        write_json(
+            out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows}
+        )
         print(f"-> {out}")
         return rows
     rows = []
@@ -168,15 +217,23 @@ def run_train_bench(a) -> list[dict]:
             for r in ("warp", "torch_ref"):
                 rows.append(bench_step(a.model, r, batch, a.samples, a.steps, device, amp=True, repeats=a.repeats))
     name = torch.cuda.get_device_name() if device.type == "cuda" else platform.processor() or "cpu"
-    print(f"\nNOF training speed on {name} ({device}), torch {torch.__version__}, tf32 {a.tf32 and device.type == 'cuda'}")
-    print(f"| what | model | renderer | amp | batch | samples | ms/step: median of {a.repeats} [min-max] | rays/s |\n"
-          "|---|---|---|---|---|---|---|---|")
+    print(
+        f"\nNOF training speed on {name} ({device}), torch {torch.__version__}, tf32 {a.tf32 and device.type == 'cuda'}"
+    )
+    print(
+        f"| what | model | renderer | amp | batch | samples | ms/step: median of {a.repeats} [min-max] | rays/s |\n"
+        "|---|---|---|---|---|---|---|---|"
+    )
     for x in rows:
-        print(f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
-              f"{x['step_ms']:.2f} [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}] | {x['rays_per_s']:,.0f} |")
+        print(
+            f"| {x['what']} | {x['model']} | {x['renderer']} | {x['amp']} | {x['batch_rays']} | {x['samples']} | "
+            f"{x['step_ms']:.2f} [{x['step_ms_min']:.2f}-{x['step_ms_max']:.2f}] | {x['rays_per_s']:,.0f} |"
+        )
     out = record_path(a.out, "train", device.type)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_json(out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows})
+    write_json(
+        out, {"device": str(device), "device_name": name, "torch": torch.__version__, "argv": vars(a), "rows": rows}
+    )
     print(f"-> {out}")
     return rows
 
@@ -196,5 +253,9 @@ def add_parser(sub) -> None:
     t.add_argument("--init", default=None, help="with --exp: the trained nof.pt the steps start from")
     t.add_argument("--preset", default="guided", help="with --exp: the train= preset the variants change")
     t.add_argument("--profile", action="store_true", help="with --exp: torch profile of the last variant's steps")
-    t.add_argument("--variants", nargs="+", default=["sampler=uniform", "sampler=occupancy"],
-                   help="with --exp: train settings per variant, comma-separated (e.g. sampler=occupancy,grid_end=none)")
+    t.add_argument(
+        "--variants",
+        nargs="+",
+        default=["sampler=uniform", "sampler=occupancy"],
+        help="with --exp: train settings per variant, comma-separated (e.g. sampler=occupancy,grid_end=none)",
+    )

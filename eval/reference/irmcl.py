@@ -58,13 +58,35 @@ from irmcl_warp.services.outputs import write_json
 REPO = Path(__file__).resolve().parents[2]
 BUILD = REPO / "outputs" / "reference" / "irmcl"
 # their pose-tracking configuration (config/pose_tracking/loc_config_test1.yml), values kept as they are
-THEIR_TRACKING = {"max_beams": 32, "L_pos": 10, "feature_size": 256, "use_skip": True, "N_samples": 256,
-                  "chunk": 266496, "use_disp": False, "sensor_model": "nog", "nog_res": 0.05, "pose_tracking": True,
-                  "init_noise": [0.5, 0.5, 0.0685], "grid_res": 1, "converge_thres": 2, "visualize": False,
-                  "plot_loc_results": False, "map_res": 0.05}
+THEIR_TRACKING = {
+    "max_beams": 32,
+    "L_pos": 10,
+    "feature_size": 256,
+    "use_skip": True,
+    "N_samples": 256,
+    "chunk": 266496,
+    "use_disp": False,
+    "sensor_model": "nog",
+    "nog_res": 0.05,
+    "pose_tracking": True,
+    "init_noise": [0.5, 0.5, 0.0685],
+    "grid_res": 1,
+    "converge_thres": 2,
+    "visualize": False,
+    "plot_loc_results": False,
+    "map_res": 0.05,
+}
 # their evo summary line after the header "location_rmse location_ptc5 ... yaw_ptc20"
-SUMMARY_KEYS = ("location_rmse_cm", "location_ptc5", "location_ptc10", "location_ptc20", "yaw_rmse_deg",
-                "yaw_ptc5", "yaw_ptc10", "yaw_ptc20")
+SUMMARY_KEYS = (
+    "location_rmse_cm",
+    "location_ptc5",
+    "location_ptc10",
+    "location_ptc20",
+    "yaw_rmse_deg",
+    "yaw_ptc5",
+    "yaw_ptc10",
+    "yaw_ptc20",
+)
 
 
 def se2_matrix(x: float, y: float, yaw: float) -> np.ndarray:
@@ -108,8 +130,14 @@ def our_checkpoint(their_ckpt: Path, near_m: float, far_m: float) -> dict:
             model[f"{'head' if part == 'layer1' else 'tail'}.{block}.{sub}.{rest[1]}"] = value
         elif part == "occ_out":
             model[f"out.{rest[1]}"] = value
-    return {"model": model, "model_config": {"num_freqs": 10, "width": 256, "depth": 8, "skip_after": 4},
-            "near_m": near_m, "far_m": far_m, "train_preset": "the authors' train.py", "source": str(their_ckpt)}
+    return {
+        "model": model,
+        "model_config": {"num_freqs": 10, "width": 256, "depth": 8, "skip_after": 4},
+        "near_m": near_m,
+        "far_m": far_m,
+        "train_preset": "the authors' train.py",
+        "source": str(their_ckpt),
+    }
 
 
 def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
@@ -122,13 +150,23 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
     angles = log.info.angles_rad
     ranges = np.where(np.isfinite(log.ranges_m[idx]), log.ranges_m[idx], far)
     ranges = np.minimum(ranges, far)  # their loader sets every reading >= max_range to 0 (ignored)
-    scans = [{"timestamp": float(log.stamps[i] - t0),
-              "pose_gt": [float(v) for v in (log.ground_truth[i] if k else log.ground_truth[idx][gt_known][0])],
-              "odom_reading": [float(v) for v in log.odom[i]],
-              "range_reading": [round(float(r), 3) for r in ranges[j]]}
-             for j, (i, k) in enumerate(zip(idx, gt_known))]
-    doc = {"num_beams": int(len(angles)), "angle_min": float(angles[0]), "angle_max": float(angles[-1]),
-           "angle_res": float(np.median(np.diff(angles))), "max_range": float(far), "scans": scans}
+    scans = [
+        {
+            "timestamp": float(log.stamps[i] - t0),
+            "pose_gt": [float(v) for v in (log.ground_truth[i] if k else log.ground_truth[idx][gt_known][0])],
+            "odom_reading": [float(v) for v in log.odom[i]],
+            "range_reading": [round(float(r), 3) for r in ranges[j]],
+        }
+        for j, (i, k) in enumerate(zip(idx, gt_known))
+    ]
+    doc = {
+        "num_beams": int(len(angles)),
+        "angle_min": float(angles[0]),
+        "angle_max": float(angles[-1]),
+        "angle_res": float(np.median(np.diff(angles))),
+        "max_range": float(far),
+        "scans": scans,
+    }
     atomic_write_bytes(folder / "seq.json", json.dumps(doc).encode())
     T = np.eye(4)  # their sensor model composes 4x4 particle poses with it
     T[np.ix_([0, 1, 3], [0, 1, 3])] = se2_matrix(*log.T_base_laser)
@@ -148,10 +186,21 @@ def export_split(test, far: float, path: Path) -> None:
     ranges = np.where(test.valid & np.isfinite(test.ranges_m), test.ranges_m, far)
     scans = []
     for pose, r in zip(test.T_map_laser, ranges):
-        scans.append({"transform_matrix": se2_matrix(*pose).tolist(), "odom": [0.0, 0.0, 0.0],
-                      "range_readings": [round(float(v), 4) for v in r]})
-    doc = {"num_beams": int(len(a)), "angle_min": float(a[0]), "angle_max": float(a[0] + res * (len(a) - 0.5)),
-           "angle_res": res, "max_range": float(far), "scans": scans}
+        scans.append(
+            {
+                "transform_matrix": se2_matrix(*pose).tolist(),
+                "odom": [0.0, 0.0, 0.0],
+                "range_readings": [round(float(v), 4) for v in r],
+            }
+        )
+    doc = {
+        "num_beams": int(len(a)),
+        "angle_min": float(a[0]),
+        "angle_max": float(a[0] + res * (len(a) - 0.5)),
+        "angle_res": res,
+        "max_range": float(far),
+        "scans": scans,
+    }
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, json.dumps(doc).encode())
 
@@ -183,8 +232,13 @@ def out_folder(cfg, repeat: int = 0) -> Path:
     """outputs/<exp>/reference_irmcl/<mode>-<N>[-run<repeat>]-<digest>/ (irmcl_warp.runs.tool_dir): their filter
     seeds itself from the machine (std::random_device), so a repeat is another draw of the same run."""
     label = f"{cfg.localize.mode}-{cfg.mcl.num_particles}" + (f"-run{repeat}" if repeat else "")
-    settings = {"localize": OmegaConf.to_container(cfg.localize), "particles": int(cfg.mcl.num_particles),
-                "reduce_to": int(cfg.mcl.reduce_to), "field": runs.identify(cfg, "train").id, "repeat": repeat}
+    settings = {
+        "localize": OmegaConf.to_container(cfg.localize),
+        "particles": int(cfg.mcl.num_particles),
+        "reduce_to": int(cfg.mcl.reduce_to),
+        "field": runs.identify(cfg, "train").id,
+        "repeat": repeat,
+    }
     return runs.tool_dir(cfg.exp, "reference_irmcl", label, settings).resolve()
 
 
@@ -221,20 +275,41 @@ def prepare(cfg, repeat: int = 0) -> Path:
         folder.mkdir(exist_ok=True)
         first = export_start(log, start_indices(t, starts, k, loc), far, folder)
         np.save(folder / "occmap.npy", np.zeros((2, 2), np.float32))  # read by their script for plots only
-        conf = {**THEIR_TRACKING, "map_file": rel(folder / "occmap.npy"), "map_pose_file": rel(folder / "seq.json"),
-                "data_file": rel(folder / "seq.json"), "T_b2l": rel(folder / "b2l.txt"), "map_size": nog_size,
-                "gt_file": rel(folder / "gt.tum"), "result_path": rel(folder / "loc_results.npz"),
-                "ckpt_path": rel(out / "nof.ckpt"), "nog_size": nog_size, "start_idx": first,
-                "numParticles": int(m.num_particles), "num_reduced": int(m.num_particles)}
+        conf = {
+            **THEIR_TRACKING,
+            "map_file": rel(folder / "occmap.npy"),
+            "map_pose_file": rel(folder / "seq.json"),
+            "data_file": rel(folder / "seq.json"),
+            "T_b2l": rel(folder / "b2l.txt"),
+            "map_size": nog_size,
+            "gt_file": rel(folder / "gt.tum"),
+            "result_path": rel(folder / "loc_results.npz"),
+            "ckpt_path": rel(out / "nof.ckpt"),
+            "nog_size": nog_size,
+            "start_idx": first,
+            "numParticles": int(m.num_particles),
+            "num_reduced": int(m.num_particles),
+        }
         if loc.mode == "global":  # their global file: uniform over the map's box (any heading), the heaviest
             # num_reduced kept 20 s in; the box here is the training path's, 1 m more on every side
             box = origins.min(0) - 1.0, origins.max(0) + 1.0
-            conf.update(pose_tracking=False, num_reduced=int(m.reduce_to) if m.reduce_to > 0 else int(m.num_particles),
-                        map_size=[float(box[0][0]), float(box[1][0]), float(box[0][1]), float(box[1][1])])
+            conf.update(
+                pose_tracking=False,
+                num_reduced=int(m.reduce_to) if m.reduce_to > 0 else int(m.num_particles),
+                map_size=[float(box[0][0]), float(box[1][0]), float(box[0][1]), float(box[1][1])],
+            )
         atomic_write_bytes(folder / "loc.yml", json.dumps(conf, indent=1).encode())  # JSON is YAML
     OmegaConf.save(cfg, out / "config.yaml")
-    settings = {**THEIR_TRACKING, "num_particles": int(m.num_particles), "nog_size": nog_size, "far_m": far,
-                "run_s": loc.run_s, "num_starts": loc.num_starts, "mode": loc.mode, "nof": str(nof_pt)}
+    settings = {
+        **THEIR_TRACKING,
+        "num_particles": int(m.num_particles),
+        "nog_size": nog_size,
+        "far_m": far,
+        "run_s": loc.run_s,
+        "num_starts": loc.num_starts,
+        "mode": loc.mode,
+        "nof": str(nof_pt),
+    }
     write_json(out / "prepared.json", settings)
     print(f"prepared {len(starts)} starts in {out}")
     return out
@@ -252,30 +327,59 @@ def score(cfg, repeat: int = 0) -> Path:
         conf = json.loads((folder / "loc.yml").read_text())
         est_file = folder / "IRMCL.txt"
         if not est_file.is_file():
-            raise RuntimeError(f"their main.py wrote no estimate for start {k} (exit {code}); see {out / f'start{k}.log'}")
+            raise RuntimeError(
+                f"their main.py wrote no estimate for start {k} (exit {code}); see {out / f'start{k}.log'}"
+            )
         tum = np.loadtxt(est_file, ndmin=2)
-        scans = start_indices(t, starts, k, cfg.localize)[conf["start_idx"]:]
-        if len(tum) != len(scans) or not np.allclose(tum[:, 0], log.stamps[scans] - log.stamps[scans[0] - conf["start_idx"]]):
-            raise RuntimeError(f"{est_file}: its {len(tum)} stamps are not those of the {len(scans)} scans it was given")
+        scans = start_indices(t, starts, k, cfg.localize)[conf["start_idx"] :]
+        if len(tum) != len(scans) or not np.allclose(
+            tum[:, 0], log.stamps[scans] - log.stamps[scans[0] - conf["start_idx"]]
+        ):
+            raise RuntimeError(
+                f"{est_file}: its {len(tum)} stamps are not those of the {len(scans)} scans it was given"
+            )
         yaw = 2 * np.arctan2(tum[:, 6], tum[:, 7])  # their quaternion (x, y, z, w) about z
         est = np.column_stack([tum[:, 1], tum[:, 2], yaw])
         write_tum(out / f"start{k}.tum", log.stamps[scans], est)
         metrics = localization_metrics(log.stamps[scans], est, log.ground_truth[scans])
-        runs.append({"start_s": float(t0), "wall_s": float(wall[0]) if wall else None, "exit_code": int(code), **parse_their_log(text), **metrics})
-        print(f"start {k} at {t0:.0f} s: their IR-MCL " + (f"RMSE {metrics['location_rmse_cm']:.1f} cm, "
-              f"{metrics['yaw_rmse_deg']:.2f} deg" if metrics["converged"] else "did not converge"))
+        runs.append(
+            {
+                "start_s": float(t0),
+                "wall_s": float(wall[0]) if wall else None,
+                "exit_code": int(code),
+                **parse_their_log(text),
+                **metrics,
+            }
+        )
+        print(
+            f"start {k} at {t0:.0f} s: their IR-MCL "
+            + (
+                f"RMSE {metrics['location_rmse_cm']:.1f} cm, {metrics['yaw_rmse_deg']:.2f} deg"
+                if metrics["converged"]
+                else "did not converge"
+            )
+        )
     ok = [r for r in runs if r["success"]]
     mean = lambda key: float(np.mean([r[key] for r in ok])) if ok else None  # noqa: E731
     settings = json.loads((out / "prepared.json").read_text())
-    summary = {"implementation": f"the authors' IR-MCL (PRBonn/ir-mcl {commit}, main.py) with our NOF ({settings['nof']})",
-               "weighting": "their nog", "mode": cfg.localize.mode, "num_particles": settings["num_particles"],
-               "starts": len(runs), "successes": len(ok), "success_rate": len(ok) / len(runs),
-               "location_rmse_cm_mean": mean("location_rmse_cm"), "yaw_rmse_deg_mean": mean("yaw_rmse_deg"),
-               "time_to_converge_s_mean": mean("time_to_converge_s"),
-               "their_ms_per_frame_median": float(np.median([r["their_ms_per_frame_median"] for r in runs]))}
+    summary = {
+        "implementation": f"the authors' IR-MCL (PRBonn/ir-mcl {commit}, main.py) with our NOF ({settings['nof']})",
+        "weighting": "their nog",
+        "mode": cfg.localize.mode,
+        "num_particles": settings["num_particles"],
+        "starts": len(runs),
+        "successes": len(ok),
+        "success_rate": len(ok) / len(runs),
+        "location_rmse_cm_mean": mean("location_rmse_cm"),
+        "yaw_rmse_deg_mean": mean("yaw_rmse_deg"),
+        "time_to_converge_s_mean": mean("time_to_converge_s"),
+        "their_ms_per_frame_median": float(np.median([r["their_ms_per_frame_median"] for r in runs])),
+    }
     write_json(out / "metrics.json", {"dataset": cfg.data.name, "summary": summary, "runs": runs, "settings": settings})
-    print(f"{cfg.data.name}, their IR-MCL ({cfg.localize.mode}, {settings['num_particles']} particles): success "
-          f"{len(ok)}/{len(runs)}, location {summary['location_rmse_cm_mean']} cm, yaw {summary['yaw_rmse_deg_mean']} deg -> {out}")
+    print(
+        f"{cfg.data.name}, their IR-MCL ({cfg.localize.mode}, {settings['num_particles']} particles): success "
+        f"{len(ok)}/{len(runs)}, location {summary['location_rmse_cm_mean']} cm, yaw {summary['yaw_rmse_deg_mean']} deg -> {out}"
+    )
     return out
 
 
@@ -313,7 +417,13 @@ def their_evaluation(cfg, ckpt: Path, out: Path) -> dict:
     # their dataset class, render_rays and error_metrics through our driver (their eval.py prints 2 decimals)
     driver = BUILD / "src" / "irmcl_eval_driver.py"
     atomic_write_bytes(driver, Path(__file__).with_name("irmcl_eval_driver.py").read_bytes())
-    args = [str(BUILD / "venv" / "bin" / "python"), driver.name, str(out / "data"), str(ckpt), str(out / "their_eval.json")]
+    args = [
+        str(BUILD / "venv" / "bin" / "python"),
+        driver.name,
+        str(out / "data"),
+        str(ckpt),
+        str(out / "their_eval.json"),
+    ]
     done = subprocess.run(args, cwd=BUILD / "src", capture_output=True, text=True)
     (out / "eval.log").write_text(done.stdout + done.stderr)
     if done.returncode != 0 or not (out / "their_eval.json").is_file():
@@ -331,20 +441,34 @@ def their_synthesis(cfg) -> Path:
     nof_pt = their_field(cfg, out)
     theirs = their_evaluation(cfg, out / "nof.ckpt", out)
     ours, ours_from = our_synthesis(cfg, nof_pt)
-    doc = {"dataset": cfg.data.name, "nof": str(nof_pt), "far_m": far_bound_m(cfg), "their_eval": theirs, "ours": ours,
-           "ours_from": ours_from}
+    doc = {
+        "dataset": cfg.data.name,
+        "nof": str(nof_pt),
+        "far_m": far_bound_m(cfg),
+        "their_eval": theirs,
+        "ours": ours,
+        "ours_from": ours_from,
+    }
     OmegaConf.save(cfg, out / "config.yaml")
     write_json(out / "metrics.json", doc)
-    print(f"{cfg.data.name}, {cfg.train.name}: their eval.py MAE {theirs['mae_m']:.3f} m, Chamfer {theirs['chamfer_m']:.3f} m, "
-          f"F {theirs['fscore_pct']:.1f} %" + (f"; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m, "
-                                               f"F {ours['fscore_pct']:.1f} %" if ours else "; ours not run") + f" -> {out}")
+    print(
+        f"{cfg.data.name}, {cfg.train.name}: their eval.py MAE {theirs['mae_m']:.3f} m, Chamfer {theirs['chamfer_m']:.3f} m, "
+        f"F {theirs['fscore_pct']:.1f} %"
+        + (
+            f"; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m, F {ours['fscore_pct']:.1f} %"
+            if ours
+            else "; ours not run"
+        )
+        + f" -> {out}"
+    )
     return out
 
 
 def nof_folder(cfg) -> Path:
     """Their training recipe on our split (eval/reference/train_irmcl.sh): one per experiment and split."""
-    return runs.tool_dir(cfg.exp, "reference_irmcl_nof", "their-recipe", {"split": cfg.data.split,
-                                                                           "val_scans": cfg.train.val_scans}).resolve()
+    return runs.tool_dir(
+        cfg.exp, "reference_irmcl_nof", "their-recipe", {"split": cfg.data.split, "val_scans": cfg.train.val_scans}
+    ).resolve()
 
 
 def nof_data(cfg) -> Path:
@@ -355,7 +479,9 @@ def nof_data(cfg) -> Path:
     val = val.subset(np.linspace(0, len(val) - 1, min(len(val), cfg.train.val_scans)).round().astype(int))
     for name, beams in (("train", sets["train"]), ("val", val), ("test", sets["test"])):
         export_split(beams, far, out / "data" / f"{name}.json")
-    print(f"{cfg.data.name}: their training data ({len(sets['train'])} / {len(val)} / {len(sets['test'])} scans) in {out / 'data'}")
+    print(
+        f"{cfg.data.name}: their training data ({len(sets['train'])} / {len(val)} / {len(sets['test'])} scans) in {out / 'data'}"
+    )
     return out
 
 
@@ -365,8 +491,12 @@ def their_val_curve(log_text: str) -> list[dict]:
     for line in log_text.replace("\r", "\n").splitlines():
         m = re.search(r"Epoch (\d+): 100%.*val/avg_error=([0-9.]+).*val/cd=([0-9.]+).*val/fscore=([0-9.na]+)", line)
         if m:
-            last[int(m.group(1))] = {"epoch": int(m.group(1)) + 1, "val_mae_m": float(m.group(2)), "val_chamfer_m": float(m.group(3)),
-                                     "val_fscore": float(m.group(4)) if m.group(4) != "nan" else None}
+            last[int(m.group(1))] = {
+                "epoch": int(m.group(1)) + 1,
+                "val_mae_m": float(m.group(2)),
+                "val_chamfer_m": float(m.group(3)),
+                "val_fscore": float(m.group(4)) if m.group(4) != "nan" else None,
+            }
     return [last[k] for k in sorted(last)]
 
 
@@ -379,7 +509,9 @@ def nof_score(cfg) -> Path:
     out = nof_folder(cfg)
     ckpts = sorted(out.glob("logs/nof/version_*/checkpoints/best.ckpt"))
     if not ckpts:
-        raise FileNotFoundError(f"{out}/logs: no best.ckpt (run bash eval/reference/train_irmcl.sh {out / 'data'} EPOCHS)")
+        raise FileNotFoundError(
+            f"{out}/logs: no best.ckpt (run bash eval/reference/train_irmcl.sh {out / 'data'} EPOCHS)"
+        )
     ckpt = ckpts[-1]
     theirs = their_evaluation(cfg, ckpt, out)
     test, far = prepare_beams(cfg)["test"], far_bound_m(cfg)
@@ -389,12 +521,20 @@ def nof_score(cfg) -> Path:
     ours = scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad)
     meta = torch.load(ckpt, map_location="cpu", weights_only=False)
     log = out / "train.log"  # what train_irmcl.sh printed (brought back with the checkpoints)
-    doc = {"dataset": cfg.data.name, "checkpoint": str(ckpt), "best_epoch": int(meta.get("epoch", -1)) + 1,
-           "their_val_per_epoch": their_val_curve(log.read_text()) if log.is_file() else None, "their_eval": theirs, "our_eval": {k: ours[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")}}
+    doc = {
+        "dataset": cfg.data.name,
+        "checkpoint": str(ckpt),
+        "best_epoch": int(meta.get("epoch", -1)) + 1,
+        "their_val_per_epoch": their_val_curve(log.read_text()) if log.is_file() else None,
+        "their_eval": theirs,
+        "our_eval": {k: ours[k] for k in ("mae_m", "accuracy_pct", "chamfer_m", "fscore_pct")},
+    }
     OmegaConf.save(cfg, out / "config.yaml")
     write_json(out / "metrics.json", doc)
-    print(f"{cfg.data.name}, their recipe (best epoch {doc['best_epoch']}): their evaluation MAE {theirs['mae_m']:.3f} m, "
-          f"Chamfer {theirs['chamfer_m']:.3f} m; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m -> {out}")
+    print(
+        f"{cfg.data.name}, their recipe (best epoch {doc['best_epoch']}): their evaluation MAE {theirs['mae_m']:.3f} m, "
+        f"Chamfer {theirs['chamfer_m']:.3f} m; ours MAE {ours['mae_m']:.3f} m, Chamfer {ours['chamfer_m']:.3f} m -> {out}"
+    )
     return out
 
 
@@ -412,7 +552,9 @@ def keep(cfg, also: list[Path], repeat: int = 0) -> Path:
     for run, stage in [(out_folder(cfg, repeat), "reference_irmcl"), *((p, "localize") for p in also)]:
         missing = [n for n in ("metrics.json", "config.yaml", *KEEP_ARTIFACTS) if not (run / n).is_file()]
         if missing:
-            raise FileNotFoundError(f"{run}: no {', '.join(missing)} (score the run, then python -m eval.analyses.yaw_lag {run})")
+            raise FileNotFoundError(
+                f"{run}: no {', '.join(missing)} (score the run, then python -m eval.analyses.yaw_lag {run})"
+            )
         entries.append((run, stage, KEEP_ARTIFACTS, repeat if stage == "reference_irmcl" else 0))
     for run in runs.tool_runs("reference_irmcl_synthesis", cfg.exp):
         entries.append((run, "reference_irmcl_synthesis", (), 0))
@@ -422,19 +564,32 @@ def keep(cfg, also: list[Path], repeat: int = 0) -> Path:
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("overrides", nargs="*", help="Hydra overrides: +exp=<name> train=<preset> localize.* mcl.num_particles=...")
-    ap.add_argument("--stage", choices=["prepare", "run", "score", "all", "keep", "synthesis", "nof-data", "nof-score"],
-                    default="all",
-                    help="prepare: write their inputs; run: their main.py here (eval/reference/run_irmcl.sh, which a GPU "
-                         "machine runs instead); score: read their estimates back; all: the three in turn; keep: copy the "
-                         "scored run and the --also runs as records of results/checks/irmcl_reference.json; synthesis: their evaluation "
-                         "(eval.py's metrics, Table I) on our test split with our field (CPU; needs open3d in their venv); nof-data: "
-                         "our split as their training data (for train_irmcl.sh); nof-score: their trained field on our "
-                         "test split, by their evaluation and ours")
-    ap.add_argument("--also", nargs="*", type=Path, default=[], help="with --stage keep: our localize runs to keep beside theirs")
-    ap.add_argument("--repeat", type=int, default=0,
-                    help="K > 0: another draw of their (self-seeding) filter, in the folder ...-run<K>")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "overrides", nargs="*", help="Hydra overrides: +exp=<name> train=<preset> localize.* mcl.num_particles=..."
+    )
+    ap.add_argument(
+        "--stage",
+        choices=["prepare", "run", "score", "all", "keep", "synthesis", "nof-data", "nof-score"],
+        default="all",
+        help="prepare: write their inputs; run: their main.py here (eval/reference/run_irmcl.sh, which a GPU "
+        "machine runs instead); score: read their estimates back; all: the three in turn; keep: copy the "
+        "scored run and the --also runs as records of results/checks/irmcl_reference.json; synthesis: their evaluation "
+        "(eval.py's metrics, Table I) on our test split with our field (CPU; needs open3d in their venv); nof-data: "
+        "our split as their training data (for train_irmcl.sh); nof-score: their trained field on our "
+        "test split, by their evaluation and ours",
+    )
+    ap.add_argument(
+        "--also", nargs="*", type=Path, default=[], help="with --stage keep: our localize runs to keep beside theirs"
+    )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=0,
+        help="K > 0: another draw of their (self-seeding) filter, in the folder ...-run<K>",
+    )
     args = ap.parse_args(argv)
     if not any(o.startswith("+exp=") for o in args.overrides):
         ap.error("give the experiment, e.g. +exp=fr079 train=fast localize.mode=tracking")
@@ -442,7 +597,9 @@ def main(argv=None) -> None:
     if args.stage in ("prepare", "all"):
         prepare(cfg, args.repeat)
     if args.stage in ("run", "all"):
-        subprocess.run(["bash", str(Path(__file__).with_name("run_irmcl.sh")), str(out_folder(cfg, args.repeat))], check=True)
+        subprocess.run(
+            ["bash", str(Path(__file__).with_name("run_irmcl.sh")), str(out_folder(cfg, args.repeat))], check=True
+        )
     if args.stage in ("score", "all"):
         score(cfg, args.repeat)
     if args.stage == "keep":

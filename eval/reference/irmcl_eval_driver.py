@@ -31,11 +31,29 @@ for k in range(len(dataset)):
     rays, ranges = decode_batch(data)
     rays, ranges, valid = rays.squeeze().to(device), ranges.squeeze().to(device), data["valid_mask_gt"].squeeze()
     with torch.no_grad():  # their fr079.sh evaluation settings
-        pred = render_rays(model=model, embedding_xy=embedding, rays=rays, N_samples=256, use_disp=False, perturb=0,
-                           noise_std=0, chunk=92160)["depth"].cpu()
+        pred = render_rays(
+            model=model,
+            embedding_xy=embedding,
+            rays=rays,
+            N_samples=256,
+            use_disp=False,
+            perturb=0,
+            noise_std=0,
+            chunk=92160,
+        )["depth"].cpu()
     rows.append([float(v) for v in error_metrics(pred, ranges.cpu(), rays.cpu(), valid)])
     if k % 50 == 0:
         print(f"scan {k} of {len(dataset)}", flush=True)
 mean = torch.tensor(rows).mean(0).tolist()
-json.dump({"checkpoint_sha256": hashlib.sha256(open(ckpt, "rb").read()).hexdigest(), "scans": len(rows), "mae_m": mean[0], "accuracy_pct": mean[1], "chamfer_m": mean[2], "fscore_pct": 100 * mean[3],
-           "per_scan": rows}, open(out, "w"))
+json.dump(
+    {
+        "checkpoint_sha256": hashlib.sha256(open(ckpt, "rb").read()).hexdigest(),
+        "scans": len(rows),
+        "mae_m": mean[0],
+        "accuracy_pct": mean[1],
+        "chamfer_m": mean[2],
+        "fscore_pct": 100 * mean[3],
+        "per_scan": rows,
+    },
+    open(out, "w"),
+)

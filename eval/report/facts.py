@@ -11,8 +11,13 @@ from eval.results.records import checks, find
 
 ROT2X = {"slam.srt": 0.4, "slam.stt": 0.4}  # slam=gmapping_rot2x
 LASER_FRAME = {"slam.frame": "laser"}
-GFS_INPUTS = {"slam.srt": 0.1, "slam.stt": 0.1, "slam.temporal_update": 5.0, "slam.beam_angles": "gfs",
-              "data.laser_offset": [0.0, 0.0, 0.0]}  # slam=gmapping_gfs data.laser_offset=[0,0,0]
+GFS_INPUTS = {
+    "slam.srt": 0.1,
+    "slam.stt": 0.1,
+    "slam.temporal_update": 5.0,
+    "slam.beam_angles": "gfs",
+    "data.laser_offset": [0.0, 0.0, 0.0],
+}  # slam=gmapping_gfs data.laser_offset=[0,0,0]
 
 
 def _minute_spans(nof: dict, exp: str) -> dict[str, str]:
@@ -27,19 +32,31 @@ def _minute_spans(nof: dict, exp: str) -> dict[str, str]:
     if not found:
         return {}
     mae, cham, secs = zip(*found)
-    return {"seeds": str(len(found)), "mae": median_span(mae, ".3f"), "chamfer": median_span(cham, ".3f"),
-            "time": median_span(secs, ".1f")}
+    return {
+        "seeds": str(len(found)),
+        "mae": median_span(mae, ".3f"),
+        "chamfer": median_span(cham, ".3f"),
+        "time": median_span(secs, ".1f"),
+    }
 
 
 def _yaw_of(log: str, weighting: str | None) -> float | None:
     """Heading RMSE of the authors' code (``weighting`` None) or of ours with their motion model on ``log``."""
     if weighting is None:
-        found = [r for r in find("reference_irmcl", log, among=checks("irmcl_reference"), localize__mode="tracking")
-                 if r.draw == 0]
+        found = [
+            r
+            for r in find("reference_irmcl", log, among=checks("irmcl_reference"), localize__mode="tracking")
+            if r.draw == 0
+        ]
     else:
         study = "fr079_yaw" if log == "fr079" else "irmcl_reference"
-        found = [r for r in find("localize", log, among=checks(study), mcl__weighting=weighting, mcl__motion="irmcl",
-                                 mcl__sigma_m=0.5) if r.artifacts]
+        found = [
+            r
+            for r in find(
+                "localize", log, among=checks(study), mcl__weighting=weighting, mcl__motion="irmcl", mcl__sigma_m=0.5
+            )
+            if r.artifacts
+        ]
     return found[0]["summary"]["yaw_rmse_deg_mean"] if found else None
 
 
@@ -57,15 +74,22 @@ def _localized(pipe: list, exp: str) -> str | None:
 
 def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list = ()) -> dict[str, str]:
     out = {}
-    for key, value in (("nof_paper_intel_mae", _nof_mae(nof, "intel", "paper")),
-                       ("grid5_intel_mae", _nof_mae(nof, "intel", "paper", "OGM 5 cm")),
-                       ("pipeline_sim_office_localized", _localized(pipe, "pipeline_sim_office")),
-                       ("pipeline_sim_office_30k_localized", _localized(pipe, "pipeline_sim_office_30k"))):
+    for key, value in (
+        ("nof_paper_intel_mae", _nof_mae(nof, "intel", "paper")),
+        ("grid5_intel_mae", _nof_mae(nof, "intel", "paper", "OGM 5 cm")),
+        ("pipeline_sim_office_localized", _localized(pipe, "pipeline_sim_office")),
+        ("pipeline_sim_office_30k_localized", _localized(pipe, "pipeline_sim_office_30k")),
+    ):
         if value is not None:
             out[key] = value
     counted = [v.verdict for _, v in verdicts]
-    for name, verdict in (("reproduced", "reproduced"), ("partly", "partly"), ("not_reproduced", "not reproduced"),
-                          ("not_testable", "not testable here"), ("not_run", "not run")):
+    for name, verdict in (
+        ("reproduced", "reproduced"),
+        ("partly", "partly"),
+        ("not_reproduced", "not reproduced"),
+        ("not_testable", "not testable here"),
+        ("not_run", "not run"),
+    ):
         if counted:
             out[f"claims_{name}"] = str(counted.count(verdict))
 
@@ -96,13 +120,27 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         count(f"killian_{short}_60p", slam_errors(slam, "mit_killian", proposal, particles=60))
         error(f"killian_{short}_60p_error", slam_errors(slam, "mit_killian", proposal, particles=60))
     count("killian_paper_30p", slam_errors(slam, "mit_killian", "paper", particles=30))
-    count("killian_released_60p", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
-    error("killian_released_60p_error", released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"))
+    count(
+        "killian_released_60p",
+        released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"),
+    )
+    error(
+        "killian_released_60p_error",
+        released_errors(released, "mit_killian", particles=60, variant="delta=0.1, particles=60"),
+    )
     processed = sorted({m["processed_scans"] for m in released.values() if m.get("dataset") == "intel"})
     if processed:
         out["intel_released_processed"] = "/".join(str(p) for p in processed)
-    ours = sorted({r["processed_scans"] for r in slam if r.get("dataset") == "intel" and r.get("proposal") == "gmapping_code"
-                   and r.get("particles") == 30 and not slam_variant(r)})
+    ours = sorted(
+        {
+            r["processed_scans"]
+            for r in slam
+            if r.get("dataset") == "intel"
+            and r.get("proposal") == "gmapping_code"
+            and r.get("particles") == 30
+            and not slam_variant(r)
+        }
+    )
     if ours:
         out["intel_code_processed"] = "/".join(str(p) for p in ours)
     count("fr079_released_gfs_noise", released_errors(released, "fr079", variant="srt=0.1, stt=0.1"))
@@ -110,7 +148,10 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     count("fr079_released_gfs", released_errors(released, "fr079", variant="gfs"))
     error("fr079_released_gfs_error", released_errors(released, "fr079", variant="gfs"))
     for p in ("gmapping_code", "paper"):
-        count(f"fr079_{'code' if p == 'gmapping_code' else p}_gfs_inputs", slam_errors(slam, "fr079", p, variant=GFS_INPUTS))
+        count(
+            f"fr079_{'code' if p == 'gmapping_code' else p}_gfs_inputs",
+            slam_errors(slam, "fr079", p, variant=GFS_INPUTS),
+        )
     for ds in ("fr079", "intel"):  # the authors' MCL with our field beside our likelihood field (pose tracking)
         for name, weighting in ((f"irmcl_theirs_yaw_{ds}", None), (f"irmcl_lf_yaw_{ds}", "likelihood_field")):
             value = _yaw_of(ds, weighting)

@@ -28,7 +28,9 @@ def particles_vs_success(runs: list, dataset: str, out: Path) -> Path | None:
     for m in runs:
         if m["dataset"] == dataset and isinstance(m.get("relations"), dict) and not slam_variant(m):
             where = "" if str(m.get("device", "")).startswith("cuda") else f" ({m.get('device', '?')})"
-            groups[f"{m['proposal']} + {m['resample']}{where}"][m["particles"]].append(m["relations"]["trans_abs_mean_m"])
+            groups[f"{m['proposal']} + {m['resample']}{where}"][m["particles"]].append(
+                m["relations"]["trans_abs_mean_m"]
+            )
     if not groups:
         return None
     fig, ax = plt.subplots(figsize=(7, 4.2))
@@ -36,10 +38,17 @@ def particles_vs_success(runs: list, dataset: str, out: Path) -> Path | None:
     for i, (name, by_n) in enumerate(sorted(groups.items())):
         ns = sorted(by_n)
         rate = [100 * sum(e < CONVERGED_M for e in by_n[n]) / len(by_n[n]) for n in ns]
-        line, = ax.plot(ns, rate, markers[i % len(markers)] + "-", label=name, alpha=0.85)
+        (line,) = ax.plot(ns, rate, markers[i % len(markers)] + "-", label=name, alpha=0.85)
         for n, r in zip(ns, rate):  # k/n under each point, staggered per series
-            ax.annotate(f"{sum(e < CONVERGED_M for e in by_n[n])}/{len(by_n[n])}", (n, r), textcoords="offset points",
-                        xytext=(0, -11 - 9 * i), ha="center", fontsize=7, color=line.get_color())
+            ax.annotate(
+                f"{sum(e < CONVERGED_M for e in by_n[n])}/{len(by_n[n])}",
+                (n, r),
+                textcoords="offset points",
+                xytext=(0, -11 - 9 * i),
+                ha="center",
+                fontsize=7,
+                color=line.get_color(),
+            )
     ax.set_xscale("log")
     ax.minorticks_off()
     ax.set_xticks(sorted({n for g in groups.values() for n in g}))
@@ -96,8 +105,12 @@ def best_maps(runs: list, out: Path) -> list[Path]:
 
     best = {}
     for m in runs:
-        if m.get("proposal") != "paper" or m.get("resample") != "selective" or slam_variant(m) \
-                or not isinstance(m.get("relations"), dict):
+        if (
+            m.get("proposal") != "paper"
+            or m.get("resample") != "selective"
+            or slam_variant(m)
+            or not isinstance(m.get("relations"), dict)
+        ):
             continue
         err = m["relations"]["trans_abs_mean_m"]
         key = (err < CONVERGED_M, m["particles"] == 30, m["particles"], -err)  # a converged run, 30 particles if any
@@ -120,13 +133,18 @@ def main(argv=None) -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     runs = load(("slam",))
-    made = [p for ds in ("intel", "fr079", "mit_csail", "mit_killian")
-            if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None]
+    made = [
+        p
+        for ds in ("intel", "fr079", "mit_csail", "mit_killian")
+        if (p := particles_vs_success(runs, ds, out / f"slam_particles_vs_success_{ds}.png")) is not None
+    ]
     made += best_maps(runs, out.parent / "maps")
     for m in sorted(load(("globloc",)), key=lambda r: (r.exp, r.label)):
         name = m.setting("globloc.scenario")
-        if m.get("kidnap_at_s", m.get("settings", {}).get("kidnap_at_s", 0)) > 0 \
-                and (p := kidnapped_run(m.exp, name, m, out / f"{m.exp}.png")) is not None:
+        if (
+            m.get("kidnap_at_s", m.get("settings", {}).get("kidnap_at_s", 0)) > 0
+            and (p := kidnapped_run(m.exp, name, m, out / f"{m.exp}.png")) is not None
+        ):
             made.append(p)
     for p in made:
         print(f"-> {p}")

@@ -30,15 +30,39 @@ def published(claim) -> str:
 def reproduction_markdown(rows: list) -> str:
     """``rows``: (Claim, Verdict) pairs in the registry's order."""
     counts = Counter(v.verdict for _, v in rows)
-    lines = [HEAD, "Summary: " + ", ".join(f"{counts[k]} {k}" for k in ("reproduced", "partly", "not reproduced",
-                                                                          "not testable here", "not run") if counts[k]) + ".", "",
-             "| system | claim | where | paper | ours | tolerance / test | verdict | reason | command |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        HEAD,
+        "Summary: "
+        + ", ".join(
+            f"{counts[k]} {k}"
+            for k in ("reproduced", "partly", "not reproduced", "not testable here", "not run")
+            if counts[k]
+        )
+        + ".",
+        "",
+        "| system | claim | where | paper | ours | tolerance / test | verdict | reason | command |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for c, v in rows:
         test = "; ".join(t for t in (c.tolerance, v.test) if t)
-        lines.append("| " + " | ".join(_cell(x) for x in (
-            c.system, c.statement, c.where, published(c), v.ours, test, f"**{v.verdict}**", v.reason,
-            f"`{c.command}`" if c.command != "-" else "-")) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                _cell(x)
+                for x in (
+                    c.system,
+                    c.statement,
+                    c.where,
+                    published(c),
+                    v.ours,
+                    test,
+                    f"**{v.verdict}**",
+                    v.reason,
+                    f"`{c.command}`" if c.command != "-" else "-",
+                )
+            )
+            + " |"
+        )
     lines += ["", "Papers:", ""] + [f"- `{k}`: {text}" for k, text in papers().items()]
     return "\n".join(lines) + "\n"
 

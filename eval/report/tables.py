@@ -7,7 +7,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from eval.results.queries import (CONVERGED_M, DATASET_ORDER, GLOBLOC_METHODS, converged, localize_cell, reference_variant, released_errors, slam_errors, slam_variant)  # noqa: F401
+from eval.results.queries import (
+    CONVERGED_M,
+    DATASET_ORDER,
+    GLOBLOC_METHODS,
+    converged,
+    localize_cell,
+    reference_variant,
+    released_errors,
+    slam_errors,
+    slam_variant,
+)  # noqa: F401
 from eval.results.records import describe, off_defaults
 from irmcl_warp.config import GlobLocConfig
 from irmcl_warp.services.metrics import FULL_COVERAGE
@@ -17,15 +27,25 @@ from irmcl_warp.services.metrics import FULL_COVERAGE
 # metric, mean translational error): Kümmerle et al. 2009 (Auton. Robots 27(4)) / the Cartographer paper (Hess
 # et al. ICRA 2016).
 SLAM_REFERENCES = {
-    "intel": [("published GMapping (Kümmerle et al. 2009)", "", "0.070", ""),
-              ("published Cartographer (Hess et al. 2016)", "", "0.0229", "")],
-    "fr079": [("published GMapping (Kümmerle et al. 2009)", "", "0.061", ""),
-              ("published Cartographer (Hess et al. 2016)", "", "0.0452", "")],
-    "mit_csail": [("published GMapping (Kümmerle et al. 2009)", "", "0.049", ""),
-                  ("published Cartographer (Hess et al. 2016)", "", "0.0319", "")],
+    "intel": [
+        ("published GMapping (Kümmerle et al. 2009)", "", "0.070", ""),
+        ("published Cartographer (Hess et al. 2016)", "", "0.0229", ""),
+    ],
+    "fr079": [
+        ("published GMapping (Kümmerle et al. 2009)", "", "0.061", ""),
+        ("published Cartographer (Hess et al. 2016)", "", "0.0452", ""),
+    ],
+    "mit_csail": [
+        ("published GMapping (Kümmerle et al. 2009)", "", "0.049", ""),
+        ("published Cartographer (Hess et al. 2016)", "", "0.0319", ""),
+    ],
 }
-METHODS = {"nog_raymarch": "IR-MCL (NOG)", "nof_direct": "IR-MCL (NOF, no grid)", "likelihood_field": "likelihood field",
-           "beam_model": "beam model"}
+METHODS = {
+    "nog_raymarch": "IR-MCL (NOG)",
+    "nof_direct": "IR-MCL (NOF, no grid)",
+    "likelihood_field": "likelihood field",
+    "beam_model": "beam model",
+}
 
 
 def _order(key):
@@ -46,16 +66,23 @@ def synthesis_table(runs: dict) -> str:
                 how = "-"
             else:
                 name = f"NOF ({preset})"  # the folder's name: preset, and the renderer when not Warp
-                how = (f"{train['train_time_s']:.0f} s, {train['epochs_done']} ep, {train.get('gpu') or train['device']}"
-                       if train else "?")
+                how = (
+                    f"{train['train_time_s']:.0f} s, {train['epochs_done']} ep, {train.get('gpu') or train['device']}"
+                    if train
+                    else "?"
+                )
             rows.append((syn["dataset"], syn["split"], name, m, how))
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
     rows.sort(key=lambda r: (ds_rank.get(r[0], 99), r[0], r[1], r[2].startswith("OGM"), r[2]))
-    lines = ["| dataset | test split | method | MAE (m) | median (m) | accuracy (%) | Chamfer (m) | F-score (%) | training |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| dataset | test split | method | MAE (m) | median (m) | accuracy (%) | Chamfer (m) | F-score (%) | training |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for ds, split, name, m, how in rows:
-        lines.append(f"| {ds} | {split} | {name} | {m['mae_m']:.3f} | {m['median_error_m']:.3f} | {m['accuracy_pct']:.1f} | "
-                     f"{m['chamfer_m']:.3f} | {m['fscore_pct']:.1f} | {how} |")
+        lines.append(
+            f"| {ds} | {split} | {name} | {m['mae_m']:.3f} | {m['median_error_m']:.3f} | {m['accuracy_pct']:.1f} | "
+            f"{m['chamfer_m']:.3f} | {m['fscore_pct']:.1f} | {how} |"
+        )
     return "\n".join(lines)
 
 
@@ -78,9 +105,11 @@ def localization_table(runs: list) -> str:
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
     w_rank = {w: i for i, w in enumerate(METHODS)}
     keys = sorted({k[:3] for k in cells}, key=lambda k: (ds_rank.get(k[0], 99), k[0], w_rank.get(k[1], 99), k[2]))
-    lines = ["| dataset | method | map | global: particles | success | converged after (s) | RMSE (cm / deg) | "
-             "within 10 cm / 1 deg (%) | tracking: particles | success | RMSE (cm / deg) | diverged |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| dataset | method | map | global: particles | success | converged after (s) | RMSE (cm / deg) | "
+        "within 10 cm / 1 deg (%) | tracking: particles | success | RMSE (cm / deg) | diverged |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for ds, w, res in keys:
         g, tr = cells.get((ds, w, res, "global")), cells.get((ds, w, res, "tracking"))
         row = [ds, METHODS.get(w, w), f"{res:g} cm"]
@@ -100,9 +129,14 @@ def localization_table(runs: list) -> str:
     return "\n".join(lines)
 
 
-ABLATION_NAMES = {"mcl.weighting": "likelihood", "mcl.map_resolution_m": "NOG / grid resolution (m)",
-                  "mcl.num_beams": "beams", "mcl.t_min": "early termination (transmittance floor)",
-                  "mcl.empty_below": "empty-space skipping (p_occ floor)", "mcl.resample": "resampling"}
+ABLATION_NAMES = {
+    "mcl.weighting": "likelihood",
+    "mcl.map_resolution_m": "NOG / grid resolution (m)",
+    "mcl.num_beams": "beams",
+    "mcl.t_min": "early termination (transmittance floor)",
+    "mcl.empty_below": "empty-space skipping (p_occ floor)",
+    "mcl.resample": "resampling",
+}
 
 
 def ablation_table(runs: list) -> str:
@@ -122,19 +156,33 @@ def ablation_table(runs: list) -> str:
         what, value = (ABLATION_NAMES[key], diff[key]) if key else ("(IR-MCL's settings)", "")
         if key == "mcl.num_beams" and value >= 360:
             value = "all"
-        rows.append(((DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99, bool(diff), what,
-                      str(value)), f"| {m['dataset']} | {what} | {METHODS.get(value, value)} | {s['successes']}/{s['starts']} | "
-                     f"{_f(s['time_to_converge_s_mean'])} | {_f(s['location_rmse_cm_mean'])} / "
-                     f"{_f(s['yaw_rmse_deg_mean'], '{:.2f}')} | {_f(float(np.median([r['ms_per_scan'] for r in m['runs']])), '{:.2f}')} | "
-                     f"{'H100' if str(s['device']).startswith('cuda') else s['device']} |"))
-    head = ["| dataset | ablation | setting | success | converged after (s) | RMSE (cm / deg) | ms per scan | device |",
-            "|---|---|---|---|---|---|---|---|"]
+        rows.append(
+            (
+                (
+                    DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99,
+                    bool(diff),
+                    what,
+                    str(value),
+                ),
+                f"| {m['dataset']} | {what} | {METHODS.get(value, value)} | {s['successes']}/{s['starts']} | "
+                f"{_f(s['time_to_converge_s_mean'])} | {_f(s['location_rmse_cm_mean'])} / "
+                f"{_f(s['yaw_rmse_deg_mean'], '{:.2f}')} | {_f(float(np.median([r['ms_per_scan'] for r in m['runs']])), '{:.2f}')} | "
+                f"{'H100' if str(s['device']).startswith('cuda') else s['device']} |",
+            )
+        )
+    head = [
+        "| dataset | ablation | setting | success | converged after (s) | RMSE (cm / deg) | ms per scan | device |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     return "\n".join(head + [r for _, r in sorted(rows)])
 
 
 def kidnap_table(runs: list) -> str:
-    lines = ["| dataset | method | map | particles | kidnapped at (s) | recovery rates (slow / fast) | recovered | "
-             "recovery time (s) | divergences |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| dataset | method | map | particles | kidnapped at (s) | recovery rates (slow / fast) | recovered | "
+        "recovery time (s) | divergences |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     rows = []
     for m in runs:
         t, s_ = localize_cell(m), m["summary"]
@@ -142,10 +190,14 @@ def kidnap_table(runs: list) -> str:
             continue
         st = m.get("settings", {})
         rates = f"{st.get('recovery_alpha_slow', '?')} / {st.get('recovery_alpha_fast', '?')}"
-        rows.append((DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99,
-                     f"| {m['dataset']} | {METHODS.get(t['weighting'], t['weighting'])} | {t['res']} cm | {s_['num_particles'] // 1000}k | "
-                     f"{s_['kidnap_at_s']:g} | {rates} | {s_['recovered']}/{s_['starts']} | "
-                     f"{_f(s_['recovery_time_s_mean'])} | {s_['divergences']} |"))
+        rows.append(
+            (
+                DATASET_ORDER.index(m["dataset"]) if m["dataset"] in DATASET_ORDER else 99,
+                f"| {m['dataset']} | {METHODS.get(t['weighting'], t['weighting'])} | {t['res']} cm | {s_['num_particles'] // 1000}k | "
+                f"{s_['kidnap_at_s']:g} | {rates} | {s_['recovered']}/{s_['starts']} | "
+                f"{_f(s_['recovery_time_s_mean'])} | {s_['divergences']} |",
+            )
+        )
     return "\n".join(lines + [r for _, r in sorted(rows)])
 
 
@@ -157,10 +209,14 @@ def slam_rows(ds: str, label: str, particles, rows: list, device: str) -> str:
     ok = t < CONVERGED_M
     wall = np.array([r["wall_time_s"] for r in rows])
     if not ok.any():
-        return (f"| {ds} | {label} | {particles} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
-                f"{wall.min():.0f}-{wall.max():.0f} s | {device} |")
-    return (f"| {ds} | {label} | {particles} | {ok.sum()}/{len(rows)} | {t[ok].mean():.3f} +- {t_std[ok].mean():.3f} | "
-            f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {device} |")
+        return (
+            f"| {ds} | {label} | {particles} | 0/{len(rows)} | - | - | {t.mean():.3f} | "
+            f"{wall.min():.0f}-{wall.max():.0f} s | {device} |"
+        )
+    return (
+        f"| {ds} | {label} | {particles} | {ok.sum()}/{len(rows)} | {t[ok].mean():.3f} +- {t_std[ok].mean():.3f} | "
+        f"{rot[ok].mean():.2f} | {t.mean():.3f} | {wall.min():.0f}-{wall.max():.0f} s | {device} |"
+    )
 
 
 def slam_table(runs: list, reference: dict | None = None) -> str:
@@ -174,18 +230,28 @@ def slam_table(runs: list, reference: dict | None = None) -> str:
         if not isinstance(m.get("relations"), dict):
             continue
         variant = describe(slam_variant(m))
-        key = (m["dataset"], variant != "", m["proposal"], m["resample"], m["particles"], variant,
-               m.get("device", "?"))
+        key = (m["dataset"], variant != "", m["proposal"], m["resample"], m["particles"], variant, m.get("device", "?"))
         groups.setdefault(key, []).append(m)
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
-    lines = ["| dataset | method | particles | converged seeds | error of converged runs (m, mean +- std over relations) | rot. (deg) | "
-             "mean of all runs (m) | wall time per run | device |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| dataset | method | particles | converged seeds | error of converged runs (m, mean +- std over relations) | rot. (deg) | "
+        "mean of all runs (m) | wall time per run | device |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for ds in sorted({k[0] for k in groups}, key=lambda d: (ds_rank.get(d, 99), d)):
         for key in sorted(k for k in groups if k[0] == ds):
             rows = groups[key]
             method = f"{key[2]} + {key[3]}" + (f" ({key[5]})" if key[5] else "")
-            counts = min(((r["relations"]["relations_used"], r["relations"]["relations_used"] + r["relations"][
-                "relations_unmatched"]) for r in rows), key=lambda c: c[0] / max(c[1], 1))
+            counts = min(
+                (
+                    (
+                        r["relations"]["relations_used"],
+                        r["relations"]["relations_used"] + r["relations"]["relations_unmatched"],
+                    )
+                    for r in rows
+                ),
+                key=lambda c: c[0] / max(c[1], 1),
+            )
             if counts[0] < FULL_COVERAGE * counts[1]:  # never print a score on a part of the relations as the log's
                 method += f" [scored on {counts[0]} of {counts[1]} relations]"
             dev = "H100" if str(key[6]).startswith("cuda") else key[6]
@@ -199,8 +265,11 @@ def slam_table(runs: list, reference: dict | None = None) -> str:
             hosts = sorted({r.get("host", "2-core CPU") for r in rows})  # runs before the field: the 2-core CPU
             lines.append(slam_rows(ds, label, particles, rows, ", ".join(hosts)))
         for name, conv, err, wall in SLAM_REFERENCES.get(ds, []):
-            lines.append(f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
-                         if conv else f"| {ds} | *{name}* | | | | | {err} | | |")
+            lines.append(
+                f"| {ds} | *{name}* | {30 if conv else ''} | {conv} | {err} | | | {wall} | 2-core CPU |"
+                if conv
+                else f"| {ds} | *{name}* | | | | | {err} | | |"
+            )
     return "\n".join(lines)
 
 
@@ -219,8 +288,11 @@ def released_table(runs: list, reference: dict) -> str:
         k, n, conv, mean = converged(errs)
         return f"{k}/{n}" + (f", {conv:.3f} m" if k else "") + f" (all runs {mean:.3f} m)"
 
-    lines = ["| log | released C++ (ROS wrapper's settings) | ours, released settings (`gmapping_code`) | "
-             "ours, `slam=gmapping_rot2x` |", "|---|---|---|---|"]
+    lines = [
+        "| log | released C++ (ROS wrapper's settings) | ours, released settings (`gmapping_code`) | "
+        "ours, `slam=gmapping_rot2x` |",
+        "|---|---|---|---|",
+    ]
     for ds in ("intel", "fr079", "mit_csail"):
         ours = [cell(slam_errors(runs, ds, "gmapping_code", variant=v)) for v in ({}, ROT2X)]
         lines.append(f"| {ds} | {cell(released_errors(reference, ds))} | {ours[0]} | {ours[1]} |")
@@ -231,16 +303,20 @@ def pipeline_table(runs: list) -> str:
     """One row per pipeline run (SLAM, NOF and global localization of the second log, time per stage), and
     for an experiment run over several second drives a row of their medians [min-max] (RMSE over the
     successful ones: converged and under IR-MCL's 0.3 m)."""
-    lines = ["| run | device | SLAM: processed scans, ATE (odometry) | NOF: validation MAE | localized scans | "
-             "converged after | RMSE (cm / deg) | time: slam / train / nog / localize (s) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| run | device | SLAM: processed scans, ATE (odometry) | NOF: validation MAE | localized scans | "
+        "converged after | RMSE (cm / deg) | time: slam / train / nog / localize (s) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     by_exp = {}
     for m in sorted(runs, key=lambda r: (r.exp, r.setting("pipeline.sim_path_seed", 0))):
         exp = m.exp
         by_exp.setdefault(exp, []).append(m)
         sl, nof, lo, t = m.get("slam", {}), m.get("nof", {}), m.get("localization"), m["timing"]
-        took = " / ".join("skipped" if t.get(k, {}).get("skipped") else _f(t.get(k, {}).get("s"), "{:.0f}")
-                          for k in ("slam", "train", "nog", "localize"))
+        took = " / ".join(
+            "skipped" if t.get(k, {}).get("skipped") else _f(t.get(k, {}).get("s"), "{:.0f}")
+            for k in ("slam", "train", "nog", "localize")
+        )
         conv = (f"{lo['time_to_converge_s']:.1f} s" if lo["converged"] else "no") if lo else "no ground truth"
         rmse = f"{_f(lo['location_rmse_cm'])} / {_f(lo['yaw_rmse_deg'], '{:.2f}')}" if lo else "-"
         if lo and not lo["success"]:
@@ -248,9 +324,11 @@ def pipeline_table(runs: list) -> str:
         second_drive = m.setting("data.format") == "sim" and m.setting("pipeline.path") is None
         seed = m.setting("pipeline.sim_path_seed") if second_drive else None  # one of several second drives
         name = exp + (f" (path seed {seed})" if seed is not None else "")
-        lines.append(f"| {name} | {_device(m['device'])} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
-                     f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
-                     f"{m['localized_scans']} | {conv} | {rmse} | {took} |")
+        lines.append(
+            f"| {name} | {_device(m['device'])} | {sl.get('processed_scans', '-')}, {_f(sl.get('ate_rmse_m'), '{:.3f}')} m "
+            f"({_f(sl.get('odometry_ate_rmse_m'), '{:.2f}')} m) | {_f(nof.get('val_mae_m'), '{:.3f}')} m | "
+            f"{m['localized_scans']} | {conv} | {rmse} | {took} |"
+        )
     for exp, ms in by_exp.items():
         scored = [m["localization"] for m in ms if m.get("localization")]
         if len(ms) < 2 or not scored:
@@ -262,11 +340,13 @@ def pipeline_table(runs: list) -> str:
             return f"{fmt.format(np.median(v))} [{fmt.format(min(v))}-{fmt.format(max(v))}]" if v else "-"
 
         total = [sum(t["s"] for t in m["timing"].values()) for m in ms]
-        lines.append(f"| **{exp}: median of {len(ms)} second drives** | {_device(ms[0]['device'])} | | | | "
-                     f"{len(ok)}/{len(scored)} succeeded; converged after "
-                     f"{spread([lo['time_to_converge_s'] for lo in ok], '{:.1f}')} s | "
-                     f"{spread([lo['location_rmse_cm'] for lo in ok], '{:.1f}')} cm | "
-                     f"time of the stages each run ran (finished ones are reused): {spread(total, '{:.0f}')} s |")
+        lines.append(
+            f"| **{exp}: median of {len(ms)} second drives** | {_device(ms[0]['device'])} | | | | "
+            f"{len(ok)}/{len(scored)} succeeded; converged after "
+            f"{spread([lo['time_to_converge_s'] for lo in ok], '{:.1f}')} s | "
+            f"{spread([lo['location_rmse_cm'] for lo in ok], '{:.1f}')} cm | "
+            f"time of the stages each run ran (finished ones are reused): {spread(total, '{:.0f}')} s |"
+        )
     return "\n".join(lines)
 
 
@@ -277,9 +357,11 @@ def _device(d) -> str:
 def globloc_table(runs: list) -> str:
     """One row per (experiment, scenario, method): success with its Wilson 95 % interval, time and distance
     until localized, kidnap recovery, false relocalizations per hour, accuracy after convergence."""
-    rows = ["| world | scenario | method | localized | 95 % CI | time / distance to localize | recovered after kidnap "
-            "(time) | kidnap detected | false relocalizations per hour | RMSE after convergence (cm) |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| world | scenario | method | localized | 95 % CI | time / distance to localize | recovered after kidnap "
+        "(time) | kidnap detected | false relocalizations per hour | RMSE after convergence (cm) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for m in sorted(runs, key=lambda r: (r.exp, r.setting("globloc.scenario"))):
         exp = m.exp
         world = ("repetitive corridor" if m.get("repetitive") else "office") + f" ({exp})"
@@ -290,13 +372,18 @@ def globloc_table(runs: list) -> str:
             label = GLOBLOC_METHODS.get(method, method)
             if method == "paper" and confirm != GlobLocConfig.trigger_confirm_frames:
                 label += f" ({confirm} confirming frame{'s' if confirm != 1 else ''})"
-            ttl = (f"{_f(sm['mean_time_to_localize_s'])} s / {_f(sm['mean_distance_to_localize_m'])} m"
-                   if sm["mean_time_to_localize_s"] is not None else "-")
-            rec = (f"{sm['recovered']}/{sm['runs']} ({_f(sm['mean_recovery_time_s'])} s)" if "recovered" in sm else "")
+            ttl = (
+                f"{_f(sm['mean_time_to_localize_s'])} s / {_f(sm['mean_distance_to_localize_m'])} m"
+                if sm["mean_time_to_localize_s"] is not None
+                else "-"
+            )
+            rec = f"{sm['recovered']}/{sm['runs']} ({_f(sm['mean_recovery_time_s'])} s)" if "recovered" in sm else ""
             det = f"{sm['detected']}/{sm['runs']}" if "detected" in sm and method == "paper" else ""
             rmse = _f(None if sm["mean_rmse_after_m"] is None else 100 * sm["mean_rmse_after_m"])
-            rows.append(f"| {world} | {m['scenario']} | {label} | {sm['localized']}/{sm['runs']} "
-                        f"| {lo:.2f}-{hi:.2f} | {ttl} | {rec} | {det} | {sm['false_relocalizations_per_hour']:.1f} | {rmse} |")
+            rows.append(
+                f"| {world} | {m['scenario']} | {label} | {sm['localized']}/{sm['runs']} "
+                f"| {lo:.2f}-{hi:.2f} | {ttl} | {rec} | {det} | {sm['false_relocalizations_per_hour']:.1f} | {rmse} |"
+            )
     return "\n".join(rows)
 
 
@@ -304,24 +391,33 @@ def worlds_table(runs: list) -> str:
     """Global localization on the held-out simulated floors (stage worlds): one row per kept run of the test split
     (observation model, particles, kidnapped or not), its counts over all runs and, per floor, how many runs
     ended right."""
-    rows = ["| floors | weighting | particles | device | kidnap | localized (protocol) | right at the end | ended "
-            "confident | confidently wrong | AUROC | false alarms per hour | kidnap detected <= 2 s | re-converged "
-            "<= 5 s | right at the end, per floor |", "|" + "---|" * 14]
+    rows = [
+        "| floors | weighting | particles | device | kidnap | localized (protocol) | right at the end | ended "
+        "confident | confidently wrong | AUROC | false alarms per hour | kidnap detected <= 2 s | re-converged "
+        "<= 5 s | right at the end, per floor |",
+        "|" + "---|" * 14,
+    ]
     test = [r for r in runs if r.setting("worlds.split") == "test"]
-    for r in sorted(test, key=lambda r: (r.setting("mcl.weighting"), r.setting("mcl.num_particles"),
-                                         r.setting("worlds.kidnap_at_s"))):
+    for r in sorted(
+        test,
+        key=lambda r: (r.setting("mcl.weighting"), r.setting("mcl.num_particles"), r.setting("worlds.kidnap_at_s")),
+    ):
         s, n = r["summary"], r["summary"]["runs"]
         kid, k = r.setting("worlds.kidnap_at_s"), s.get("kidnaps")
         per = " · ".join(f"{w} {v['right_at_end']}/{v['runs']}" for w, v in r["per_world"].items())
         fa = s["false_alarms"] / s["tracking_right_h"] if s["tracking_right_h"] > 0 else None
         detected = f"{s['detected_within_2s']}/{k}" if k else "-"
         back = f"{s['reconverged_within_5s']}/{k}" if k else "-"
-        how = (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else []) + \
-            ([f"searched every {r.setting('worlds.search_rivals_every')} updates"] if r.setting("worlds.search_rivals_every")
-             else [])
+        how = (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else []) + (
+            [f"searched every {r.setting('worlds.search_rivals_every')} updates"]
+            if r.setting("worlds.search_rivals_every")
+            else []
+        )
         label = s["weighting"].replace("_", " ") + (f" ({', '.join(how)})" if how else "")
-        rows.append(f"| test ({len(s['worlds'])}) | {label} | {s['num_particles'] // 1000}k "
-                    f"| {s['device']} | {f'{kid:g} s' if kid else '-'} | {s['successes']}/{n} | {s['right_at_end']}/{n} "
-                    f"| {s['localized_at_end']}/{n} | {s['confidently_wrong_at_end']} | {_f(s.get('auroc'), '{:.3f}')} "
-                    f"| {_f(fa)} | {detected} | {back} | {per} |")
+        rows.append(
+            f"| test ({len(s['worlds'])}) | {label} | {s['num_particles'] // 1000}k "
+            f"| {s['device']} | {f'{kid:g} s' if kid else '-'} | {s['successes']}/{n} | {s['right_at_end']}/{n} "
+            f"| {s['localized_at_end']}/{n} | {s['confidently_wrong_at_end']} | {_f(s.get('auroc'), '{:.3f}')} "
+            f"| {_f(fa)} | {detected} | {back} | {per} |"
+        )
     return "\n".join(rows)

@@ -21,8 +21,12 @@ from irmcl_warp import runs
 from irmcl_warp.runs import Record
 from irmcl_warp.services.metrics import SLAM_CONVERGED_M as CONVERGED_M
 
-GLOBLOC_METHODS = {"lidar_mcl": "lidar-only MCL", "camera_only": "camera only", "paper": "paper's pipeline",
-                   "mcl_seeded": "MCL seeded by the camera"}
+GLOBLOC_METHODS = {
+    "lidar_mcl": "lidar-only MCL",
+    "camera_only": "camera only",
+    "paper": "paper's pipeline",
+    "mcl_seeded": "MCL seeded by the camera",
+}
 DATASET_ORDER = ("fr079", "intel", "mit_csail", "sim_office")
 GEOMETRY = ("data.fov_rad", "data.angle_min_rad", "data.laser_offset")  # where the beams point: a SLAM variant
 
@@ -43,6 +47,7 @@ def converged(errs) -> tuple[int, int, float | None, float]:
 
 # --- scan synthesis ----------------------------------------------------------------------------------------
 
+
 def preset(rec: Record) -> str:
     """A NOF run's preset, plus the renderer when it is not Warp (``fast-torch_ref``), from its settings."""
     render = rec.setting("render.name", "warp")
@@ -59,7 +64,9 @@ def synthesis_pairs(recs: list[Record]) -> dict:
         if r.stage != "synthesis":
             continue
         up = (getattr(r, "upstream", None) or {}).get("train")
-        train = trained.get((r.exp, up)) if up else by_settings.get((r.exp, runs.settings_id(r.config, "train"), r.source))
+        train = (
+            trained.get((r.exp, up)) if up else by_settings.get((r.exp, runs.settings_id(r.config, "train"), r.source))
+        )
         out[(r.exp, preset(r))] = (r, train)
     return out
 
@@ -77,14 +84,27 @@ def slam_variant(rec: Record) -> dict:
     return out
 
 
-def slam_errors(recs, ds: str, proposal: str = "paper", resample: str = "selective", particles: int = 30,
-                variant: dict | None = None) -> list[float]:
+def slam_errors(
+    recs,
+    ds: str,
+    proposal: str = "paper",
+    resample: str = "selective",
+    particles: int = 30,
+    variant: dict | None = None,
+) -> list[float]:
     """Mean relations errors (m) of the SLAM records on ``ds`` with these settings and exactly the settings
     ``variant`` changed."""
-    return [r["relations"]["trans_abs_mean_m"] for r in recs
-            if r.stage == "slam" and r.get("dataset") == ds and r.setting("slam.proposal") == proposal
-            and r.setting("slam.resample") == resample and r.setting("slam.num_particles") == particles
-            and isinstance(r.get("relations"), dict) and slam_variant(r) == (variant or {})]
+    return [
+        r["relations"]["trans_abs_mean_m"]
+        for r in recs
+        if r.stage == "slam"
+        and r.get("dataset") == ds
+        and r.setting("slam.proposal") == proposal
+        and r.setting("slam.resample") == resample
+        and r.setting("slam.num_particles") == particles
+        and isinstance(r.get("relations"), dict)
+        and slam_variant(r) == (variant or {})
+    ]
 
 
 def load_slam(**where) -> list[Record]:
@@ -114,16 +134,25 @@ def reference_variant(m: dict) -> str:
     """The driver settings of a released-code run that differ from the ROS wrapper's defaults, then the
     overrides of the log's data config it ran with (``--data``); ``gfs`` for a run of the released code's
     own CARMEN-log tool (``--gfs``: its defaults, not the wrapper's)."""
-    return ", ".join([*(["gfs"] if m.get("tool") == "gfs_nogui" else []),
-                      *(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS),
-                      *m.get("data_overrides", [])])
+    return ", ".join(
+        [
+            *(["gfs"] if m.get("tool") == "gfs_nogui" else []),
+            *(f"{k}={v:g}" for k, v in sorted(m.get("settings", {}).items()) if k not in DERIVED_SETTINGS),
+            *m.get("data_overrides", []),
+        ]
+    )
 
 
 def released_errors(ref: dict, ds: str, particles: int = 30, variant: str = "") -> list[float]:
     """Mean relations errors (m) of the released GMapping's runs on ``ds`` (``variant``: reference_variant)."""
-    return [m["relations"]["trans_abs_mean_m"] for m in ref.values()
-            if m.get("dataset") == ds and m.get("particles") == particles and isinstance(m.get("relations"), dict)
-            and reference_variant(m) == variant]
+    return [
+        m["relations"]["trans_abs_mean_m"]
+        for m in ref.values()
+        if m.get("dataset") == ds
+        and m.get("particles") == particles
+        and isinstance(m.get("relations"), dict)
+        and reference_variant(m) == variant
+    ]
 
 
 # --- localization -----------------------------------------------------------------------------------------
@@ -142,14 +171,29 @@ def localize_cell(rec: Record) -> dict:
     "2.5"), and ``extra``: the settings beyond the cell that differ from the defaults ({} for a run of the
     paper's cells; kidnapping, recovery and ablations otherwise)."""
     extra = off_defaults(rec, ("mcl", "localize"), ignore=LOCALIZE_CELL)
-    return {"weighting": rec.setting("mcl.weighting"), "mode": rec.setting("localize.mode"),
-            "res": resolution_cm(rec.setting("mcl.map_resolution_m")), "extra": extra}
+    return {
+        "weighting": rec.setting("mcl.weighting"),
+        "mode": rec.setting("localize.mode"),
+        "res": resolution_cm(rec.setting("mcl.map_resolution_m")),
+        "extra": extra,
+    }
 
 
-def localize_records(recs, exp: str, weighting: str, mode: str, particles: int, res_m: float = 0.05,
-                     extra: dict | None = None) -> list[Record]:
+def localize_records(
+    recs, exp: str, weighting: str, mode: str, particles: int, res_m: float = 0.05, extra: dict | None = None
+) -> list[Record]:
     """The localization records of a cell of ``exp`` whose other settings are exactly ``extra`` off the
     defaults."""
-    return [r for r in runs.find("localize", exp, among=recs, mcl__weighting=weighting, localize__mode=mode,
-                                 mcl__num_particles=particles, mcl__map_resolution_m=res_m)
-            if localize_cell(r)["extra"] == (extra or {})]
+    return [
+        r
+        for r in runs.find(
+            "localize",
+            exp,
+            among=recs,
+            mcl__weighting=weighting,
+            localize__mode=mode,
+            mcl__num_particles=particles,
+            mcl__map_resolution_m=res_m,
+        )
+        if localize_cell(r)["extra"] == (extra or {})
+    ]

@@ -30,8 +30,15 @@ from irmcl_warp.runs import Record, find, matches  # noqa: F401  (the query inte
 
 REPO = Path(__file__).resolve().parents[2]
 RESULTS, OUTPUTS = REPO / "results", REPO / "outputs"
-GROUPS = {"train": "nof", "synthesis": "nof", "localize": "mcl", "slam": "slam", "globloc": "globloc",
-          "pipeline": "pipeline", "worlds": "worlds"}  # a stage's records are kept in results/<group>/<exp>.json
+GROUPS = {
+    "train": "nof",
+    "synthesis": "nof",
+    "localize": "mcl",
+    "slam": "slam",
+    "globloc": "globloc",
+    "pipeline": "pipeline",
+    "worlds": "worlds",
+}  # a stage's records are kept in results/<group>/<exp>.json
 MAX_FILE_BYTES = 800_000  # one results file at most (the repository keeps no file over 1 MB)
 # settings that decide how fast a run goes, never what it gives (the same bits: tests/test_weighting.py
 # for the batched march, tests/test_mcl.py for the step's graph and the march order): tables ignore them
@@ -67,8 +74,9 @@ def _composed(exp: str, stage: str) -> str:
     from irmcl_warp.config import CONF_DIR, compose_config
 
     overrides = [f"+exp={exp}"] if (CONF_DIR / "exp" / f"{exp}.yaml").is_file() else []
-    return json.dumps(OmegaConf.to_container(compose_config(overrides, "pipeline" if stage == "pipeline" else "config"),
-                                             resolve=True))
+    return json.dumps(
+        OmegaConf.to_container(compose_config(overrides, "pipeline" if stage == "pipeline" else "config"), resolve=True)
+    )
 
 
 def exp_defaults(exp: str, stage: str) -> dict:
@@ -93,12 +101,15 @@ def off_defaults(rec: Record, sections, ignore=()) -> dict:
 
 def describe(settings: dict) -> str:
     """``slam.srt=0.4, slam.stt=0.4`` -> ``srt=0.4, stt=0.4``: settings as a table labels them."""
+
     def value(v):
         return f"{v:g}" if isinstance(v, float) else str(v)
+
     return ", ".join(f"{k.split('.', 1)[1]}={value(v)}" for k, v in sorted(settings.items()))
 
 
 # --- kept records ----------------------------------------------------------------------------------------
+
 
 def kept_files(group_dir: Path, exp: str) -> list[Path]:
     """The files holding ``exp``'s kept records in results/<group>/: <exp>.json, then <exp>.2.json, ... in order."""
@@ -117,8 +128,9 @@ def load_doc(group_dir: Path, exp: str) -> dict | None:
         for f in files[1:]:
             doc["records"].update(json.loads(f.read_text())["records"])
     except (OSError, ValueError, KeyError) as e:
-        raise ValueError(f"{files[0]}: unreadable results file ({e}); keep its runs again with "
-                         f"python -m eval.keep") from e
+        raise ValueError(
+            f"{files[0]}: unreadable results file ({e}); keep its runs again with python -m eval.keep"
+        ) from e
     return doc
 
 
@@ -139,9 +151,10 @@ def write_doc(path: Path, doc: dict, max_bytes: int = MAX_FILE_BYTES) -> None:
     shards.append(lines)
     exp = path.name.removesuffix(".json")
     for i, part in enumerate(shards):
-        atomic_write_bytes(path if i == 0 else path.with_name(f"{exp}.{i + 1}.json"),
-                           (head + ",\n".join(part) + tail).encode())
-    for stale in kept_files(path.parent, exp)[len(shards):]:
+        atomic_write_bytes(
+            path if i == 0 else path.with_name(f"{exp}.{i + 1}.json"), (head + ",\n".join(part) + tail).encode()
+        )
+    for stale in kept_files(path.parent, exp)[len(shards) :]:
         stale.unlink()
 
 
@@ -167,9 +180,21 @@ def kept(stages=None, results: Path = RESULTS) -> list[Record]:
             for entry in doc["records"].values():
                 if stages and entry["stage"] not in stages:
                     continue
-                rec = Record(entry["metrics"], entry["stage"], doc["exp"], entry["id"], complete(entry["config"]),
-                             None, "results", entry["label"])
-                rec.manifest, rec.kept_from, rec.upstream = entry.get("manifest"), entry.get("kept_from"), entry.get("upstream")
+                rec = Record(
+                    entry["metrics"],
+                    entry["stage"],
+                    doc["exp"],
+                    entry["id"],
+                    complete(entry["config"]),
+                    None,
+                    "results",
+                    entry["label"],
+                )
+                rec.manifest, rec.kept_from, rec.upstream = (
+                    entry.get("manifest"),
+                    entry.get("kept_from"),
+                    entry.get("upstream"),
+                )
                 out.append(rec)
     return out
 
@@ -218,8 +243,16 @@ def checks(study: str, results: Path = RESULTS) -> list[Record]:
     doc = json.loads(path.read_text())
     out = []
     for entry in doc["records"].values():
-        rec = Record(entry["metrics"], entry["stage"], entry["exp"], entry["id"], complete(entry["config"]), None,
-                     "results", entry.get("label", ""))
+        rec = Record(
+            entry["metrics"],
+            entry["stage"],
+            entry["exp"],
+            entry["id"],
+            complete(entry["config"]),
+            None,
+            "results",
+            entry.get("label", ""),
+        )
         rec.study, rec.artifacts, rec.kept_from = study, entry.get("artifacts", {}), entry.get("kept_from")
         rec.draw = entry.get("draw", 0)
         out.append(rec)
@@ -238,13 +271,19 @@ def keep_check(study: str, exp: str, entries, results: Path = RESULTS) -> Path:
         config = OmegaConf.to_container(OmegaConf.load(folder / "config.yaml"), resolve=True)
         config["exp"] = exp
         metrics = json.loads((folder / "metrics.json").read_text())
-        entry = {"stage": stage, "exp": exp, "config": config, "metrics": metrics, "kept_from": folder.name,
-                 "artifacts": {name: json.loads((folder / name).read_text()) for name in artifacts}}
+        entry = {
+            "stage": stage,
+            "exp": exp,
+            "config": config,
+            "metrics": metrics,
+            "kept_from": folder.name,
+            "artifacts": {name: json.loads((folder / name).read_text()) for name in artifacts},
+        }
         if draw:
             entry["draw"] = draw
         entry["id"] = runs.digest({k: entry[k] for k in ("stage", "config", "kept_from")} | {"draw": draw})
         entry["label"] = folder.name
-        doc["records"][f"{stage}/{folder.name}-{entry['id'][:runs.ID_CHARS]}"] = entry  # a tool's own folder name
+        doc["records"][f"{stage}/{folder.name}-{entry['id'][: runs.ID_CHARS]}"] = entry  # a tool's own folder name
         print(f"kept {folder} -> {path} ({stage})")
     atomic_write_bytes(path, (json.dumps(doc, sort_keys=True, indent=0) + "\n").encode())
     return path
@@ -273,8 +312,11 @@ def keep(folders, results: Path = RESULTS, maps: bool = False) -> list[Path]:
         why = _unkeepable(folder)
         if why:
             raise ValueError(f"{folder}: not a finished run ({why})")
-        (rec,) = [r for r in yours([json.loads((folder / "manifest.json").read_text())["stage"]], folder.parents[2])
-                  if r.path.resolve() == folder.resolve()]
+        (rec,) = [
+            r
+            for r in yours([json.loads((folder / "manifest.json").read_text())["stage"]], folder.parents[2])
+            if r.path.resolve() == folder.resolve()
+        ]
         rec.kept_from = f"{folder.parent.name}/{folder.name}"
         group = GROUPS.get(rec.stage)
         if group is None:

@@ -51,13 +51,17 @@ def slots(gpus: Optional[int], jobs_per_gpu: int, cpu_workers: Optional[int]) ->
     """One entry per job that may run at once: the environment it adds (its GPU, its CPU threads)."""
     seen = visible_gpus() if gpus != 0 else []
     if gpus is not None and gpus > len(seen):
-        raise ValueError(f"hydra.launcher.gpus={gpus}, but this machine shows {len(seen)} GPU(s) "
-                         f"(CUDA_VISIBLE_DEVICES / nvidia-smi)")
+        raise ValueError(
+            f"hydra.launcher.gpus={gpus}, but this machine shows {len(seen)} GPU(s) (CUDA_VISIBLE_DEVICES / nvidia-smi)"
+        )
     if seen:
         use = seen[:gpus] if gpus else seen
         cores = max(1, (os.cpu_count() or 1) // (len(use) * max(1, jobs_per_gpu)))
-        return [{"CUDA_VISIBLE_DEVICES": g, "OMP_NUM_THREADS": str(cores), "name": f"gpu{g}"}
-                for g in use for _ in range(max(1, jobs_per_gpu))]
+        return [
+            {"CUDA_VISIBLE_DEVICES": g, "OMP_NUM_THREADS": str(cores), "name": f"gpu{g}"}
+            for g in use
+            for _ in range(max(1, jobs_per_gpu))
+        ]
     n = cpu_workers or max(1, (os.cpu_count() or 1) // 2)
     cores = max(1, (os.cpu_count() or 1) // n)
     return [{"CUDA_VISIBLE_DEVICES": "", "OMP_NUM_THREADS": str(cores), "name": f"cpu{i}"} for i in range(n)]
@@ -125,9 +129,11 @@ class PoolLauncher(Launcher):
         retries, timeout = int(s.get("retries", 1)), s.get("timeout_min")
         jobs = [self._job(initial_job_idx + i, ov) for i, ov in enumerate(job_overrides)]
         command, env = job_command(self.task_function)
-        print(f"[pool] {len(jobs)} job(s) on {len(places)} worker(s) "
-              f"({', '.join(sorted({p['name'] for p in places}))}); logs under {jobs[0].folder.parent if jobs else '-'}",
-              flush=True)
+        print(
+            f"[pool] {len(jobs)} job(s) on {len(places)} worker(s) "
+            f"({', '.join(sorted({p['name'] for p in places}))}); logs under {jobs[0].folder.parent if jobs else '-'}",
+            flush=True,
+        )
         waiting, running, done, failed = list(jobs), {}, [], []
         free = list(range(len(places)))
         last = ""
@@ -154,14 +160,19 @@ class PoolLauncher(Launcher):
                     if rc == 0:
                         done.append(job)
                     elif job.attempts <= retries:
-                        print(f"[pool] job {job.num} failed (exit {rc}); starting it again "
-                              f"({job.attempts + 1} of {retries + 1})", flush=True)
+                        print(
+                            f"[pool] job {job.num} failed (exit {rc}); starting it again "
+                            f"({job.attempts + 1} of {retries + 1})",
+                            flush=True,
+                        )
                         waiting.insert(0, job)
                     else:
                         failed.append(job)
                         self._report(job, int(s.get("tail_lines", 25)))
-                line = (f"[pool] {len(done)}/{len(jobs)} done, {len(running)} running, {len(failed)} failed, "
-                        f"{len(waiting)} waiting")
+                line = (
+                    f"[pool] {len(done)}/{len(jobs)} done, {len(running)} running, {len(failed)} failed, "
+                    f"{len(waiting)} waiting"
+                )
                 if line != last:
                     print(line, flush=True)
                     last = line
@@ -190,13 +201,22 @@ class PoolLauncher(Launcher):
     @staticmethod
     def _report(job: Job, tail: int) -> None:
         lines = job.log.read_text(errors="replace").splitlines()[-tail:]
-        print(f"[pool] job {job.num} failed after {job.attempts} attempt(s) (exit {job.returncode})"
-              f"{': ' + job.why if job.why else ''}\n  overrides: {' '.join(job.overrides)}\n  log: {job.log}\n"
-              + "\n".join("    | " + x for x in lines), file=sys.stderr, flush=True)
+        print(
+            f"[pool] job {job.num} failed after {job.attempts} attempt(s) (exit {job.returncode})"
+            f"{': ' + job.why if job.why else ''}\n  overrides: {' '.join(job.overrides)}\n  log: {job.log}\n"
+            + "\n".join("    | " + x for x in lines),
+            file=sys.stderr,
+            flush=True,
+        )
 
     @staticmethod
     def _result(job: Job) -> JobReturn:
-        ret = JobReturn(overrides=job.overrides, cfg=job.cfg, working_dir=str(job.folder),
-                        task_name=str(job.cfg.hydra.job.name), status=JobStatus.COMPLETED)
+        ret = JobReturn(
+            overrides=job.overrides,
+            cfg=job.cfg,
+            working_dir=str(job.folder),
+            task_name=str(job.cfg.hydra.job.name),
+            status=JobStatus.COMPLETED,
+        )
         ret.return_value = 0
         return ret

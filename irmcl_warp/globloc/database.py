@@ -35,8 +35,10 @@ class KeyframeDB:
         if n == 0:
             raise ValueError("keyframe database: empty (record a mapping run first)")
         if not (len(self.rgb) == len(self.depth) == len(self.gists) == n):
-            raise ValueError(f"keyframe database: {n} poses, {len(self.rgb)} images, {len(self.depth)} depth maps, "
-                             f"{len(self.gists)} descriptors")
+            raise ValueError(
+                f"keyframe database: {n} poses, {len(self.rgb)} images, {len(self.depth)} depth maps, "
+                f"{len(self.gists)} descriptors"
+            )
         if self.depth.ndim != 3 or self.depth.shape[:3] != self.rgb.shape[:3]:
             raise ValueError(f"keyframe database: depth {self.depth.shape} does not match the images {self.rgb.shape}")
         empty = [i for i in range(n) if not np.any(np.isfinite(self.depth[i]) & (self.depth[i] > 0))]
@@ -50,7 +52,9 @@ class KeyframeDB:
         """Indices of the ``n`` keyframes nearest to a query descriptor (L2), nearest first."""
         g = np.asarray(gist, np.float32).reshape(-1)
         if g.shape[0] != self.gists.shape[1]:
-            raise ValueError(f"retrieval: a descriptor of {g.shape[0]} values, the database holds {self.gists.shape[1]}")
+            raise ValueError(
+                f"retrieval: a descriptor of {g.shape[0]} values, the database holds {self.gists.shape[1]}"
+            )
         d = np.sum((self.gists - g) ** 2, 1)
         n = min(n, len(d))
         top = np.argpartition(d, n - 1)[:n]
@@ -70,7 +74,7 @@ def describe(rgb: np.ndarray, gist: Gist, batch: int = 64) -> np.ndarray:
         raise ValueError(f"gist: expected RGB images [N, H, W, 3], got {rgb.shape}")
     out = []
     for i in range(0, len(rgb), batch):
-        x = rgb[i:i + batch].astype(np.float32)
+        x = rgb[i : i + batch].astype(np.float32)
         if x.shape[1:3] != gist.size:
             x = resize(x, gist.size)
         out.append(gist(x))
@@ -96,8 +100,9 @@ def kmeans(x: np.ndarray, k: int, iters: int = 20) -> np.ndarray:
     return labels
 
 
-def cluster_candidates(db: KeyframeDB, idx: np.ndarray, k: int = 3, space: str = "pose",
-                       heading_m: float = 1.0) -> list[np.ndarray]:
+def cluster_candidates(
+    db: KeyframeDB, idx: np.ndarray, k: int = 3, space: str = "pose", heading_m: float = 1.0
+) -> list[np.ndarray]:
     """Groups of candidate keyframes (each nearest-first): k-means in pose space (x, y and the heading as a
     point on a circle of ``heading_m``), or (the paper's) on the keyframe indices, i.e. along the mapping run."""
     idx = np.asarray(idx)

@@ -26,13 +26,29 @@ def make_filter(cfg, grid, origin, device):
     """The MCL of the lidar methods: the likelihood field on the world's grid, AMCL's recovery (the filter
     every MCL user builds, services.filters.build_filter)."""
     g, res = cfg.globloc, cfg.globloc.map_resolution_m
-    m = OmegaConf.merge(cfg.mcl, {"num_particles": g.num_particles, "num_beams": g.beams,
-                                  "weighting": "likelihood_field", "estimate": "top_share", "reduce_to": 0,
-                                  "recovery_alpha_slow": g.recovery_alpha_slow,
-                                  "recovery_alpha_fast": g.recovery_alpha_fast, "seed": g.seed})
+    m = OmegaConf.merge(
+        cfg.mcl,
+        {
+            "num_particles": g.num_particles,
+            "num_beams": g.beams,
+            "weighting": "likelihood_field",
+            "estimate": "top_share",
+            "reduce_to": 0,
+            "recovery_alpha_slow": g.recovery_alpha_slow,
+            "recovery_alpha_fast": g.recovery_alpha_fast,
+            "seed": g.seed,
+        },
+    )
     maps = WeightingMaps(occupancy=grid, origin_xy=origin, resolution_m=res)
-    return build_filter(m, free_space_view(grid, origin, res), (cfg.sim.laser_x_m, 0.0, 0.0), laser_angles(cfg),
-                        cfg.sim.max_range_m, device, maps)
+    return build_filter(
+        m,
+        free_space_view(grid, origin, res),
+        (cfg.sim.laser_x_m, 0.0, 0.0),
+        laser_angles(cfg),
+        cfg.sim.max_range_m,
+        device,
+        maps,
+    )
 
 
 def pf_scan2map(cfg, pose, ranges, scorer: Scan2Map) -> float:
@@ -42,8 +58,9 @@ def pf_scan2map(cfg, pose, ranges, scorer: Scan2Map) -> float:
     that tracking error out of the comparison."""
     g = cfg.globloc
     d = np.array([-1.0, 0.0, 1.0])
-    offs = np.stack(np.meshgrid(d * g.trigger_search_m, d * g.trigger_search_m, d * g.trigger_search_rad,
-                                indexing="ij"), -1).reshape(-1, 3)
+    offs = np.stack(
+        np.meshgrid(d * g.trigger_search_m, d * g.trigger_search_m, d * g.trigger_search_rad, indexing="ij"), -1
+    ).reshape(-1, 3)
     poses = np.asarray(pose, np.float64)[None] + offs
     return float(scorer(poses, (cfg.sim.laser_x_m, 0.0, 0.0), ranges, laser_angles(cfg)).max())
 

@@ -54,8 +54,18 @@ def backproject(uv: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 
 class OrbPnP:
-    def __init__(self, K: np.ndarray, cam_height_m: float, T_base_cam, n_features: int = 1000, ratio: float = 0.8,
-                 min_inliers: int = 12, reproj_px: float = 3.0, edge_ratio: float = 1.1, refine_px: float = 1.5):
+    def __init__(
+        self,
+        K: np.ndarray,
+        cam_height_m: float,
+        T_base_cam,
+        n_features: int = 1000,
+        ratio: float = 0.8,
+        min_inliers: int = 12,
+        reproj_px: float = 3.0,
+        edge_ratio: float = 1.1,
+        refine_px: float = 1.5,
+    ):
         import cv2
 
         self.cv2, self.K = cv2, np.asarray(K, np.float64)
@@ -70,15 +80,19 @@ class OrbPnP:
         kp, des = self.orb.detectAndCompute(gray, None)
         return np.array([k.pt for k in kp], np.float64).reshape(-1, 2), des
 
-    def solve(self, query, keyframe_rgb: np.ndarray, keyframe_depth: np.ndarray, keyframe_robot_pose,
-              keyframe_features=None) -> PnPResult:
+    def solve(
+        self, query, keyframe_rgb: np.ndarray, keyframe_depth: np.ndarray, keyframe_robot_pose, keyframe_features=None
+    ) -> PnPResult:
         """Robot pose of the query (its features from ``features``, or its RGB image) from one keyframe."""
         q_uv, q_des = query if isinstance(query, tuple) else self.features(query)
         k_uv, k_des = keyframe_features if keyframe_features is not None else self.features(keyframe_rgb)
         if q_des is None or k_des is None or len(q_des) < 2 or len(k_des) < 2:
             return PnPResult(None, 0, 0)
-        good = [m[0] for m in self.matcher.knnMatch(q_des, k_des, k=2)
-                if len(m) == 2 and m[0].distance < self.ratio * m[1].distance]
+        good = [
+            m[0]
+            for m in self.matcher.knnMatch(q_des, k_des, k=2)
+            if len(m) == 2 and m[0].distance < self.ratio * m[1].distance
+        ]
         if len(good) < max(self.min_inliers, 6):
             return PnPResult(None, 0, len(good))
         qi = np.array([m.queryIdx for m in good])
@@ -89,9 +103,15 @@ class OrbPnP:
             return PnPResult(None, 0, len(good))
         R, t = camera_to_world(compose(np.asarray(keyframe_robot_pose, np.float64), self.T_base_cam), self.cam_height)
         X = backproject(kuv[ok], z[ok], self.K) @ R.T + t  # float64
-        found, rvec, tvec, inl = self.cv2.solvePnPRansac(X.astype(np.float64), q_uv[qi[ok]].astype(np.float64), self.K,
-                                                         None, reprojectionError=self.reproj, iterationsCount=200,
-                                                         flags=self.cv2.SOLVEPNP_EPNP)
+        found, rvec, tvec, inl = self.cv2.solvePnPRansac(
+            X.astype(np.float64),
+            q_uv[qi[ok]].astype(np.float64),
+            self.K,
+            None,
+            reprojectionError=self.reproj,
+            iterationsCount=200,
+            flags=self.cv2.SOLVEPNP_EPNP,
+        )
         n_in = 0 if inl is None else len(inl)
         if not found or n_in <= self.min_inliers:
             return PnPResult(None, n_in, len(good))

@@ -48,6 +48,7 @@ METHODS = ("lidar_mcl", "camera_only", "paper", "mcl_seeded")
 @dataclass
 class Stream:
     """One query run: true poses, odometry, scans and camera frames (every ``cam_every`` scans)."""
+
     stamps: np.ndarray
     truth: np.ndarray
     odom: np.ndarray
@@ -59,8 +60,17 @@ class Stream:
 
 def world_of(cfg):
     s = cfg.sim
-    return office(s.seed, s.width_m, s.height_m, s.corridor_width_m, s.room_min_width_m, s.room_max_width_m,
-                  s.door_width_m, s.furniture_per_room, s.repetitive)
+    return office(
+        s.seed,
+        s.width_m,
+        s.height_m,
+        s.corridor_width_m,
+        s.room_min_width_m,
+        s.room_max_width_m,
+        s.door_width_m,
+        s.furniture_per_room,
+        s.repetitive,
+    )
 
 
 def moved_furniture(world, rng, shift_m: float):
@@ -70,7 +80,7 @@ def moved_furniture(world, rng, shift_m: float):
     w = copy.deepcopy(world)
     n = w.n_walls
     for b in range(n, len(w.segments), 4):  # boxes are 4 consecutive segments
-        w.segments[b:b + 4] += np.tile(rng.uniform(-shift_m, shift_m, 2), 2)
+        w.segments[b : b + 4] += np.tile(rng.uniform(-shift_m, shift_m, 2), 2)
     return w
 
 
@@ -99,9 +109,15 @@ def make_stream(cfg, world, look, rng, k: int, device: str) -> Stream:
         more = noisy_odometry(parts[1], list(s.odom_alphas), rng)
         odom = np.concatenate([odom, compose(odom[-1], relative(more[:1], more))])
     query_world = moved_furniture(world, rng, g.moved_furniture_m)
-    lidar = SIM.build("segment_lidar", segments=query_world.segments, angles_rad=laser_angles(cfg),
-                      max_range_m=s.max_range_m, noise_std_m=s.range_noise_std_m, dropout_prob=s.dropout_prob,
-                      device=device)
+    lidar = SIM.build(
+        "segment_lidar",
+        segments=query_world.segments,
+        angles_rad=laser_angles(cfg),
+        max_range_m=s.max_range_m,
+        noise_std_m=s.range_noise_std_m,
+        dropout_prob=s.dropout_prob,
+        device=device,
+    )
     ranges = lidar.scan(compose(truth, np.array([s.laser_x_m, 0.0, 0.0])), seed=int(rng.integers(1 << 30)))
     cam_every = max(1, int(round(g.camera_every_s * s.rate_hz)))
     cam_idx = np.arange(0, len(truth), cam_every)
@@ -141,8 +157,9 @@ class Hypotheses:
         t3 = time.perf_counter()
         scored = []
         if out:
-            s = self.scan2map(np.array([p for p, _ in out]), (self.cfg.sim.laser_x_m, 0.0, 0.0), ranges,
-                              laser_angles(self.cfg))
+            s = self.scan2map(
+                np.array([p for p, _ in out]), (self.cfg.sim.laser_x_m, 0.0, 0.0), ranges, laser_angles(self.cfg)
+            )
             scored = [(p, n, float(v)) for (p, n), v in zip(out, s)]
         t4 = time.perf_counter()
         for key, a, b in (("gist", t, t1), ("retrieval", t1, t2), ("pnp", t2, t3), ("scan2map", t3, t4)):
@@ -170,13 +187,16 @@ def score_run(est, st: Stream, relocs, g) -> dict:
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(st.truth[:, :2], axis=0).T))])
     end1 = st.kidnap_idx if st.kidnap_idx > 0 else len(est)
     j = settle_index(ok[:end1])
-    out = {"localized": j >= 0, "time_to_localize_s": float(st.stamps[j] - st.stamps[0]) if j >= 0 else None,
-           "distance_to_localize_m": float(path[j]) if j >= 0 else None}
+    out = {
+        "localized": j >= 0,
+        "time_to_localize_s": float(st.stamps[j] - st.stamps[0]) if j >= 0 else None,
+        "distance_to_localize_m": float(path[j]) if j >= 0 else None,
+    }
     if j >= 0:
         e = np.hypot(*(est[j:end1, :2] - st.truth[j:end1, :2]).T)
-        out["rmse_after_m"] = float(np.sqrt(np.mean(e ** 2)))
+        out["rmse_after_m"] = float(np.sqrt(np.mean(e**2)))
     if st.kidnap_idx > 0:
-        k = settle_index(ok[st.kidnap_idx:])
+        k = settle_index(ok[st.kidnap_idx :])
         out["recovered"] = k >= 0
         out["recovery_time_s"] = float(st.stamps[st.kidnap_idx + k] - st.stamps[st.kidnap_idx]) if k >= 0 else None
         out["detected"] = any(r >= st.kidnap_idx for r in relocs)
@@ -200,8 +220,13 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 def summarise(rows: list, hours: float) -> dict:
     n = len(rows)
     k = sum(r["localized"] for r in rows)
-    out = {"runs": n, "localized": k, "success_rate": k / n if n else float("nan"), "success_ci95": wilson(k, n),
-           "false_relocalizations_per_hour": sum(r["false_relocalizations"] for r in rows) / max(hours, 1e-9)}
+    out = {
+        "runs": n,
+        "localized": k,
+        "success_rate": k / n if n else float("nan"),
+        "success_ci95": wilson(k, n),
+        "false_relocalizations_per_hour": sum(r["false_relocalizations"] for r in rows) / max(hours, 1e-9),
+    }
     for key in ("time_to_localize_s", "distance_to_localize_m", "rmse_after_m", "recovery_time_s"):
         v = [r[key] for r in rows if r.get(key) is not None]
         out[f"mean_{key}"] = float(np.mean(v)) if v else None
@@ -237,8 +262,10 @@ def localize_runs(run: runs.Run) -> Path:
     t_render = time.perf_counter() - t0
     gist = Gist(tuple(g.gist_size), g.gist_blocks, tuple(g.gist_orientations))
     db = build_database(mapping[kf], rgb, depth, gist)
-    print(f"globloc: {len(db)} keyframes over {len(mapping) / s.rate_hz:.0f} s of mapping run "
-          f"(rendered in {t_render:.1f} s on {device})")
+    print(
+        f"globloc: {len(db)} keyframes over {len(mapping) / s.rate_hz:.0f} s of mapping run "
+        f"(rendered in {t_render:.1f} s on {device})"
+    )
     scan2map = Scan2Map(grid, origin, g.map_resolution_m, g.scan2map)
     hyp = Hypotheses(cfg, db, camera, scan2map)
     rows = {m: [] for m in g.methods}
@@ -258,23 +285,35 @@ def localize_runs(run: runs.Run) -> Path:
             rows[m].append(score_run(est, st, relocs, g))
             if k == 0:
                 err = np.hypot(*(est[:, :2] - st.truth[:, :2]).T)
-                first_run[m] = {"error_m": [None if not np.isfinite(e) else round(float(e), 4) for e in err],
-                                "relocalized_at": [int(r) for r in relocs]}
+                first_run[m] = {
+                    "error_m": [None if not np.isfinite(e) else round(float(e), 4) for e in err],
+                    "relocalized_at": [int(r) for r in relocs],
+                }
                 first_run["stamps_s"] = [round(float(t), 3) for t in st.stamps]
                 first_run["kidnap_index"] = int(st.kidnap_idx)
     hours = g.runs * g.run_s / 3600.0
     frames = max(hyp.timing["frames"], 1)
-    metrics = {"scenario": g.scenario, "device": device, "keyframes": len(db), "runs": g.runs, "run_s": g.run_s,
-               "kidnap_at_s": g.kidnap_at_s, "lighting": g.lighting, "moved_furniture_m": g.moved_furniture_m,
-               "repetitive": bool(s.repetitive),
-               "methods": {m: {"summary": summarise(rows[m], hours), "runs": rows[m]} for m in g.methods},
-               "ms_per_camera_frame": {k: 1e3 * v / frames for k, v in hyp.timing.items() if k != "frames"},
-               "first_run": first_run,
-               "settings": OmegaConf.to_container(g)}
+    metrics = {
+        "scenario": g.scenario,
+        "device": device,
+        "keyframes": len(db),
+        "runs": g.runs,
+        "run_s": g.run_s,
+        "kidnap_at_s": g.kidnap_at_s,
+        "lighting": g.lighting,
+        "moved_furniture_m": g.moved_furniture_m,
+        "repetitive": bool(s.repetitive),
+        "methods": {m: {"summary": summarise(rows[m], hours), "runs": rows[m]} for m in g.methods},
+        "ms_per_camera_frame": {k: 1e3 * v / frames for k, v in hyp.timing.items() if k != "frames"},
+        "first_run": first_run,
+        "settings": OmegaConf.to_container(g),
+    }
     out = run.finish(metrics, device)
     for m in g.methods:
         sm = metrics["methods"][m]["summary"]
-        print(f"  {m:12s} localized {sm['localized']}/{sm['runs']}"
-              + (f", recovered {sm['recovered']}/{sm['runs']}" if "recovered" in sm else "")
-              + f", false relocalizations/h {sm['false_relocalizations_per_hour']:.1f}")
+        print(
+            f"  {m:12s} localized {sm['localized']}/{sm['runs']}"
+            + (f", recovered {sm['recovered']}/{sm['runs']}" if "recovered" in sm else "")
+            + f", false relocalizations/h {sm['false_relocalizations_per_hour']:.1f}"
+        )
     return out

@@ -11,8 +11,15 @@ from irmcl_warp.kernels.raycast import distance_to_occupied
 
 
 class Scan2Map:
-    def __init__(self, occupancy: np.ndarray, origin_xy, resolution_m: float, kind: str = "paper",
-                 sigma_m: float = 0.2, occ_threshold: float = 0.65):
+    def __init__(
+        self,
+        occupancy: np.ndarray,
+        origin_xy,
+        resolution_m: float,
+        kind: str = "paper",
+        sigma_m: float = 0.2,
+        occ_threshold: float = 0.65,
+    ):
         if kind not in ("paper", "likelihood_field"):
             raise ValueError(f"globloc.scan2map={kind!r}: choose paper or likelihood_field")
         self.occ = np.asarray(occupancy, np.float32)
@@ -20,7 +27,6 @@ class Scan2Map:
             raise ValueError(f"Scan2Map: expected a 2D occupancy grid, got {self.occ.shape}")
         self.origin, self.res, self.kind, self.sigma = np.asarray(origin_xy, float), float(resolution_m), kind, sigma_m
         if kind == "likelihood_field":
-
             self.dist = distance_to_occupied(self.occ, self.res, occ_threshold)
 
     def __call__(self, poses, T_base_laser, ranges_m, angles_rad) -> np.ndarray:

@@ -23,10 +23,30 @@ from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations
 from irmcl_warp.io.rosbag import read_bag, read_bag_extrinsic, write_bag
 from irmcl_warp.types import LaserLog, match_stamps
 
-__all__ = ["GEOMETRY_FIELDS", "GroundTruthMatch", "LogDefectWarning", "LogFormatError", "apply_ground_truth",
-           "apply_laser_geometry", "attach_ground_truth", "check_ground_truth", "data_root", "load_log", "read_bag", "read_carmen", "read_log",
-           "read_g2o", "read_ground_truth", "read_matched_csv", "read_tum", "read_relations", "read_splits", "resolve",
-           "write_bag", "write_tum"]
+__all__ = [
+    "GEOMETRY_FIELDS",
+    "GroundTruthMatch",
+    "LogDefectWarning",
+    "LogFormatError",
+    "apply_ground_truth",
+    "apply_laser_geometry",
+    "attach_ground_truth",
+    "check_ground_truth",
+    "data_root",
+    "load_log",
+    "read_bag",
+    "read_carmen",
+    "read_log",
+    "read_g2o",
+    "read_ground_truth",
+    "read_matched_csv",
+    "read_tum",
+    "read_relations",
+    "read_splits",
+    "resolve",
+    "write_bag",
+    "write_tum",
+]
 
 
 def data_root() -> Path:
@@ -44,7 +64,9 @@ def resolve(path: str) -> Path:
     if not p.is_absolute():
         p = data_root() / p
     if not p.exists():
-        raise FileNotFoundError(f"{path} not found, neither from the working directory nor under IRMCL_DATA={data_root()}")
+        raise FileNotFoundError(
+            f"{path} not found, neither from the working directory nor under IRMCL_DATA={data_root()}"
+        )
     return p
 
 
@@ -70,8 +92,16 @@ class GroundTruthMatch:
     share: float
 
 
-def attach_ground_truth(log: LaserLog, stamps, poses, *, offset_s: float = 0.0, max_gap_s: float | None = None,
-                        tol_s: float = 1e-4, fill: str = "none") -> GroundTruthMatch:
+def attach_ground_truth(
+    log: LaserLog,
+    stamps,
+    poses,
+    *,
+    offset_s: float = 0.0,
+    max_gap_s: float | None = None,
+    tol_s: float = 1e-4,
+    fill: str = "none",
+) -> GroundTruthMatch:
     """Set ``log.ground_truth`` (NaN where unknown) from poses whose stamps plus ``offset_s`` are the log's
     clock: matched by stamp within ``tol_s`` (keyframes), or SE(2)-interpolated at every scan between two
     poses at most ``max_gap_s`` apart (a dense trajectory). Keyframes with ``fill="odometry"``: every scan after
@@ -122,24 +152,32 @@ def check_ground_truth(path, log: LaserLog, stamps, poses, match: GroundTruthMat
         return
     t = np.asarray(stamps, np.float64)
     if match.considered == 0:
-        what = (f"none of its {len(t)} poses lies in the log's time span ({log.stamps.min():.3f} to "
-                f"{log.stamps.max():.3f} s; its own stamps run from {t.min():.3f} to {t.max():.3f} s)")
+        what = (
+            f"none of its {len(t)} poses lies in the log's time span ({log.stamps.min():.3f} to "
+            f"{log.stamps.max():.3f} s; its own stamps run from {t.min():.3f} to {t.max():.3f} s)"
+        )
     elif match.mode == "keyframes":
         what = f"{match.scans_posed} of the {match.considered} poses in the log's time span match a scan by stamp"
     else:
         what = f"{match.scans_posed} of the {match.considered} scans in its time span get a pose"
-    msg = f"ground truth for {log.source or 'the log'} is refused: {what} ({100 * match.share:.0f} %, at least " \
-          f"{100 * GT_MIN_SHARE:.0f} % needed)"
+    msg = (
+        f"ground truth for {log.source or 'the log'} is refused: {what} ({100 * match.share:.0f} %, at least "
+        f"{100 * GT_MIN_SHARE:.0f} % needed)"
+    )
     if not offset_set and len(stamps) > 2 and len(log) > 2:
         c = estimate_clock_offset(log.stamps, log.odom, stamps, poses)
         if c.convincing:
-            msg += (f". Its clock appears offset from the log's by {c.offset_s:+.3f} s (its turns then agree with "
-                    f"the odometry's to {c.yaw_increment_error_deg:.2f} deg per step, {c.contrast:.2f} of the "
-                    f"disagreement a few seconds off): " + _checked_hint(log, stamps, poses, c.offset_s))
+            msg += (
+                f". Its clock appears offset from the log's by {c.offset_s:+.3f} s (its turns then agree with "
+                f"the odometry's to {c.yaw_increment_error_deg:.2f} deg per step, {c.contrast:.2f} of the "
+                f"disagreement a few seconds off): " + _checked_hint(log, stamps, poses, c.offset_s)
+            )
         else:
             msg += ". No clock offset lines its turns up with the odometry's either"
-    hint = ("; for a dense trajectory set data.ground_truth_max_gap_s (interpolate between poses), for keyframes "
-            "whose stamps jitter data.ground_truth_tolerance_s")
+    hint = (
+        "; for a dense trajectory set data.ground_truth_max_gap_s (interpolate between poses), for keyframes "
+        "whose stamps jitter data.ground_truth_tolerance_s"
+    )
     raise LogFormatError(path, None, msg + hint)
 
 
@@ -154,18 +192,28 @@ def _checked_hint(log: LaserLog, stamps, poses, offset_s: float) -> str:
         m = attach_ground_truth(trial, stamps, poses, offset_s=offset_s, **extra)
         if m.share >= GT_MIN_SHARE and m.scans_posed > 0:
             setting = f"data.ground_truth_time_offset_s={offset_s:.3f}" + (
-                f" data.ground_truth_max_gap_s={extra['max_gap_s']:g}" if extra else "")
+                f" data.ground_truth_max_gap_s={extra['max_gap_s']:g}" if extra else ""
+            )
             return f"set {setting} (tried: {100 * m.share:.0f} % of the log then gets a pose, {how})"
-    return (f"but even at that offset it meets too little of the log ({100 * m.share:.0f} % interpolated); "
-            f"set data.ground_truth_time_offset_s={offset_s:.3f} and look at its stamps")
+    return (
+        f"but even at that offset it meets too little of the log ({100 * m.share:.0f} % interpolated); "
+        f"set data.ground_truth_time_offset_s={offset_s:.3f} and look at its stamps"
+    )
 
 
 def apply_ground_truth(log: LaserLog, path, d) -> GroundTruthMatch:
     """Read the ground truth at ``path`` and attach it as ``d`` (a data config) says, or refuse it."""
     stamps, poses = read_ground_truth(path)
     offset = d.get("ground_truth_time_offset_s")
-    match = attach_ground_truth(log, stamps, poses, offset_s=offset or 0.0, max_gap_s=d.get("ground_truth_max_gap_s"),
-                                tol_s=d.get("ground_truth_tolerance_s", 1e-4), fill=d.get("ground_truth_fill", "none"))
+    match = attach_ground_truth(
+        log,
+        stamps,
+        poses,
+        offset_s=offset or 0.0,
+        max_gap_s=d.get("ground_truth_max_gap_s"),
+        tol_s=d.get("ground_truth_tolerance_s", 1e-4),
+        fill=d.get("ground_truth_fill", "none"),
+    )
     check_ground_truth(path, log, stamps, poses, match, offset is not None)
     return match
 
@@ -209,12 +257,25 @@ def read_log(cfg) -> LaserLog:
         raise ValueError(f"data={d.name}: data.path is not set")
     path = resolve(d.path)
     if d.format == "carmen":
-        log = read_carmen(path, no_return_m=d.no_return_m, beam_policy=d.beam_policy,
-                          max_speed_mps=d.max_speed_mps, max_step_m=d.max_step_m)
+        log = read_carmen(
+            path,
+            no_return_m=d.no_return_m,
+            beam_policy=d.beam_policy,
+            max_speed_mps=d.max_speed_mps,
+            max_step_m=d.max_step_m,
+        )
     elif d.format == "bag":
-        log = read_bag(path, scan_topic=d.scan_topic, odom_topic=d.odom_topic, base_frame=d.base_frame,
-                       odom_frame=d.odom_frame, beam_policy=d.beam_policy, max_speed_mps=d.max_speed_mps,
-                       max_step_m=d.max_step_m, repair_reversing=d.repair_reversing)
+        log = read_bag(
+            path,
+            scan_topic=d.scan_topic,
+            odom_topic=d.odom_topic,
+            base_frame=d.base_frame,
+            odom_frame=d.odom_frame,
+            beam_policy=d.beam_policy,
+            max_speed_mps=d.max_speed_mps,
+            max_step_m=d.max_step_m,
+            repair_reversing=d.repair_reversing,
+        )
     else:
         raise ValueError(f"data.format={d.format!r}: expected sim, carmen or bag")
     if d.laser_frame_path:

@@ -17,8 +17,11 @@ class DiskFullError(OSError):
 def raise_disk_full(e: BaseException, path: Path) -> None:
     """Re-raise ``e`` as a DiskFullError naming ``path`` when it says the disk is full; else return."""
     if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
-        raise DiskFullError(e.errno, f"no space left on the device writing {path} (nothing half-written was kept): "
-                                     f"free space under {Path(path).parent} and run the command again") from e
+        raise DiskFullError(
+            e.errno,
+            f"no space left on the device writing {path} (nothing half-written was kept): "
+            f"free space under {Path(path).parent} and run the command again",
+        ) from e
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

@@ -58,11 +58,16 @@ def check_geometry(path, where, num_beams, angle_min, increment, range_min=0.0, 
     if num_beams < 2:
         raise LogFormatError(path, where, f"scan has {num_beams} beams: expected at least 2")
     if increment == 0 or abs(increment) * (num_beams - 1) > 2 * np.pi + 1e-6:
-        raise LogFormatError(path, where, f"angle_increment {increment:g} rad over {num_beams} beams: expected a "
-                             f"non-zero increment spanning at most 2 pi")
+        raise LogFormatError(
+            path,
+            where,
+            f"angle_increment {increment:g} rad over {num_beams} beams: expected a "
+            f"non-zero increment spanning at most 2 pi",
+        )
     if not 0.0 <= range_min < range_max:
-        raise LogFormatError(path, where, f"range_min {range_min:g} m, range_max {range_max:g} m: expected "
-                             f"0 <= range_min < range_max")
+        raise LogFormatError(
+            path, where, f"range_min {range_min:g} m, range_max {range_max:g} m: expected 0 <= range_min < range_max"
+        )
     return ScanGeometry(int(num_beams), float(angle_min), float(increment))
 
 
@@ -83,8 +88,9 @@ def harmonise_beams(path, scans, locations, policy: BeamPolicy, report: DefectRe
     for i, g in enumerate(geometries):
         if g.angle_increment_rad < 0:  # reversed scanner: the same beams, in increasing angle
             scans[i] = np.asarray(scans[i])[::-1]
-            geometries[i] = ScanGeometry(g.num_beams, g.angle_min_rad + g.angle_increment_rad * (g.num_beams - 1),
-                                         -g.angle_increment_rad)
+            geometries[i] = ScanGeometry(
+                g.num_beams, g.angle_min_rad + g.angle_increment_rad * (g.num_beams - 1), -g.angle_increment_rad
+            )
     for i, (s, g) in enumerate(zip(scans, geometries)):
         if len(s) != g.num_beams:
             raise LogFormatError(path, locations[i], f"scan holds {len(s)} ranges, its geometry says {g.num_beams}")
@@ -94,12 +100,18 @@ def harmonise_beams(path, scans, locations, policy: BeamPolicy, report: DefectRe
     odd = [i for i, g in enumerate(geometries) if not g.same_as(common)]
     if odd and policy == "error":
         i, g = odd[0], geometries[odd[0]]
-        what = (f"scan has {g.num_beams} beams, the log's scans have {B}" if g.num_beams != B else
-                f"scan's beams start at {np.degrees(g.angle_min_rad):.4f} deg every "
-                f"{np.degrees(g.angle_increment_rad):.4f} deg, the log's at {np.degrees(common.angle_min_rad):.4f} "
-                f"every {np.degrees(common.angle_increment_rad):.4f} deg")
-        raise LogFormatError(path, locations[i], f"{what} ({len(odd)} such scans; set data.beam_policy=reject or "
-                             f"resample to accept them)")
+        what = (
+            f"scan has {g.num_beams} beams, the log's scans have {B}"
+            if g.num_beams != B
+            else f"scan's beams start at {np.degrees(g.angle_min_rad):.4f} deg every "
+            f"{np.degrees(g.angle_increment_rad):.4f} deg, the log's at {np.degrees(common.angle_min_rad):.4f} "
+            f"every {np.degrees(common.angle_increment_rad):.4f} deg"
+        )
+        raise LogFormatError(
+            path,
+            locations[i],
+            f"{what} ({len(odd)} such scans; set data.beam_policy=reject or resample to accept them)",
+        )
     if policy == "reject":
         report.add("scans_rejected_beam_geometry", len(odd), f"scans whose beams differ from the log's {B}, dropped")
         keep = [i for i in range(len(scans)) if geometries[i].same_as(common)]
@@ -149,17 +161,27 @@ def mask_ranges(path, ranges, no_return_m, report: DefectReport, tol_m: float = 
             raise LogFormatError(path, f"scan {row}", f"negative range {np.nanmin(ranges):g} m (ranges must be >= 0)")
         if (ranges > MAX_PLAUSIBLE_RANGE_M).any():
             row = int(np.argwhere(ranges > MAX_PLAUSIBLE_RANGE_M)[0, 0])
-            raise LogFormatError(path, f"scan {row}", f"range {np.nanmax(ranges):g} m is beyond any lidar "
-                                 f"(> {MAX_PLAUSIBLE_RANGE_M:g} m)")
+            raise LogFormatError(
+                path,
+                f"scan {row}",
+                f"range {np.nanmax(ranges):g} m is beyond any lidar (> {MAX_PLAUSIBLE_RANGE_M:g} m)",
+            )
         no_return = detect_no_return(ranges) if no_return_m is None else float(no_return_m)
         beyond = ranges > no_return + tol_m
-        report.add("ranges_beyond_no_return", int(beyond.sum()),
-                   f"beams reading more than the log's no-return value {no_return:g} m, masked")
+        report.add(
+            "ranges_beyond_no_return",
+            int(beyond.sum()),
+            f"beams reading more than the log's no-return value {no_return:g} m, masked",
+        )
         count, value = near_no_return(ranges, no_return, tol_m)
         finite = int(np.isfinite(ranges).sum())
         if np.isfinite(no_return) and count >= max(20, 1e-3 * finite):
-            report.add("near_no_return_code", count, f"beams reading {value:g} m, just under the no-return value "
-                       f"{no_return:g} m: a second no-return code? Kept as returns (data.no_return_m={value:g} masks them)")
+            report.add(
+                "near_no_return_code",
+                count,
+                f"beams reading {value:g} m, just under the no-return value "
+                f"{no_return:g} m: a second no-return code? Kept as returns (data.no_return_m={value:g} masks them)",
+            )
         masked = ranges.astype(np.float32)
         masked[ranges >= no_return - tol_m] = np.nan
     zero = ranges <= 0.0

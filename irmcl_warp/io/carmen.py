@@ -67,8 +67,11 @@ def _exact(path, n_line, tok, count, what):
     """A record ends with its timestamp, optionally followed by ``host logger_timestamp``: any other count
     means a line merged with the next or split from its end."""
     if len(tok) not in (count, count + 2):
-        raise LogFormatError(path, f"line {n_line}", f"{what}: expected {count} fields (or {count + 2} with host and "
-                             f"logger timestamp), found {len(tok)}")
+        raise LogFormatError(
+            path,
+            f"line {n_line}",
+            f"{what}: expected {count} fields (or {count + 2} with host and logger timestamp), found {len(tok)}",
+        )
     if len(tok) == count + 2:
         parse_floats(path, n_line, tok[-1:], f"{what} logger timestamp")
 
@@ -77,8 +80,8 @@ def _parse_flaser(path, n_line, tok):
     _need(path, n_line, tok, 2, "FLASER")
     n = _count(path, n_line, tok[1], "FLASER beam count")
     _exact(path, n_line, tok, 2 + n + 7, f"FLASER with {n} beams (n ranges, 6 pose values, timestamp)")
-    ranges = parse_floats(path, n_line, tok[2:2 + n], "FLASER ranges")
-    tail = parse_floats(path, n_line, tok[2 + n:2 + n + 7], "FLASER poses/timestamp")
+    ranges = parse_floats(path, n_line, tok[2 : 2 + n], "FLASER ranges")
+    tail = parse_floats(path, n_line, tok[2 + n : 2 + n + 7], "FLASER poses/timestamp")
     return _Scan(n_line, tail[6], ranges, tuple(tail[3:6]), tuple(tail[0:3]))
 
 
@@ -87,21 +90,51 @@ def _parse_robotlaser(path, n_line, tok):
     head = parse_floats(path, n_line, tok[1:9], "ROBOTLASER1 header")
     n = _count(path, n_line, tok[8], "ROBOTLASER1 beam count")
     _need(path, n_line, tok, 10 + n, f"ROBOTLASER1 with {n} ranges")
-    ranges = parse_floats(path, n_line, tok[9:9 + n], "ROBOTLASER1 ranges")
+    ranges = parse_floats(path, n_line, tok[9 : 9 + n], "ROBOTLASER1 ranges")
     m = _count(path, n_line, tok[9 + n], "ROBOTLASER1 remission count")
     i = 10 + n + m
     _exact(path, n_line, tok, i + 12, f"ROBOTLASER1 with {n} ranges and {m} remissions")
-    tail = parse_floats(path, n_line, tok[i:i + 12], "ROBOTLASER1 poses/timestamp")
-    return _Scan(n_line, tail[11], ranges, tuple(tail[3:6]), tuple(tail[0:3]),
-                 start_angle=head[1], fov=head[2], max_range=head[4])
+    tail = parse_floats(path, n_line, tok[i : i + 12], "ROBOTLASER1 poses/timestamp")
+    return _Scan(
+        n_line,
+        tail[11],
+        ranges,
+        tuple(tail[3:6]),
+        tuple(tail[0:3]),
+        start_angle=head[1],
+        fov=head[2],
+        max_range=head[4],
+    )
 
 
 READ_RECORDS = ("FLASER", "ROBOTLASER1", "ODOM")
 RECORD_NAME = re.compile(r"[A-Z][A-Z0-9_\-]{1,39}")
 # the records CARMEN's logger and GMapping write besides the ones read here: skipped without a word
-KNOWN_RECORDS = {"PARAM", "SYNC", "TRUEPOS", "NEFF", "RLASER", "LASER3", "LASER4", "RAWLASER1", "RAWLASER2",
-                 "RAWLASER3", "RAWLASER4", "ROBOTLASER2", "GPSNMEAGGA", "GPSNMEARMC", "SONAR", "BUMPER", "SCANMARK",
-                 "POSITIONLASER", "IMU", "VECTORMOVE", "ROBOTVELOCITY", "FOLLOW-TRAJECTORY", "BASEVELOCITY"}
+KNOWN_RECORDS = {
+    "PARAM",
+    "SYNC",
+    "TRUEPOS",
+    "NEFF",
+    "RLASER",
+    "LASER3",
+    "LASER4",
+    "RAWLASER1",
+    "RAWLASER2",
+    "RAWLASER3",
+    "RAWLASER4",
+    "ROBOTLASER2",
+    "GPSNMEAGGA",
+    "GPSNMEARMC",
+    "SONAR",
+    "BUMPER",
+    "SCANMARK",
+    "POSITIONLASER",
+    "IMU",
+    "VECTORMOVE",
+    "ROBOTVELOCITY",
+    "FOLLOW-TRAJECTORY",
+    "BASEVELOCITY",
+}
 
 
 def parse_carmen(path) -> CarmenContents:
@@ -130,14 +163,26 @@ def parse_carmen(path) -> CarmenContents:
             out.odom_lines.append((v[6], v[0], v[1], v[2], v[3]))
         elif not RECORD_NAME.fullmatch(kind):
             first = not out.scans and not out.odom_lines and not out.records_seen
-            raise LogFormatError(path, f"line {n_line}", f"expected a record name (FLASER, ODOM, ...), found "
-                                 f"{kind[:40]!r}: " + ("not a CARMEN log? (the CARMEN subset this reads and how to "
-                                 "bring another format in: README, 'Your own log')" if first else "a line broken in two?"))
+            raise LogFormatError(
+                path,
+                f"line {n_line}",
+                f"expected a record name (FLASER, ODOM, ...), found "
+                f"{kind[:40]!r}: "
+                + (
+                    "not a CARMEN log? (the CARMEN subset this reads and how to "
+                    "bring another format in: README, 'Your own log')"
+                    if first
+                    else "a line broken in two?"
+                ),
+            )
         else:
             merged = next((t for t in tok[1:] if any(name in t for name in READ_RECORDS)), None)
             if merged is not None:
-                raise LogFormatError(path, f"line {n_line}", f"{kind} line holds {merged[:40]!r}: two records on one "
-                                     f"line (a lost line break)?")
+                raise LogFormatError(
+                    path,
+                    f"line {n_line}",
+                    f"{kind} line holds {merged[:40]!r}: two records on one line (a lost line break)?",
+                )
             out.skipped[kind] += 1
         out.records_seen += 1
     return out
@@ -160,8 +205,15 @@ def _kinds(skipped: Counter, most: int = 5) -> str:
     return top + (f" and {len(skipped) - most} other kinds" if len(skipped) > most else "")
 
 
-def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None = None,
-                beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0, max_step_m: float = 2.0) -> LaserLog:
+def read_carmen(
+    path,
+    *,
+    no_return_m: float | None = None,
+    fov_rad: float | None = None,
+    beam_policy: BeamPolicy = "error",
+    max_speed_mps: float = 3.0,
+    max_step_m: float = 2.0,
+) -> LaserLog:
     """Read a CARMEN log into a :class:`LaserLog` (scans in file order, odometry from each scan line)."""
     path = Path(path)
     c = parse_carmen(path)
@@ -169,13 +221,15 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
         raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
     report = _parse_report(c)
     geometries = [_geometry(path, s, fov_rad) for s in c.scans]
-    ranges, kept, common = harmonise_beams(path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans],
-                                           beam_policy, report, geometries)
+    ranges, kept, common = harmonise_beams(
+        path, [s.ranges for s in c.scans], [f"line {s.line}" for s in c.scans], beam_policy, report, geometries
+    )
     scans = [c.scans[i] for i in kept]
     first = scans[0]
     ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.max_range, report)
-    info = LaserInfo(common.num_beams, common.angle_min_rad, common.angle_increment_rad, 0.0, float(no_return),
-                     float(no_return))
+    info = LaserInfo(
+        common.num_beams, common.angle_min_rad, common.angle_increment_rad, 0.0, float(no_return), float(no_return)
+    )
     stamps = np.array([s.stamp for s in scans])
     odom = np.array([s.odom for s in scans])
     # the extrinsic is what separates the laser pose from the robot pose on the same line
@@ -187,9 +241,16 @@ def read_carmen(path, *, no_return_m: float | None = None, fov_rad: float | None
     if c.odom_lines:
         od = np.array(c.odom_lines)
         stamped = od[:, 0] != 0.0  # GMapping's corrected logs interleave path points stamped 0
-        report.add("odom_stamps_backwards", count_stamps_backwards(od[stamped, 0]), "ODOM lines stamped earlier than the one before")
-        report.add("odometry_contradicts_velocity", count_velocity_contradictions(od[:, 1:4], od[:, 4]),
-                   "ODOM steps moving against their own forward velocity")
+        report.add(
+            "odom_stamps_backwards",
+            count_stamps_backwards(od[stamped, 0]),
+            "ODOM lines stamped earlier than the one before",
+        )
+        report.add(
+            "odometry_contradicts_velocity",
+            count_velocity_contradictions(od[:, 1:4], od[:, 4]),
+            "ODOM steps moving against their own forward velocity",
+        )
     warn_defects(path, report)
     return LaserLog(stamps, ranges, odom, info, T_base_laser, None, str(path), report)
 
@@ -214,12 +275,22 @@ def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:
     if not c.scans:
         raise LogFormatError(path, None, f"no FLASER or ROBOTLASER1 lines (other lines: {_kinds(c.skipped)})")
     warn_defects(path, _parse_report(c))
-    return check_pose_stamps(path, np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans]),
-                             [s.line for s in c.scans])
+    return check_pose_stamps(
+        path, np.array([s.stamp for s in c.scans]), np.array([s.odom for s in c.scans]), [s.line for s in c.scans]
+    )
 
 
-GFS_RESOLUTION_DEG = {180: 1.0, 181: 1.0, 360: 0.5, 361: 0.5, 540: 0.5, 541: 0.5, 682: 360 / 1024, 683: 360 / 1024,
-                      769: 360 / 1024}  # the released GMapping's CARMEN reader (log/carmenconfiguration.cpp)
+GFS_RESOLUTION_DEG = {
+    180: 1.0,
+    181: 1.0,
+    360: 0.5,
+    361: 0.5,
+    540: 0.5,
+    541: 0.5,
+    682: 360 / 1024,
+    683: 360 / 1024,
+    769: 360 / 1024,
+}  # the released GMapping's CARMEN reader (log/carmenconfiguration.cpp)
 
 
 def gfs_flaser_angles(num_beams: int) -> np.ndarray:
@@ -229,8 +300,10 @@ def gfs_flaser_angles(num_beams: int) -> np.ndarray:
     none (360 beams: -90, ..., -0.5, +0.5, ..., +90 deg, where the log's uniform 180-deg span puts them
     0.501 deg apart). Used by ``slam.beam_angles=gfs`` to feed our filter the released tool's input."""
     if num_beams not in GFS_RESOLUTION_DEG:
-        raise ValueError(f"slam.beam_angles=gfs: the released CARMEN reader sets no resolution for {num_beams} beams "
-                         f"(it knows {sorted(GFS_RESOLUTION_DEG)}; others need a PARAM line)")
+        raise ValueError(
+            f"slam.beam_angles=gfs: the released CARMEN reader sets no resolution for {num_beams} beams "
+            f"(it knows {sorted(GFS_RESOLUTION_DEG)}; others need a PARAM line)"
+        )
     step, j = np.deg2rad(GFS_RESOLUTION_DEG[num_beams]), np.arange(num_beams)
     if num_beams % 2:
         return (j - num_beams // 2) * step

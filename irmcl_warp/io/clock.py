@@ -56,14 +56,17 @@ def estimate_clock_offset(log_stamps, log_odom, gt_stamps, gt_poses, min_overlap
     lt, lyaw = lt[lo], np.asarray(log_odom, np.float64)[lo, 2]
     gt, gyaw = gt[go], np.asarray(gt_poses, np.float64)[go, 2]
     # a grid no finer than the sparser of the two, so keyframe ground truth is not read between its poses
-    dt = max(0.05, 0.5 * float(np.median(np.diff(gt))) if len(gt) > 1 else 0.05,
-             float(np.median(np.diff(lt))) if len(lt) > 1 else 0.05)
+    dt = max(
+        0.05,
+        0.5 * float(np.median(np.diff(gt))) if len(gt) > 1 else 0.05,
+        float(np.median(np.diff(lt))) if len(lt) > 1 else 0.05,
+    )
     na, nb = int((lt[-1] - lt[0]) / dt) + 1, int((gt[-1] - gt[0]) / dt) + 1
     a, b = _yaw_rate(lt, lyaw, lt[0], dt, na), _yaw_rate(gt, gyaw, gt[0], dt, nb)
     n = 1 << int(np.ceil(np.log2(na + nb)))
     corr = np.fft.irfft(np.fft.rfft(a, n) * np.conj(np.fft.rfft(b, n)), n)  # corr[k] = sum_i a[i + k] b[i]
     lags = np.concatenate([np.arange(0, na), np.arange(-nb + 1, 0)])
-    values = np.concatenate([corr[:na], corr[n - nb + 1:]])
+    values = np.concatenate([corr[:na], corr[n - nb + 1 :]])
     overlap = np.minimum(na, lags + nb) - np.maximum(0, lags)
     usable = overlap >= min_overlap * min(na, nb)
     score = np.where(usable, values / np.maximum(overlap, 1), -np.inf)

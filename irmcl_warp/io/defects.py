@@ -60,13 +60,23 @@ def repair_reversing(poses, forward_velocity_mps) -> tuple[np.ndarray, int, floa
     return out, int(flip.sum()), float(np.hypot(steps[flip, 0], steps[flip, 1]).sum())
 
 
-def scan_defects(report: DefectReport, stamps_recording_order, odom_poses, *, max_speed_mps=3.0,
-                 max_step_m=2.0, what="scans") -> DefectReport:
+def scan_defects(
+    report: DefectReport, stamps_recording_order, odom_poses, *, max_speed_mps=3.0, max_step_m=2.0, what="scans"
+) -> DefectReport:
     """The checks every reader runs on its scans and their odometry."""
-    report.add(f"{what}_stamps_backwards", count_stamps_backwards(stamps_recording_order),
-               f"{what} stamped earlier than the one recorded before them")
-    report.add(f"{what}_duplicate_stamps", count_duplicate_stamps(stamps_recording_order),
-               f"{what} sharing a stamp with another")
-    report.add("odometry_jumps", count_odometry_jumps(stamps_recording_order, odom_poses, max_speed_mps, max_step_m),
-               f"odometry steps between scans over {max_step_m} m or {max_speed_mps} m/s")
+    report.add(
+        f"{what}_stamps_backwards",
+        count_stamps_backwards(stamps_recording_order),
+        f"{what} stamped earlier than the one recorded before them",
+    )
+    report.add(
+        f"{what}_duplicate_stamps",
+        count_duplicate_stamps(stamps_recording_order),
+        f"{what} sharing a stamp with another",
+    )
+    report.add(
+        "odometry_jumps",
+        count_odometry_jumps(stamps_recording_order, odom_poses, max_speed_mps, max_step_m),
+        f"odometry steps between scans over {max_step_m} m or {max_speed_mps} m/s",
+    )
     return report

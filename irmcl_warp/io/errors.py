@@ -42,8 +42,12 @@ def check_pose_stamps(path, stamps, poses, lines):
     differ = [k for k in same if not np.array_equal(poses[k], poses[k + 1])]
     if differ:
         k = differ[0]
-        raise LogFormatError(path, f"line {lines[k + 1]}", f"stamp {stamps[k]:.6f} was given at line {lines[k]} "
-                             f"with another pose ({len(differ)} such stamps): expected one pose per stamp")
+        raise LogFormatError(
+            path,
+            f"line {lines[k + 1]}",
+            f"stamp {stamps[k]:.6f} was given at line {lines[k]} "
+            f"with another pose ({len(differ)} such stamps): expected one pose per stamp",
+        )
     if backwards:
         notes.append(f"{backwards} poses stamped earlier than the line before them (sorted by stamp)")
     if same.size:

@@ -26,8 +26,12 @@ def _content_lines(path, numbered=None):
     was cut off while written, and its last number may be cut too) dropped with a warning."""
     lines, cut = read_lines(path) if numbered is None else numbered
     if cut:
-        warnings.warn(f"{path}: unfinished last line {lines[-1][0]} dropped (the file ends without a newline: "
-                      f"cut off while written?)", LogDefectWarning, stacklevel=3)
+        warnings.warn(
+            f"{path}: unfinished last line {lines[-1][0]} dropped (the file ends without a newline: "
+            f"cut off while written?)",
+            LogDefectWarning,
+            stacklevel=3,
+        )
         lines = lines[:-1]
     out = []
     for n, ln in lines:
@@ -50,8 +54,9 @@ def read_matched_csv(path) -> tuple[np.ndarray, np.ndarray]:
         if not header_seen:
             cols = [c.strip() for c in line.split(",")]
             if cols[:5] != ["bag_scan_index", "ipc_stamp", "x", "y", "theta"]:
-                raise LogFormatError(path, f"line {n_line}", f"expected header bag_scan_index,ipc_stamp,x,y,theta, "
-                                     f"found {line[:80]!r}")
+                raise LogFormatError(
+                    path, f"line {n_line}", f"expected header bag_scan_index,ipc_stamp,x,y,theta, found {line[:80]!r}"
+                )
             header_seen = True
             continue
         tok = line.split(",")
@@ -70,8 +75,11 @@ def read_matched_csv(path) -> tuple[np.ndarray, np.ndarray]:
 def _check_pose(path, n_line, pose, what="pose"):
     x, y, yaw = pose
     if max(abs(x), abs(y)) > MAX_PLAUSIBLE_MOTION_M:
-        raise LogFormatError(path, f"line {n_line}", f"{what} ({x:g}, {y:g}) is more than {MAX_PLAUSIBLE_MOTION_M:g} m "
-                             f"away: expected metres")
+        raise LogFormatError(
+            path,
+            f"line {n_line}",
+            f"{what} ({x:g}, {y:g}) is more than {MAX_PLAUSIBLE_MOTION_M:g} m away: expected metres",
+        )
     if abs(yaw) > MAX_PLAUSIBLE_MOTION_M:  # unwrapped headings are fine (mit-csail's keyframes reach 6.6 rad)
         raise LogFormatError(path, f"line {n_line}", f"{what} yaw {yaw:g}: expected radians")
 
@@ -96,29 +104,40 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray]:
     for n_line, line in _content_lines(path):
         tok = line.split()
         if len(tok) != 8:
-            raise LogFormatError(path, f"line {n_line}", f"expected 8 values (stamp x y z qx qy qz qw), found {len(tok)}")
+            raise LogFormatError(
+                path, f"line {n_line}", f"expected 8 values (stamp x y z qx qy qz qw), found {len(tok)}"
+            )
         t, x, y, _, qx, qy, qz, qw = parse_floats(path, n_line, tok, "TUM pose")
         norm = float(np.sqrt(qx * qx + qy * qy + qz * qz + qw * qw))
         if abs(norm - 1.0) > 1e-2:  # printed to a few decimals a unit quaternion stays within 1e-3 of 1
-            raise LogFormatError(path, f"line {n_line}", f"quaternion ({qx}, {qy}, {qz}, {qw}) has length {norm:.4g}: "
-                                 f"expected a unit quaternion")
+            raise LogFormatError(
+                path,
+                f"line {n_line}",
+                f"quaternion ({qx}, {qy}, {qz}, {qw}) has length {norm:.4g}: expected a unit quaternion",
+            )
         if abs(qx) > 1e-3 or abs(qy) > 1e-3:
-            raise LogFormatError(path, f"line {n_line}", f"a 2D pose needs a rotation about z, found q = ({qx}, {qy}, {qz}, {qw})")
+            raise LogFormatError(
+                path, f"line {n_line}", f"a 2D pose needs a rotation about z, found q = ({qx}, {qy}, {qz}, {qw})"
+            )
         _check_pose(path, n_line, (x, y, 0.0))
         rows.append((t, x, y, 2.0 * np.arctan2(qz, qw)))
         lines.append(n_line)
     if not rows:
         raise LogFormatError(path, None, "no poses (empty file or comments only)")
     a = np.array(rows)
-    return check_pose_stamps(path, a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi]),
-                             lines)
+    return check_pose_stamps(
+        path, a[:, 0], np.column_stack([a[:, 1:3], (a[:, 3] + np.pi) % (2 * np.pi) - np.pi]), lines
+    )
 
 
 def write_tum(path, stamps, poses) -> None:
     """Poses [N, 3] (x, y, yaw) at ``stamps`` as a TUM trajectory (``read_tum``'s format), written atomically.
     A pose that is not finite (no estimate yet) has no line, as evo expects."""
-    lines = [f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {np.sin(a / 2):.9f} {np.cos(a / 2):.9f}" for t, (x, y, a) in zip(stamps, poses)
-             if np.isfinite(x) and np.isfinite(y) and np.isfinite(a)]
+    lines = [
+        f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {np.sin(a / 2):.9f} {np.cos(a / 2):.9f}"
+        for t, (x, y, a) in zip(stamps, poses)
+        if np.isfinite(x) and np.isfinite(y) and np.isfinite(a)
+    ]
     atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode())
 
 
@@ -130,26 +149,38 @@ def read_relations(path) -> Relations:
     for n_line, line in _content_lines(path):
         tok = line.split()
         if len(tok) != 8:
-            raise LogFormatError(path, f"line {n_line}", f"expected 8 values 't1 t2 x y z roll pitch yaw', found {len(tok)}")
+            raise LogFormatError(
+                path, f"line {n_line}", f"expected 8 values 't1 t2 x y z roll pitch yaw', found {len(tok)}"
+            )
         row = parse_floats(path, n_line, tok, "relation")
         if row[0] == row[1]:
             raise LogFormatError(path, f"line {n_line}", f"t1 = t2 = {row[0]:.6f}: a relation joins two scans")
         backwards += int(row[0] > row[1])
         if abs(row[7]) > np.pi + 1e-6 or max(abs(row[2]), abs(row[3])) > MAX_PLAUSIBLE_MOTION_M:
-            raise LogFormatError(path, f"line {n_line}", f"motion ({row[2]:g}, {row[3]:g}, yaw {row[7]:g}): expected "
-                                 f"metres and a yaw in radians within [-pi, pi]")
+            raise LogFormatError(
+                path,
+                f"line {n_line}",
+                f"motion ({row[2]:g}, {row[3]:g}, yaw {row[7]:g}): expected "
+                f"metres and a yaw in radians within [-pi, pi]",
+            )
         rows.append(row)
     if not rows:
         raise LogFormatError(path, None, "no relations")
     a = np.array(rows)
     if backwards:  # intel's: its logger's stamps step back (../shared/data/README.md); the motion is still t1 -> t2
-        warnings.warn(f"{path}: {backwards} relations whose t1 is later than t2 (a log whose clock steps back?); "
-                      f"each is scored as the motion from the scan stamped t1 to the one stamped t2", LogDefectWarning,
-                      stacklevel=2)
+        warnings.warn(
+            f"{path}: {backwards} relations whose t1 is later than t2 (a log whose clock steps back?); "
+            f"each is scored as the motion from the scan stamped t1 to the one stamped t2",
+            LogDefectWarning,
+            stacklevel=2,
+        )
     pairs = np.unique(a[:, :2], axis=0, return_counts=True)[1]
     if (pairs > 1).any():
-        warnings.warn(f"{path}: {int((pairs > 1).sum())} relations given more than once (each is scored as often)",
-                      LogDefectWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: {int((pairs > 1).sum())} relations given more than once (each is scored as often)",
+            LogDefectWarning,
+            stacklevel=2,
+        )
     return Relations(a[:, 0], a[:, 1], a[:, [2, 3, 7]])
 
 
@@ -168,8 +199,9 @@ def read_splits(path) -> dict[str, np.ndarray]:
     names = {f"{s}{b}" for s in ("train", "val", "test") for b in ("", "_block")}
     odd = sorted(k for k, v in d.items() if isinstance(v, list) and k not in names)
     if odd:
-        warnings.warn(f"{path}: lists of unknown split names {odd[:5]} (expected {sorted(names)})", LogDefectWarning,
-                      stacklevel=2)
+        warnings.warn(
+            f"{path}: lists of unknown split names {odd[:5]} (expected {sorted(names)})", LogDefectWarning, stacklevel=2
+        )
     for k, v in d.items():
         if not isinstance(v, list) or k not in names:
             continue
@@ -180,17 +212,25 @@ def read_splits(path) -> dict[str, np.ndarray]:
         back = np.flatnonzero(np.diff(stamps) < -MAX_SPLIT_STEP_BACK_S)
         if back.size:
             i = int(back[0])
-            raise LogFormatError(path, f"split {k!r}", f"stamp {stamps[i + 1]!r} (entry {i + 1}) lies "
-                                 f"{stamps[i] - stamps[i + 1]:g} s before the one listed before it: expected stamps in "
-                                 f"time order")
+            raise LogFormatError(
+                path,
+                f"split {k!r}",
+                f"stamp {stamps[i + 1]!r} (entry {i + 1}) lies "
+                f"{stamps[i] - stamps[i + 1]:g} s before the one listed before it: expected stamps in "
+                f"time order",
+            )
         gaps = np.diff(stamps)
         if gaps.size > 2:
             limit = max(60.0, 100.0 * float(np.median(np.abs(gaps))))
             if (gaps > limit).any():
                 i = int(np.argmax(gaps > limit))
-                raise LogFormatError(path, f"split {k!r}", f"stamps jump from {stamps[i]!r} to {stamps[i + 1]!r} (entry "
-                                     f"{i + 1}), {gaps[i]:g} s where they are {np.median(np.abs(gaps)):g} s apart "
-                                     f"otherwise: expected the stamps of one log (a number split in two?)")
+                raise LogFormatError(
+                    path,
+                    f"split {k!r}",
+                    f"stamps jump from {stamps[i]!r} to {stamps[i + 1]!r} (entry "
+                    f"{i + 1}), {gaps[i]:g} s where they are {np.median(np.abs(gaps)):g} s apart "
+                    f"otherwise: expected the stamps of one log (a number split in two?)",
+                )
         if len(np.unique(stamps)) != len(stamps):
             raise LogFormatError(path, f"split {k!r}", f"{len(stamps) - len(np.unique(stamps))} stamps listed twice")
         out[k] = stamps
@@ -202,8 +242,17 @@ def read_splits(path) -> dict[str, np.ndarray]:
 
 G2O_RECORD = re.compile(r"[A-Z][A-Z0-9_:]{1,39}")
 # g2o's 2D types besides the ones read here: skipped without a word
-G2O_KNOWN = {"VERTEX_XY", "EDGE_SE2_XY", "EDGE_PRIOR_SE2", "EDGE_SE2_PRIOR", "FIX", "PARAMS_SE2OFFSET",
-             "VERTEX_SE2_TAG", "EDGE_SE2_OFFSET", "EDGE_SE2_POINTXY"}
+G2O_KNOWN = {
+    "VERTEX_XY",
+    "EDGE_SE2_XY",
+    "EDGE_PRIOR_SE2",
+    "EDGE_SE2_PRIOR",
+    "FIX",
+    "PARAMS_SE2OFFSET",
+    "VERTEX_SE2_TAG",
+    "EDGE_SE2_OFFSET",
+    "EDGE_SE2_POINTXY",
+}
 
 
 @dataclass
@@ -241,8 +290,9 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
         tok = line.split()
         if tok[0] == "VERTEX_SE2":
             if len(tok) != 5:
-                raise LogFormatError(path, f"line {n_line}", f"VERTEX_SE2: expected 'id x y theta', found {len(tok) - 1} "
-                                     f"values")
+                raise LogFormatError(
+                    path, f"line {n_line}", f"VERTEX_SE2: expected 'id x y theta', found {len(tok) - 1} values"
+                )
             vid.append(_count(path, n_line, tok[1], "VERTEX_SE2 id"))
             v = parse_floats(path, n_line, tok[2:5], "VERTEX_SE2")
             _check_pose(path, n_line, v, "vertex")
@@ -250,8 +300,12 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
             vline.append(n_line)
         elif tok[0] == "EDGE_SE2":
             if len(tok) not in (6, 12):
-                raise LogFormatError(path, f"line {n_line}", f"EDGE_SE2: expected 'from to x y theta' and optionally "
-                                     f"the 6 values of the information matrix, found {len(tok) - 1} values")
+                raise LogFormatError(
+                    path,
+                    f"line {n_line}",
+                    f"EDGE_SE2: expected 'from to x y theta' and optionally "
+                    f"the 6 values of the information matrix, found {len(tok) - 1} values",
+                )
             parse_floats(path, n_line, tok[6:], "EDGE_SE2 information")
             ids = [_count(path, n_line, t, "EDGE_SE2 vertex id") for t in tok[1:3]]
             motion = parse_floats(path, n_line, tok[3:6], "EDGE_SE2")
@@ -264,8 +318,11 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
             ranges.append(np.asarray(scan.ranges, np.float64))
             max_range = scan.max_range
         elif not G2O_RECORD.fullmatch(tok[0]):
-            raise LogFormatError(path, f"line {n_line}", f"expected a record name (VERTEX_SE2, EDGE_SE2, ...), found "
-                                 f"{tok[0][:40]!r}: a line broken in two?")
+            raise LogFormatError(
+                path,
+                f"line {n_line}",
+                f"expected a record name (VERTEX_SE2, EDGE_SE2, ...), found {tok[0][:40]!r}: a line broken in two?",
+            )
         elif tok[0] not in G2O_KNOWN:
             unknown[tok[0]] = unknown.get(tok[0], 0) + 1
     if unknown:
@@ -286,19 +343,18 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
     repeated = len(edges) - len(np.unique(edges, axis=0))
     if repeated:
         warnings.warn(f"{path}: {repeated} EDGE_SE2 lines repeat another exactly", LogDefectWarning, stacklevel=2)
-    return G2oGraph(np.array(vid), np.array(vpose), edges, np.array(stamps),
-                    ranges, max_range)
+    return G2oGraph(np.array(vid), np.array(vpose), edges, np.array(stamps), ranges, max_range)
 
 
 def g2o_scan_stamps(graph: G2oGraph, ranges_m: np.ndarray, decimals: int = 2) -> np.ndarray:
     """True stamps for a log whose own stamps are not (MIT Killian's bag): the stamp of the g2o laser with
     the same range array, NaN for scans that are no g2o keyframe. Ranges are compared at the g2o file's
     printed precision, with every reading at or beyond its maximum range (or missing) as "no echo"."""
-    far = graph.laser_max_range_m - 0.5 * 10.0 ** -decimals
+    far = graph.laser_max_range_m - 0.5 * 10.0**-decimals
 
     def key(r) -> bytes:
         r = np.asarray(r, np.float64)
-        q = np.where(np.isfinite(r) & (r < far), np.round(r * 10 ** decimals), -1).astype(np.int64)
+        q = np.where(np.isfinite(r) & (r < far), np.round(r * 10**decimals), -1).astype(np.int64)
         return q.tobytes()
 
     index = {}

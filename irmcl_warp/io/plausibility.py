@@ -45,21 +45,34 @@ def check_map(path, occupancy_p: np.ndarray, known: np.ndarray) -> float | None:
     beside walls (thin lines: walls read as free); returns the share it warned about."""
     edge = free_on_walls_share(occupancy_p, known)
     if edge > MAX_FREE_ON_WALLS:
-        warnings.warn(f"{path}: {100 * edge:.0f} % of its known free cells touch an occupied cell, where a building's "
-                      f"free space is rooms and corridors many cells wide: are walls read as free space (an inverted "
-                      f"image, map_server's 'negate')?", LogDefectWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: {100 * edge:.0f} % of its known free cells touch an occupied cell, where a building's "
+            f"free space is rooms and corridors many cells wide: are walls read as free space (an inverted "
+            f"image, map_server's 'negate')?",
+            LogDefectWarning,
+            stacklevel=2,
+        )
         return edge
     share = occupied_share(occupancy_p, known)
     if share > MAX_OCCUPIED_SHARE:
-        warnings.warn(f"{path}: {100 * share:.0f} % of its known cells are occupied, where a building's map is mostly "
-                      f"free space: is the image inverted (white read as occupied)? map_server's 'negate: 1' flips it",
-                      LogDefectWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: {100 * share:.0f} % of its known cells are occupied, where a building's map is mostly "
+            f"free space: is the image inverted (white read as occupied)? map_server's 'negate: 1' flips it",
+            LogDefectWarning,
+            stacklevel=2,
+        )
         return share
     return None
 
 
-def beam_order_votes(ranges_m: np.ndarray, odom: np.ndarray, increment_rad: float, max_trans_m: float = 0.05,
-                     min_shift: int = 2, max_shift_share: float = 0.1) -> tuple[int, int]:
+def beam_order_votes(
+    ranges_m: np.ndarray,
+    odom: np.ndarray,
+    increment_rad: float,
+    max_trans_m: float = 0.05,
+    min_shift: int = 2,
+    max_shift_share: float = 0.1,
+) -> tuple[int, int]:
     """(turns where the scans line up as the log orders its beams, turns where they line up mirrored), over
     consecutive scans that turn on the spot by at least ``min_shift`` beams: a counter-clockwise turn by dtheta
     moves a wall from beam i + s to beam i in the next scan (s = dtheta / increment)."""
@@ -67,8 +80,11 @@ def beam_order_votes(ranges_m: np.ndarray, odom: np.ndarray, increment_rad: floa
     step = np.diff(np.asarray(odom, np.float64), axis=0)
     shift = np.round(np.angle(np.exp(1j * step[:, 2])) / increment_rad).astype(int)
     B = r.shape[1]
-    turns = np.flatnonzero((np.hypot(step[:, 0], step[:, 1]) <= max_trans_m) & (np.abs(shift) >= min_shift)
-                           & (np.abs(shift) <= max_shift_share * B))
+    turns = np.flatnonzero(
+        (np.hypot(step[:, 0], step[:, 1]) <= max_trans_m)
+        & (np.abs(shift) >= min_shift)
+        & (np.abs(shift) <= max_shift_share * B)
+    )
     ok_fwd = ok_rev = 0
     for k in turns:
         fwd, rev = (_mismatch(r[k], r[k + 1], s) for s in (shift[k], -shift[k]))
@@ -93,10 +109,14 @@ def check_beam_order(path, ranges_m, odom, increment_rad: float, min_turns: int 
     """Warn when the scans line up with the odometry's turns only with their beams mirrored; True if it warned."""
     fwd, rev = beam_order_votes(ranges_m, odom, increment_rad)
     if fwd + rev >= min_turns and rev > 3 * fwd:
-        warnings.warn(f"{path}: its beams appear to run the other way round: in {rev} of {fwd + rev} turns on the spot "
-                      f"consecutive scans line up with the odometry's rotation only when mirrored. Check the driver's "
-                      f"angle_increment sign (or data.angle_min_rad / data.fov_rad for a CARMEN log): mapped as they "
-                      f"are, the scans smear into a disc", LogDefectWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: its beams appear to run the other way round: in {rev} of {fwd + rev} turns on the spot "
+            f"consecutive scans line up with the odometry's rotation only when mirrored. Check the driver's "
+            f"angle_increment sign (or data.angle_min_rad / data.fov_rad for a CARMEN log): mapped as they "
+            f"are, the scans smear into a disc",
+            LogDefectWarning,
+            stacklevel=2,
+        )
         return True
     return False
 
@@ -107,9 +127,11 @@ def check_odometry(path, odom: np.ndarray, max_step_m: float = ABSURD_STEP_M) ->
     bad = np.flatnonzero(~np.isfinite(step) | (step > max_step_m))
     if len(bad):
         k = int(bad[0])
-        raise ValueError(f"{path}: the odometry jumps {step[k]:.4g} m between scans {k} and {k + 1} "
-                         f"({len(bad)} such step{'s' if len(bad) > 1 else ''}): corrupt odometry, which localization "
-                         f"would follow off the map; repair the log or cut it (localize.start_s / run_s)")
+        raise ValueError(
+            f"{path}: the odometry jumps {step[k]:.4g} m between scans {k} and {k + 1} "
+            f"({len(bad)} such step{'s' if len(bad) > 1 else ''}): corrupt odometry, which localization "
+            f"would follow off the map; repair the log or cut it (localize.start_s / run_s)"
+        )
 
 
 def near_no_return(ranges: np.ndarray, no_return_m: float, tol_m: float, below_m: float = 0.2) -> tuple[int, float]:

@@ -16,8 +16,7 @@ import numpy as np
 
 from irmcl_warp.geometry import interpolate_poses
 from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams
-from irmcl_warp.io.defects import (count_stamps_backwards, count_velocity_contradictions, repair_reversing,
-                                   scan_defects)
+from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, repair_reversing, scan_defects
 from irmcl_warp.io.errors import LogFormatError, warn_defects
 from irmcl_warp.types import DefectReport, LaserInfo, LaserLog, match_stamps
 
@@ -55,9 +54,15 @@ def _decode(path, where, msg) -> np.ndarray:
     need = h * w * ch * np.dtype(dt).itemsize
     buf = np.asarray(msg.data, np.uint8)
     if int(msg.step) < w * ch * np.dtype(dt).itemsize or buf.size < int(msg.step) * h:
-        raise LogFormatError(path, where, f"image of {w} x {h} {enc} needs {need} bytes, has {buf.size} (step {msg.step})")
+        raise LogFormatError(
+            path, where, f"image of {w} x {h} {enc} needs {need} bytes, has {buf.size} (step {msg.step})"
+        )
     rows = buf[: int(msg.step) * h].reshape(h, int(msg.step))[:, : w * ch * np.dtype(dt).itemsize]
-    a = np.frombuffer(rows.tobytes(), dt).reshape(h, w, ch) if ch == 3 else np.frombuffer(rows.tobytes(), dt).reshape(h, w)
+    a = (
+        np.frombuffer(rows.tobytes(), dt).reshape(h, w, ch)
+        if ch == 3
+        else np.frombuffer(rows.tobytes(), dt).reshape(h, w)
+    )
     if enc == "bgr8":
         a = a[..., ::-1]
     if enc == "16UC1":
@@ -75,8 +80,12 @@ def read_bag_images(path, rgb_topic: str = "/camera/rgb", depth_topic: str = "/c
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic in (rgb_topic, depth_topic)]
             if {c.topic for c in conns} != {rgb_topic, depth_topic}:
-                raise LogFormatError(path, None, f"expected image topics {rgb_topic} and {depth_topic}, found "
-                                     f"{sorted({c.topic for c in reader.connections if c.msgtype == IMAGE})}")
+                raise LogFormatError(
+                    path,
+                    None,
+                    f"expected image topics {rgb_topic} and {depth_topic}, found "
+                    f"{sorted({c.topic for c in reader.connections if c.msgtype == IMAGE})}",
+                )
             for k, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
                 msg = reader.deserialize(raw, conn.msgtype)
                 img = _decode(path, f"message {k} on {conn.topic}", msg)
@@ -106,13 +115,13 @@ class _Quaternions:
         v = np.array([q.x, q.y, q.z, q.w], np.float64)
         norm = float(np.linalg.norm(v)) if np.all(np.isfinite(v)) else float("nan")
         if not norm > 1e-6:
-            raise LogFormatError(path, where, f"quaternion ({q.x}, {q.y}, {q.z}, {q.w}) is no rotation: expected "
-                                 f"unit length")
+            raise LogFormatError(
+                path, where, f"quaternion ({q.x}, {q.y}, {q.z}, {q.w}) is no rotation: expected unit length"
+            )
         if abs(norm - 1.0) > 1e-3:
             self.unnormalised += 1
         x, y, z, w = v / norm if abs(norm - 1.0) > 1e-6 else v  # unit to float precision: read as written
         return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-
 
 
 @dataclass
@@ -136,7 +145,9 @@ def _pick_topic(path, conns, msgtype, wanted):
             raise LogFormatError(path, None, f"topic {wanted!r} not in bag (has {sorted({c.topic for c in conns})})")
         return wanted
     if len(topics) > 1:
-        raise LogFormatError(path, None, f"several {msgtype} topics {topics}: choose one (data.scan_topic / data.odom_topic)")
+        raise LogFormatError(
+            path, None, f"several {msgtype} topics {topics}: choose one (data.scan_topic / data.odom_topic)"
+        )
     return topics[0] if topics else None
 
 
@@ -152,17 +163,30 @@ def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, st
     try:
         scan_topic = _pick_topic(path, reader.connections, SCAN, scan_topic)
         if scan_topic is None:
-            raise LogFormatError(path, None, f"no {SCAN} topic (topics: {sorted({c.topic for c in reader.connections})})")
-        odom_topic = _pick_topic(path, [c for c in reader.connections if c.topic != GROUND_TRUTH_TOPIC], ODOM, odom_topic)
-        truth = GROUND_TRUTH_TOPIC if any(c.topic == GROUND_TRUTH_TOPIC and c.msgtype == ODOM for c in reader.connections) \
+            raise LogFormatError(
+                path, None, f"no {SCAN} topic (topics: {sorted({c.topic for c in reader.connections})})"
+            )
+        odom_topic = _pick_topic(
+            path, [c for c in reader.connections if c.topic != GROUND_TRUTH_TOPIC], ODOM, odom_topic
+        )
+        truth = (
+            GROUND_TRUTH_TOPIC
+            if any(c.topic == GROUND_TRUTH_TOPIC and c.msgtype == ODOM for c in reader.connections)
             else None
+        )
         conns = [c for c in reader.connections if c.topic in (scan_topic, odom_topic, truth) or c.msgtype == TF]
         counters: dict[str, int] = {}
         messages = reader.messages(connections=conns)
         from tqdm import tqdm
 
-        bar = tqdm(total=sum(c.msgcount for c in conns), desc=f"read {path.name}", unit="msg", mininterval=1.0,
-                   disable=None, leave=False)  # (on a terminal only)
+        bar = tqdm(
+            total=sum(c.msgcount for c in conns),
+            desc=f"read {path.name}",
+            unit="msg",
+            mininterval=1.0,
+            disable=None,
+            leave=False,
+        )  # (on a terminal only)
         while True:
             try:
                 conn, _, raw = next(messages)
@@ -171,12 +195,16 @@ def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, st
                 bar.close()
                 break
             except Exception as e:
-                raise LogFormatError(path, f"after message {sum(counters.values())}", f"bag is truncated or corrupt: {e}") from e
+                raise LogFormatError(
+                    path, f"after message {sum(counters.values())}", f"bag is truncated or corrupt: {e}"
+                ) from e
             k = counters[conn.topic] = counters.get(conn.topic, -1) + 1
             try:
                 msg = reader.deserialize(raw, conn.msgtype)
             except Exception as e:
-                raise LogFormatError(path, f"message {k} on {conn.topic}", f"cannot deserialize {conn.msgtype}: {e}") from e
+                raise LogFormatError(
+                    path, f"message {k} on {conn.topic}", f"cannot deserialize {conn.msgtype}: {e}"
+                ) from e
             _collect(s, conn, msg, scan_topic, odom_topic, k)
     finally:
         reader.close()
@@ -185,20 +213,46 @@ def _read_streams(path: Path, scan_topic, odom_topic) -> tuple[_Streams, str, st
 
 def _collect(s: _Streams, conn, msg, scan_topic, odom_topic, k):
     if conn.topic == scan_topic:
-        s.scans.append((_stamp(msg.header), getattr(msg.header, "seq", k), np.asarray(msg.ranges, dtype=np.float64),
-                         msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max, msg.header.frame_id, k))
+        s.scans.append(
+            (
+                _stamp(msg.header),
+                getattr(msg.header, "seq", k),
+                np.asarray(msg.ranges, dtype=np.float64),
+                msg.angle_min,
+                msg.angle_increment,
+                msg.range_min,
+                msg.range_max,
+                msg.header.frame_id,
+                k,
+            )
+        )
     elif conn.topic == GROUND_TRUTH_TOPIC and conn.msgtype == ODOM:
         p = msg.pose.pose
-        s.truth.append((_stamp(msg.header), p.position.x, p.position.y, s.yaw(p.orientation, f"message {k} on {conn.topic}")))
+        s.truth.append(
+            (_stamp(msg.header), p.position.x, p.position.y, s.yaw(p.orientation, f"message {k} on {conn.topic}"))
+        )
     elif conn.topic == odom_topic:
         p = msg.pose.pose
-        s.odom.append((_stamp(msg.header), getattr(msg.header, "seq", k), p.position.x, p.position.y,
-                       s.yaw(p.orientation, f"message {k} on {conn.topic}"), msg.twist.twist.linear.x))
+        s.odom.append(
+            (
+                _stamp(msg.header),
+                getattr(msg.header, "seq", k),
+                p.position.x,
+                p.position.y,
+                s.yaw(p.orientation, f"message {k} on {conn.topic}"),
+                msg.twist.twist.linear.x,
+            )
+        )
     elif conn.msgtype == TF:
         for t in msg.transforms:
             tr, q = t.transform.translation, t.transform.rotation
-            row = (t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"), tr.x, tr.y,
-                   s.yaw(q, f"message {k} on {conn.topic}"))
+            row = (
+                t.header.frame_id.lstrip("/"),
+                t.child_frame_id.lstrip("/"),
+                tr.x,
+                tr.y,
+                s.yaw(q, f"message {k} on {conn.topic}"),
+            )
             if conn.topic == "/tf_static":
                 s.tf_static.append(row)
             else:
@@ -213,9 +267,18 @@ def _recording_order(stamps, seqs):
     return np.arange(len(stamps))
 
 
-def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = None, base_frame: str | None = None,
-             odom_frame: str | None = None, beam_policy: BeamPolicy = "error", max_speed_mps: float = 3.0,
-             max_step_m: float = 2.0, repair_reversing: bool = False) -> LaserLog:
+def read_bag(
+    path,
+    *,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+    base_frame: str | None = None,
+    odom_frame: str | None = None,
+    beam_policy: BeamPolicy = "error",
+    max_speed_mps: float = 3.0,
+    max_step_m: float = 2.0,
+    repair_reversing: bool = False,
+) -> LaserLog:
     """``repair_reversing``: drive backwards the odometry steps whose messages report a negative forward
     velocity (io.defects.repair_reversing); the repair is counted in the log's defects."""
     path = Path(path)
@@ -228,8 +291,11 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     report.add("quaternions_not_unit", s.quats.unnormalised, "orientations off unit length by > 1e-3, normalised")
     stamps_read = np.array([r[0] for r in s.scans])
     rec = _recording_order(stamps_read, [r[1] for r in s.scans])
-    report.add("scans_stamps_backwards", count_stamps_backwards(stamps_read[rec]),
-               "scans stamped earlier than the scan recorded before them (header.seq order)")
+    report.add(
+        "scans_stamps_backwards",
+        count_stamps_backwards(stamps_read[rec]),
+        "scans stamped earlier than the scan recorded before them (header.seq order)",
+    )
     order = np.argsort(stamps_read, kind="stable")
     scans = [s.scans[i] for i in order]
     where = [f"message {r[8]} on {scan_topic}" for r in scans]
@@ -240,20 +306,30 @@ def read_bag(path, *, scan_topic: str | None = None, odom_topic: str | None = No
     # each scan's own limits mask its own beams (drivers write range_max for "no echo" too)
     rmin = np.array([float(r[5]) for r in scans])[:, None]
     rmax = np.array([float(r[6]) for r in scans])[:, None]
-    report.add("scans_with_other_range_limits", int(np.sum((rmin != rmin[0]) | (rmax != rmax[0]))),
-               f"scans whose range_min/range_max differ from the first scan's {rmin[0, 0]:g}/{rmax[0, 0]:g} m")
+    report.add(
+        "scans_with_other_range_limits",
+        int(np.sum((rmin != rmin[0]) | (rmax != rmax[0]))),
+        f"scans whose range_min/range_max differ from the first scan's {rmin[0, 0]:g}/{rmax[0, 0]:g} m",
+    )
     finite = np.isfinite(ranges)
     beyond = float(np.max(ranges[finite])) if finite.any() else float(rmax.max())
     with np.errstate(invalid="ignore"):
         bad = ~finite | (ranges < rmin) | (ranges >= rmax) | (ranges == 0)
-        report.add("beams_below_range_min", int(np.sum(finite & (ranges < rmin) & (ranges != 0))),
-                   "beams below range_min, masked")
-        report.add("zero_ranges", int(np.sum(ranges == 0)), "beams reading 0 m (a driver's no echo, even where "
-                   "range_min is 0), masked as no return")
+        report.add(
+            "beams_below_range_min",
+            int(np.sum(finite & (ranges < rmin) & (ranges != 0))),
+            "beams below range_min, masked",
+        )
+        report.add(
+            "zero_ranges",
+            int(np.sum(ranges == 0)),
+            "beams reading 0 m (a driver's no echo, even where range_min is 0), masked as no return",
+        )
     ranges = np.where(bad, np.nan, ranges).astype(np.float32)
     rmin0, rmax0 = float(np.median(rmin)), float(np.median(rmax))
-    info = LaserInfo(common.num_beams, common.angle_min_rad, common.angle_increment_rad, rmin0, rmax0,
-                     max(beyond, rmax0))
+    info = LaserInfo(
+        common.num_beams, common.angle_min_rad, common.angle_increment_rad, rmin0, rmax0, max(beyond, rmax0)
+    )
     stamps = np.array([r[0] for r in scans])
     laser_frame = first[7].lstrip("/")
     T_base_laser, base = _extrinsic(s.tf_static, laser_frame, base_frame, report)
@@ -281,11 +357,17 @@ def _odometry_at(path, s: _Streams, stamps, base, odom_frame, report, repair: bo
     if s.odom:
         od = np.array([r for r in s.odom])
         rec = _recording_order(od[:, 0], od[:, 1])
-        report.add("odom_stamps_backwards", count_stamps_backwards(od[rec, 0]),
-                   "odometry stamped earlier than the message recorded before it")
+        report.add(
+            "odom_stamps_backwards",
+            count_stamps_backwards(od[rec, 0]),
+            "odometry stamped earlier than the message recorded before it",
+        )
         od = od[np.argsort(od[:, 0], kind="stable")]
-        report.add("odometry_contradicts_velocity", count_velocity_contradictions(od[:, 2:5], od[:, 5]),
-                   "odometry steps moving against the message's own forward velocity")
+        report.add(
+            "odometry_contradicts_velocity",
+            count_velocity_contradictions(od[:, 2:5], od[:, 5]),
+            "odometry steps moving against the message's own forward velocity",
+        )
         src_t, src_p = od[:, 0], od[:, 2:5]
         if repair:
             src_p, n, metres = repair_reversing(src_p, od[:, 5])
@@ -333,28 +415,46 @@ class Messages:
 
     def pose(self, p):
         T = self.T
-        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=0.0),
-                                           orientation=self.quat(p[2]))
+        return T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=0.0), orientation=self.quat(p[2])
+        )
 
     def tf(self, stamp, parent, child, pose, seq=0):
         T = self.T
         tr = T["geometry_msgs/msg/Transform"](translation=self.vec3(pose[0], pose[1]), rotation=self.quat(pose[2]))
-        return T[TF](transforms=[T["geometry_msgs/msg/TransformStamped"](header=self.header(stamp, parent, seq),
-                                                                          child_frame_id=child, transform=tr)])
+        return T[TF](
+            transforms=[
+                T["geometry_msgs/msg/TransformStamped"](
+                    header=self.header(stamp, parent, seq), child_frame_id=child, transform=tr
+                )
+            ]
+        )
 
     def odom(self, stamp, pose, v, odom_frame, base_frame, seq=0):
         T, cov = self.T, np.zeros(36)
-        tw = T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
-            linear=self.vec3(v), angular=self.vec3()), covariance=cov)
-        return T[ODOM](header=self.header(stamp, odom_frame, seq), child_frame_id=base_frame,
-                       pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(pose), covariance=cov), twist=tw)
+        tw = T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](linear=self.vec3(v), angular=self.vec3()), covariance=cov
+        )
+        return T[ODOM](
+            header=self.header(stamp, odom_frame, seq),
+            child_frame_id=base_frame,
+            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(pose), covariance=cov),
+            twist=tw,
+        )
 
     def scan(self, stamp, info, ranges, laser_frame, seq=0):
-        return self.T[SCAN](header=self.header(stamp, laser_frame, seq), angle_min=info.angle_min_rad,
-                            angle_max=info.angle_min_rad + info.fov_rad, angle_increment=info.angle_increment_rad,
-                            time_increment=0.0, scan_time=0.0, range_min=info.range_min_m, range_max=info.range_max_m,
-                            ranges=np.where(np.isfinite(ranges), ranges, np.inf).astype(np.float32),
-                            intensities=np.zeros(0, np.float32))
+        return self.T[SCAN](
+            header=self.header(stamp, laser_frame, seq),
+            angle_min=info.angle_min_rad,
+            angle_max=info.angle_min_rad + info.fov_rad,
+            angle_increment=info.angle_increment_rad,
+            time_increment=0.0,
+            scan_time=0.0,
+            range_min=info.range_min_m,
+            range_max=info.range_max_m,
+            ranges=np.where(np.isfinite(ranges), ranges, np.inf).astype(np.float32),
+            intensities=np.zeros(0, np.float32),
+        )
 
 
 def latched_qos():
@@ -362,9 +462,19 @@ def latched_qos():
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     never = QosTime(sec=0, nsec=0)
-    return [Qos(history=QosHistory.KEEP_LAST, depth=1, reliability=QosReliability.RELIABLE,
-                durability=QosDurability.TRANSIENT_LOCAL, deadline=never, lifespan=never,
-                liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=never, avoid_ros_namespace_conventions=False)]
+    return [
+        Qos(
+            history=QosHistory.KEEP_LAST,
+            depth=1,
+            reliability=QosReliability.RELIABLE,
+            durability=QosDurability.TRANSIENT_LOCAL,
+            deadline=never,
+            lifespan=never,
+            liveliness=QosLiveliness.AUTOMATIC,
+            liveliness_lease_duration=never,
+            avoid_ros_namespace_conventions=False,
+        )
+    ]
 
 
 def bag_writer(path: Path, version: int, storage: str = "sqlite3"):
@@ -386,8 +496,11 @@ def bag_writer(path: Path, version: int, storage: str = "sqlite3"):
 
         partial.mkdir(parents=True)
         tmp = partial / path.name  # the bag folder under its own name: its storage file takes that name
-        writer = Writer(tmp, version=9 if storage == "mcap" else 8,
-                        storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+        writer = Writer(
+            tmp,
+            version=9 if storage == "mcap" else 8,
+            storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3,
+        )
 
     def finish() -> Path:
         if path.is_dir():
@@ -407,12 +520,27 @@ def add_connection(writer, msgs: Messages, topic: str, msgtype: str, latched: bo
     """A topic of ``msgtype``; ``latched``: a ROS 1 latching connection, a ROS 2 transient-local QoS."""
     if msgs.version == 1:
         return writer.add_connection(topic, msgtype, typestore=msgs.ts, latching=1 if latched else None)
-    return writer.add_connection(topic, msgtype, typestore=msgs.ts, offered_qos_profiles=latched_qos() if latched else ())
+    return writer.add_connection(
+        topic, msgtype, typestore=msgs.ts, offered_qos_profiles=latched_qos() if latched else ()
+    )
 
 
-def write_bag(log: LaserLog, path, *, version: int = 1, storage: str = "sqlite3", scan_topic="/scan", odom_topic="/odom",
-              odom_frame="odom", base_frame="base_link", laser_frame="laser", images: "CameraFrames | None" = None,
-              rgb_topic="/camera/rgb", depth_topic="/camera/depth", camera_frame="camera") -> Path:
+def write_bag(
+    log: LaserLog,
+    path,
+    *,
+    version: int = 1,
+    storage: str = "sqlite3",
+    scan_topic="/scan",
+    odom_topic="/odom",
+    odom_frame="odom",
+    base_frame="base_link",
+    laser_frame="laser",
+    images: "CameraFrames | None" = None,
+    rgb_topic="/camera/rgb",
+    depth_topic="/camera/depth",
+    camera_frame="camera",
+) -> Path:
     """Write a LaserLog as a ROS1 bag (``version=1``) or ROS2 bag folder (``version=2``; ``storage`` sqlite3 or
     mcap).
 
@@ -429,26 +557,62 @@ def write_bag(log: LaserLog, path, *, version: int = 1, storage: str = "sqlite3"
     v = (step[:, 0] * np.cos(log.odom[:, 2]) + step[:, 1] * np.sin(log.odom[:, 2])) / np.maximum(dt, 1e-6)
     writer, finish, discard = bag_writer(path, version, storage)
     try:
-        _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_frame, laser_frame, images,
-                   rgb_topic, depth_topic, camera_frame)
+        _write_all(
+            writer,
+            msgs,
+            log,
+            v,
+            scan_topic,
+            odom_topic,
+            odom_frame,
+            base_frame,
+            laser_frame,
+            images,
+            rgb_topic,
+            depth_topic,
+            camera_frame,
+        )
     except BaseException:
         discard()
         raise
     return finish()
 
 
-def _write_all(writer, msgs, log, v, scan_topic, odom_topic, odom_frame, base_frame, laser_frame, images=None,
-               rgb_topic=None, depth_topic=None, camera_frame=None):
+def _write_all(
+    writer,
+    msgs,
+    log,
+    v,
+    scan_topic,
+    odom_topic,
+    odom_frame,
+    base_frame,
+    laser_frame,
+    images=None,
+    rgb_topic=None,
+    depth_topic=None,
+    camera_frame=None,
+):
     T, ser = msgs.T, msgs.serialize
     with writer:
         if images is not None:
-            c_rgb, c_depth = add_connection(writer, msgs, rgb_topic, IMAGE), add_connection(writer, msgs, depth_topic, IMAGE)
+            c_rgb, c_depth = (
+                add_connection(writer, msgs, rgb_topic, IMAGE),
+                add_connection(writer, msgs, depth_topic, IMAGE),
+            )
             for i, stamp in enumerate(images.stamps):
                 ns = int(round(stamp * 1e9))
                 for c, img, enc in ((c_rgb, images.rgb[i], "rgb8"), (c_depth, images.depth[i], images.depth_encoding)):
                     data, step = _encode(img, enc)
-                    msg = T[IMAGE](header=msgs.header(stamp, camera_frame, i), height=img.shape[0], width=img.shape[1],
-                                   encoding=enc, is_bigendian=0, step=step, data=data)
+                    msg = T[IMAGE](
+                        header=msgs.header(stamp, camera_frame, i),
+                        height=img.shape[0],
+                        width=img.shape[1],
+                        encoding=enc,
+                        is_bigendian=0,
+                        step=step,
+                        data=data,
+                    )
                     writer.write(c, ns, ser(msg, IMAGE))
 
         c_static = add_connection(writer, msgs, "/tf_static", TF, latched=True)

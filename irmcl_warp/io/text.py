@@ -50,8 +50,11 @@ def parse_floats(path, line_no, tokens, what):
         values = np.array(tokens, dtype=np.float64)
     except ValueError:
         bad = next(t for t in tokens if not _is_float(t))
-        raise LogFormatError(path, f"line {line_no}", f"{what}: expected a number, found {bad[:40]!r}"
-                             + (f" ({len(bad)} characters)" if len(bad) > 40 else "")) from None
+        raise LogFormatError(
+            path,
+            f"line {line_no}",
+            f"{what}: expected a number, found {bad[:40]!r}" + (f" ({len(bad)} characters)" if len(bad) > 40 else ""),
+        ) from None
     if not np.all(np.isfinite(values)):
         raise LogFormatError(path, f"line {line_no}", f"{what}: NaN or infinite value")
     return values
@@ -64,8 +67,9 @@ def check_comment(path, n_line, line):
     """A comment that holds a record's worth of numbers swallowed the next line when a line break was lost."""
     numbers = sum(_is_float(t) for t in line.replace(",", " ").split())
     if numbers >= COMMENT_NUMBERS:
-        raise LogFormatError(path, f"line {n_line}", f"a comment holds {numbers} numbers: a record joined to it "
-                             f"(a lost line break)?")
+        raise LogFormatError(
+            path, f"line {n_line}", f"a comment holds {numbers} numbers: a record joined to it (a lost line break)?"
+        )
 
 
 def _is_float(t):

@@ -42,8 +42,9 @@ def grid_bounds(log: LaserLog, T_map_base: np.ndarray, max_range_m: float, margi
     return laser_bounds(compose(T_map_base, log.T_base_laser), log.ranges_m, log.info.angles_rad, max_range_m, margin_m)
 
 
-def laser_bounds(T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: np.ndarray, max_range_m: float,
-                 margin_m: float = 1.0):
+def laser_bounds(
+    T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: np.ndarray, max_range_m: float, margin_m: float = 1.0
+):
     r = np.minimum(np.nan_to_num(ranges_m, nan=0.0), max_range_m)
     pts = np.stack([r * np.cos(angles_rad), r * np.sin(angles_rad)], -1)
     ends = np.concatenate([transform_points(T_map_laser, pts).reshape(-1, 2), np.asarray(T_map_laser)[:, :2]])
@@ -60,10 +61,22 @@ def build_map(log: LaserLog, T_map_base: np.ndarray, **settings) -> OccupancyGri
     return integrate_scans(compose(T_map_base, log.T_base_laser), log.ranges_m, log.info.angles_rad, **settings)
 
 
-def integrate_scans(T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: np.ndarray, *,
-                    resolution_m: float = 0.05, max_range_m: float = 30.0, l_occ: float = 0.85, l_free: float = -0.4,
-                    l_min: float = -4.0, l_max: float = 4.0, batch_scans: int = 256, bounds=None,
-                    kernel: str = "logodds", device: str = "auto") -> OccupancyGrid:
+def integrate_scans(
+    T_map_laser: np.ndarray,
+    ranges_m: np.ndarray,
+    angles_rad: np.ndarray,
+    *,
+    resolution_m: float = 0.05,
+    max_range_m: float = 30.0,
+    l_occ: float = 0.85,
+    l_free: float = -0.4,
+    l_min: float = -4.0,
+    l_max: float = 4.0,
+    batch_scans: int = 256,
+    bounds=None,
+    kernel: str = "logodds",
+    device: str = "auto",
+) -> OccupancyGrid:
     """Log-odds grid from laser poses [S, 3] and ranges [S, B] (NaN = no return). Returns it on the host."""
     xmin, ymin, xmax, ymax = bounds or laser_bounds(T_map_laser, ranges_m, angles_rad, max_range_m)
     W, H = int(np.ceil((xmax - xmin) / resolution_m)), int(np.ceil((ymax - ymin) / resolution_m))
@@ -75,7 +88,7 @@ def integrate_scans(T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: n
     angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=dev)
     T_map_laser = np.asarray(T_map_laser, np.float32)
     for s in range(0, len(T_map_laser), batch_scans):
-        poses = wp.array(T_map_laser[s:s + batch_scans], dtype=wp.vec3, device=dev)
-        ranges = wp.array(np.asarray(ranges_m[s:s + batch_scans], np.float32), dtype=wp.float32, device=dev)
+        poses = wp.array(T_map_laser[s : s + batch_scans], dtype=wp.vec3, device=dev)
+        ranges = wp.array(np.asarray(ranges_m[s : s + batch_scans], np.float32), dtype=wp.float32, device=dev)
         integrator.integrate(logodds, (xmin, ymin), resolution_m, poses, ranges, angles)
     return OccupancyGrid(logodds.numpy(), (xmin, ymin), resolution_m)

@@ -42,9 +42,11 @@ def save_map(grid: OccupancyGrid, stem) -> dict[str, Path]:
     img = to_trinary(grid)
     H, W = img.shape
     atomic_write_bytes(stem.with_suffix(".pgm"), f"P5\n{W} {H}\n255\n".encode() + img.tobytes())
-    yaml = (f"image: {stem.name}.pgm\nresolution: {grid.resolution_m}\n"
-            f"origin: [{grid.origin_xy[0]}, {grid.origin_xy[1]}, 0.0]\nnegate: 0\n"
-            f"occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\nmode: trinary\n")
+    yaml = (
+        f"image: {stem.name}.pgm\nresolution: {grid.resolution_m}\n"
+        f"origin: [{grid.origin_xy[0]}, {grid.origin_xy[1]}, 0.0]\nnegate: 0\n"
+        f"occupied_thresh: {OCCUPIED_THRESH}\nfree_thresh: {FREE_THRESH}\nmode: trinary\n"
+    )
     atomic_write_bytes(stem.with_suffix(".yaml"), yaml.encode())
     import io
 
@@ -68,7 +70,7 @@ def _read_pgm(path: Path) -> np.ndarray:
     while len(tokens) < 4:
         while pos < len(data) and chr(data[pos]).isspace():
             pos += 1
-        if pos < len(data) and data[pos:pos + 1] == b"#":
+        if pos < len(data) and data[pos : pos + 1] == b"#":
             pos = data.find(b"\n", pos) + 1
             if pos == 0:
                 raise ValueError(f"{path}: truncated PGM header (a comment runs to the end of the file)")
@@ -82,13 +84,15 @@ def _read_pgm(path: Path) -> np.ndarray:
     if tokens[0] != "P5":
         raise ValueError(f"{path}: expected a binary PGM (P5), found {tokens[0]!r}")
     if not all(t.isdigit() and 0 < int(t) < 1 << 16 for t in tokens[1:4]):
-        raise ValueError(f"{path}: PGM width, height and maxval must be whole numbers from 1 to 65535, found "
-                         f"{[t[:20] for t in tokens[1:4]]}")
+        raise ValueError(
+            f"{path}: PGM width, height and maxval must be whole numbers from 1 to 65535, found "
+            f"{[t[:20] for t in tokens[1:4]]}"
+        )
     W, H, maxval = int(tokens[1]), int(tokens[2]), int(tokens[3])
-    pixels = data[pos + 1:]
+    pixels = data[pos + 1 :]
     if maxval > 255 or len(pixels) < W * H:
         raise ValueError(f"{path}: expected {W}x{H} 8-bit pixels, found {len(pixels)} bytes")
-    return np.frombuffer(pixels[:W * H], dtype=np.uint8).reshape(H, W)
+    return np.frombuffer(pixels[: W * H], dtype=np.uint8).reshape(H, W)
 
 
 def _read_image(path: Path) -> np.ndarray:
@@ -135,8 +139,11 @@ def _read_map_yaml(path: Path) -> dict:
         if key not in raw:
             raise ValueError(f"{path}: map YAML lacks {key!r}")
     if text and not text.endswith("\n"):
-        warnings.warn(f"{path}: ends without a newline: if it was cut off, its last value may be cut too",
-                      LogDefectWarning, stacklevel=3)
+        warnings.warn(
+            f"{path}: ends without a newline: if it was cut off, its last value may be cut too",
+            LogDefectWarning,
+            stacklevel=3,
+        )
     meta = dict(raw)
     if not isinstance(raw["origin"], list):
         raise ValueError(f"{path}: origin must be [x, y, yaw], found {raw['origin']!r}")
@@ -164,8 +171,11 @@ def load_map(path) -> OccupancyGrid:
         return grid
     meta = _read_map_yaml(path)
     origin, res = meta["origin"], meta["resolution"]
-    if not (isinstance(origin, list) and len(origin) in (2, 3)
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1e7 for v in origin)):
+    if not (
+        isinstance(origin, list)
+        and len(origin) in (2, 3)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1e7 for v in origin)
+    ):
         raise ValueError(f"{path}: origin must be [x, y, yaw], found {origin!r}")
     if len(origin) == 3 and abs(origin[2]) > 1e-9:
         raise ValueError(f"{path}: origin yaw {origin[2]} is not supported (rotate the image into the map frame)")

@@ -32,8 +32,16 @@ MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set 
 COARSE_TOLERANCE_M = 0.5  # ScanAgreement.search's first pass: poses 0.5 m and 22.5 deg apart are scored this loosely
 RIGHT_M = 0.5  # issue 33: the estimate counts as right within 0.5 m ...
 RIGHT_DEG = 10.0  # ... and 10 deg of the truth
-FEATURES = ("top_weight", "second_weight", "agreement", "agreement_margin", "agreement_recent", "rival_margin",
-            "log_updates", "log_spread")
+FEATURES = (
+    "top_weight",
+    "second_weight",
+    "agreement",
+    "agreement_margin",
+    "agreement_recent",
+    "rival_margin",
+    "log_updates",
+    "log_spread",
+)
 
 
 @dataclass
@@ -87,8 +95,15 @@ class ScanAgreement:
     an occupancy grid ``occupancy`` [H, W] (p_occ; lower-left corner ``origin_xy``). Every ``beam_step``-th
     beam is used; end points off the grid count as not agreeing."""
 
-    def __init__(self, occupancy, origin_xy, resolution_m: float, occ_threshold: float = 0.65,
-                 tolerance_m: float = 0.2, beam_step: int = 4):
+    def __init__(
+        self,
+        occupancy,
+        origin_xy,
+        resolution_m: float,
+        occ_threshold: float = 0.65,
+        tolerance_m: float = 0.2,
+        beam_step: int = 4,
+    ):
         walls = np.asarray(occupancy) >= occ_threshold
         if not walls.any():
             raise ValueError("scan agreement: the map has no wall")
@@ -102,8 +117,8 @@ class ScanAgreement:
 
     def many(self, poses, ranges_m, angles_rad, T_base_laser, coarse: bool = False) -> np.ndarray:
         """The agreement at each of ``poses`` [k, 3]: [k] (``coarse``: within COARSE_TOLERANCE_M of a wall)."""
-        r = np.asarray(ranges_m, float)[::self.step]
-        a = np.asarray(angles_rad, float)[::self.step]
+        r = np.asarray(ranges_m, float)[:: self.step]
+        a = np.asarray(angles_rad, float)[:: self.step]
         ok = np.isfinite(r)
         poses = np.asarray(poses, float)
         if not ok.any():
@@ -121,14 +136,24 @@ class ScanAgreement:
         hits[inside] = near[iy[inside], ix[inside]]
         return hits.mean(1)
 
-    def search(self, candidates, ranges_m, angles_rad, T_base_laser, away_from, apart_m: float, count: int = 3,
-               chunk: int = 4096) -> list[tuple[np.ndarray, float]]:
+    def search(
+        self,
+        candidates,
+        ranges_m,
+        angles_rad,
+        T_base_laser,
+        away_from,
+        apart_m: float,
+        count: int = 3,
+        chunk: int = 4096,
+    ) -> list[tuple[np.ndarray, float]]:
         """Look-alike places: the ``count`` best agreeing of ``candidates`` [k, 3] (a coarse grid of the map's free
         space), each at least ``apart_m`` from ``away_from`` [x, y] and from each other, refined twice (0.2 m /
         0.1 rad steps, then 0.1 m / 0.05 rad): [(pose, agreement)], best first."""
         scan = (ranges_m, angles_rad, T_base_laser)
-        score = np.concatenate([self.many(candidates[i:i + chunk], *scan, coarse=True)
-                                for i in range(0, len(candidates), chunk)])
+        score = np.concatenate(
+            [self.many(candidates[i : i + chunk], *scan, coarse=True) for i in range(0, len(candidates), chunk)]
+        )
         order = np.argsort(-score, kind="stable")
         picked = []
         for i in order[:200]:
@@ -168,9 +193,18 @@ class FeatureTracker:
       scan fits as well as the estimate's, and keeps them as rivals (``ScanAgreement.search``): a look-alike place
       the particle set never held, or dropped before it became a mode."""
 
-    def __init__(self, agreement: ScanAgreement, recent: int = 10, rival_weight: float = 0.02, rival_apart_m: float = 2.0,
-                 rule_out: float = 0.25, max_rivals: int = 16, refine_rivals: bool = False, search_poses=None,
-                 search_every: int = 0):
+    def __init__(
+        self,
+        agreement: ScanAgreement,
+        recent: int = 10,
+        rival_weight: float = 0.02,
+        rival_apart_m: float = 2.0,
+        rule_out: float = 0.25,
+        max_rivals: int = 16,
+        refine_rivals: bool = False,
+        search_poses=None,
+        search_every: int = 0,
+    ):
         self.agreement, self.refine_rivals = agreement, refine_rivals
         self.search_poses, self.search_every = search_poses, int(search_every)
         self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
@@ -184,8 +218,9 @@ class FeatureTracker:
         self.rival_history = np.zeros((0, self.recent))  # NaN-padded recent agreements, newest last
         self.updates = 0
 
-    def __call__(self, particles, log_w, ranges_m, angles_rad, T_base_laser, odom_delta=(0.0, 0.0, 0.0)
-                 ) -> tuple[np.ndarray, Modes]:
+    def __call__(
+        self, particles, log_w, ranges_m, angles_rad, T_base_laser, odom_delta=(0.0, 0.0, 0.0)
+    ) -> tuple[np.ndarray, Modes]:
         """``odom_delta``: the odometry's motion since the last update, in the robot's frame (x, y, yaw)."""
         stride = -(-len(log_w) // MAX_PARTICLES)  # a systematic sample of a large set (a GPU's 100k)
         particles, log_w = np.asarray(particles)[::stride], np.asarray(log_w)[::stride]
@@ -197,8 +232,18 @@ class FeatureTracker:
         self.history.append(top)
         recent_top = float(np.mean(self.history))
         rival_margin = self._rivals(m, odom_delta, scan, recent_top)
-        f = np.array([m.weights[0], m.weights[1] if len(m.weights) > 1 else 0.0, top, top - second, recent_top,
-                      rival_margin, np.log1p(self.updates), np.log(spread(particles, log_w) + 0.01)])
+        f = np.array(
+            [
+                m.weights[0],
+                m.weights[1] if len(m.weights) > 1 else 0.0,
+                top,
+                top - second,
+                recent_top,
+                rival_margin,
+                np.log1p(self.updates),
+                np.log(spread(particles, log_w) + 0.01),
+            ]
+        )
         return f, m
 
     def _rivals(self, m: Modes, odom_delta, scan, recent_top: float) -> float:
@@ -206,8 +251,11 @@ class FeatureTracker:
             self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
         found = []
         if self.search_every > 0 and self.search_poses is not None and self.updates % self.search_every == 0:
-            found = [(p, 1.0) for p, a in self.agreement.search(self.search_poses, *scan, m.poses[0],
-                                                                 self.rival_apart_m) if a > recent_top - self.rule_out]
+            found = [
+                (p, 1.0)
+                for p, a in self.agreement.search(self.search_poses, *scan, m.poses[0], self.rival_apart_m)
+                if a > recent_top - self.rule_out
+            ]
         for pose, w in [*zip(m.poses[1:], m.weights[1:]), *found]:
             if w < self.rival_weight or np.hypot(*(pose[:2] - m.poses[0, :2])) < self.rival_apart_m:
                 continue
@@ -235,8 +283,13 @@ class FeatureTracker:
 def compose_rows(poses: np.ndarray, delta: np.ndarray) -> np.ndarray:
     """Each pose [k, 3] moved by ``delta`` (x, y, yaw) in its own frame."""
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    return np.column_stack([poses[:, 0] + c * delta[0] - s * delta[1], poses[:, 1] + s * delta[0] + c * delta[1],
-                            np.angle(np.exp(1j * (poses[:, 2] + delta[2])))])
+    return np.column_stack(
+        [
+            poses[:, 0] + c * delta[0] - s * delta[1],
+            poses[:, 1] + s * delta[0] + c * delta[1],
+            np.angle(np.exp(1j * (poses[:, 2] + delta[2]))),
+        ]
+    )
 
 
 def right(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
@@ -263,15 +316,23 @@ class Confidence:
         try:
             doc = json.loads(path.read_text())
             if tuple(doc["features"]) != FEATURES:
-                raise ValueError(f"features {doc['features']}, this code computes {list(FEATURES)}: fit it again "
-                                 "(python -m eval.confidence fit)")
+                raise ValueError(
+                    f"features {doc['features']}, this code computes {list(FEATURES)}: fit it again "
+                    "(python -m eval.confidence fit)"
+                )
             return cls(doc["coef"], doc["intercept"], doc["mean"], doc["scale"], doc)
         except (OSError, KeyError, json.JSONDecodeError) as e:
             raise ValueError(f"{path}: not a confidence calibration ({e})") from None
 
     def to_json(self) -> dict:
-        return {**self.meta, "features": list(FEATURES), "coef": self.coef.tolist(), "intercept": self.intercept,
-                "mean": self.mean.tolist(), "scale": self.scale.tolist()}
+        return {
+            **self.meta,
+            "features": list(FEATURES),
+            "coef": self.coef.tolist(),
+            "intercept": self.intercept,
+            "mean": self.mean.tolist(),
+            "scale": self.scale.tolist(),
+        }
 
 
 shipped = shipped_calibration
@@ -314,7 +375,7 @@ def auroc(score: np.ndarray, label: np.ndarray) -> float:
         j = i
         while j + 1 < len(s) and s[j + 1] == s[i]:
             j += 1
-        ranks[order[i:j + 1]] = (i + j) / 2 + 1
+        ranks[order[i : j + 1]] = (i + j) / 2 + 1
         i = j + 1
     return float((ranks[label].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
 
@@ -324,9 +385,17 @@ def reliability(prob: np.ndarray, label: np.ndarray, bins: int = 10) -> list[dic
     prob, label = np.asarray(prob, float), np.asarray(label, bool)
     edges = np.linspace(0, 1, bins + 1)
     which = np.clip(np.digitize(prob, edges) - 1, 0, bins - 1)
-    return [{"from": float(edges[b]), "to": float(edges[b + 1]), "predicted": float(prob[which == b].mean()),
-             "observed": float(label[which == b].mean()), "count": int((which == b).sum())}
-            for b in range(bins) if (which == b).any()]
+    return [
+        {
+            "from": float(edges[b]),
+            "to": float(edges[b + 1]),
+            "predicted": float(prob[which == b].mean()),
+            "observed": float(label[which == b].mean()),
+            "count": int((which == b).sum()),
+        }
+        for b in range(bins)
+        if (which == b).any()
+    ]
 
 
 class Judge:

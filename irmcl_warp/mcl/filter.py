@@ -25,11 +25,17 @@ from irmcl_warp.kernels.resample import LogMeanLikelihood, ParticleWeights, Resa
 
 # mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
 ESTIMATORS = {
-    "top_share": lambda cfg, n, bounds, d: ESTIMATE.build("top_share", num_particles=n, share=cfg.estimate_share,
-                                                          device=d),
-    "best_cluster": lambda cfg, n, bounds, d: ESTIMATE.build("best_cluster", num_particles=n, bounds=bounds,
-                                                             cell_m=cfg.cluster_cell_m, yaw_bins=cfg.cluster_yaw_bins,
-                                                             device=d),
+    "top_share": lambda cfg, n, bounds, d: ESTIMATE.build(
+        "top_share", num_particles=n, share=cfg.estimate_share, device=d
+    ),
+    "best_cluster": lambda cfg, n, bounds, d: ESTIMATE.build(
+        "best_cluster",
+        num_particles=n,
+        bounds=bounds,
+        cell_m=cfg.cluster_cell_m,
+        yaw_bins=cfg.cluster_yaw_bins,
+        device=d,
+    ),
     "mean": lambda cfg, n, bounds, d: None,
 }
 
@@ -78,8 +84,16 @@ def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray
 
 
 class ParticleFilter:
-    def __init__(self, free_space, cfg: MCLConfig, T_base_laser, scan_angles_rad, far_m: float, make_weighting,
-                 device: str = "auto"):
+    def __init__(
+        self,
+        free_space,
+        cfg: MCLConfig,
+        T_base_laser,
+        scan_angles_rad,
+        far_m: float,
+        make_weighting,
+        device: str = "auto",
+    ):
         """``free_space``: a NOG whose zero nodes are free space (the uniform start and recovery draw there);
         ``far_m``: beams at or beyond are no return; ``make_weighting(num_particles, num_beams)``: the
         observation model sized for the filter (services.filters.build_filter makes it), called again by
@@ -91,17 +105,29 @@ class ParticleFilter:
         if cfg.estimate not in ESTIMATORS:
             raise ValueError(f"MCL: unknown estimate {cfg.estimate!r}; choose one of {sorted(ESTIMATORS)}")
         self.beam_index = pick_beams(n_sensor, cfg.num_beams, cfg.beam_pick)
-        self.num_sensor_beams, self.free_space, self.T_base_laser = n_sensor, free_space, tuple(map(float, T_base_laser))
+        self.num_sensor_beams, self.free_space, self.T_base_laser = (
+            n_sensor,
+            free_space,
+            tuple(map(float, T_base_laser)),
+        )
         N, B, d = cfg.num_particles, len(self.beam_index), self.device
         if cfg.motion not in ("odometry", "irmcl"):
             raise ValueError(f"MCL: mcl.motion={cfg.motion!r}; choose odometry or irmcl")
-        self.motion = (MOTION.build("odometry", alphas=cfg.alphas, device=d) if cfg.motion == "odometry" else
-                       MOTION.build("irmcl", noise=cfg.motion_noise, device=d))
+        self.motion = (
+            MOTION.build("odometry", alphas=cfg.alphas, device=d)
+            if cfg.motion == "odometry"
+            else MOTION.build("irmcl", noise=cfg.motion_noise, device=d)
+        )
         self.make_weighting = make_weighting
         self.resampler = RESAMPLE.build(cfg.resample, device=d)
         H, W = free_space.shape
         lo = np.asarray(free_space.origin_xy, float)
-        self.bounds = (lo[0], lo[1], lo[0] + (W - 1) * free_space.resolution_m, lo[1] + (H - 1) * free_space.resolution_m)
+        self.bounds = (
+            lo[0],
+            lo[1],
+            lo[0] + (W - 1) * free_space.resolution_m,
+            lo[1] + (H - 1) * free_space.resolution_m,
+        )
         self._allocate(N)
         self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
         self.inputs = StepInputs(B, d)
@@ -116,7 +142,9 @@ class ParticleFilter:
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
         self.log_mean_likelihood = LogMeanLikelihood(d)
-        free = np.argwhere(free_space.occupancy < 0.5)[:, ::-1] * free_space.resolution_m + np.asarray(free_space.origin_xy)
+        free = np.argwhere(free_space.occupancy < 0.5)[:, ::-1] * free_space.resolution_m + np.asarray(
+            free_space.origin_xy
+        )
         self.free_xy = wp.array(free.astype(np.float32), dtype=wp.vec2, device=d) if len(free) else None
 
     def _allocate(self, n: int) -> None:
@@ -158,7 +186,11 @@ class ParticleFilter:
             raise ValueError("MCL: the map has no free space to spread particles over")
         k = self.rng.integers(0, len(ix), self.cfg.num_particles)
         res = self.free_space.resolution_m
-        xy = np.stack([ix[k], iy[k]], -1) * res + np.asarray(self.free_space.origin_xy) + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
+        xy = (
+            np.stack([ix[k], iy[k]], -1) * res
+            + np.asarray(self.free_space.origin_xy)
+            + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
+        )
         self.set_particles(np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))]))
 
     def init_gaussian(self, pose, std=(0.5, 0.5, 0.3)) -> None:
@@ -169,7 +201,9 @@ class ParticleFilter:
         """Equal-weight particles at ``poses`` [n, 3], n up to ``mcl.num_particles`` (the arrays follow n)."""
         poses = np.asarray(poses, np.float32)
         if poses.ndim != 2 or poses.shape[1] != 3 or not 1 <= len(poses) <= self.cfg.num_particles:
-            raise ValueError(f"MCL: particles must be [n, 3] with 1 <= n <= {self.cfg.num_particles}, got {poses.shape}")
+            raise ValueError(
+                f"MCL: particles must be [n, 3] with 1 <= n <= {self.cfg.num_particles}, got {poses.shape}"
+            )
         H, W = self.free_space.shape
         cells = self.free_space.node_of(poses[:, :2])
         if np.any((cells < 0) | (cells >= np.array([W, H]))):
@@ -189,11 +223,21 @@ class ParticleFilter:
         mode = self.cfg.step_graph
         if mode not in ("auto", "on", "off"):
             raise ValueError(f"MCL: mcl.step_graph={mode!r}; choose auto, on or off")
-        blockers = [why for why, bad in [
-            ("recovery is on (mcl.recovery_alpha_*)", self.recovery_on),
-            (f"mcl.estimate={self.cfg.estimate} finds its cluster on the host", self.cfg.estimate == "best_cluster"),
-            (f"the weighting {type(self.weighting).__name__} is not made of Warp launches only",
-             not getattr(self.weighting, "capturable", False))] if bad]
+        blockers = [
+            why
+            for why, bad in [
+                ("recovery is on (mcl.recovery_alpha_*)", self.recovery_on),
+                (
+                    f"mcl.estimate={self.cfg.estimate} finds its cluster on the host",
+                    self.cfg.estimate == "best_cluster",
+                ),
+                (
+                    f"the weighting {type(self.weighting).__name__} is not made of Warp launches only",
+                    not getattr(self.weighting, "capturable", False),
+                ),
+            ]
+            if bad
+        ]
         if mode == "on" and blockers:
             raise ValueError("MCL: mcl.step_graph=on, but a step cannot be captured: " + "; ".join(blockers))
         return mode == "on" or (mode == "auto" and not blockers and self.device.startswith("cuda"))
@@ -209,8 +253,12 @@ class ParticleFilter:
         inp.send()
         self.motion.launch(self.particles, inp.odom, inp.motion_seed)
         self.weighting(self.particles, self.T_base_laser, self.angles, inp.measured, self.log_lik)
-        wp.launch(accumulate_kernel, self.log_w.shape[0], [self.log_w, self.log_lik, float(self.cfg.temper)],
-                  device=self.device)
+        wp.launch(
+            accumulate_kernel,
+            self.log_w.shape[0],
+            [self.log_w, self.log_lik, float(self.cfg.temper)],
+            device=self.device,
+        )
         self.weights.update(self.log_w, self.particles)
         if self.estimator is not None:
             self.estimator.launch(self.particles, self.log_w)
@@ -218,8 +266,16 @@ class ParticleFilter:
     def _launch_resampling(self, limit: float) -> None:
         """Resampling into the scratch buffer (decided on the device) and the copies to read back."""
         inp = self.inputs
-        self.resampler.launch(self.weights.cdf, self.particles, self.scratch, inp.draw, inp.resample_seed,
-                              self.weights.sums, limit, self.log_w)
+        self.resampler.launch(
+            self.weights.cdf,
+            self.particles,
+            self.scratch,
+            inp.draw,
+            inp.resample_seed,
+            self.weights.sums,
+            limit,
+            self.log_w,
+        )
         wp.copy(self.readback, self.weights.sums, 0, 0, 8)
         if self.estimator is not None:
             wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
@@ -244,12 +300,19 @@ class ParticleFilter:
         Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling)."""
         ranges_m = np.asarray(ranges_m, np.float32)
         if ranges_m.shape != (self.num_sensor_beams,):
-            raise ValueError(f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
-                             f"for a sensor of {self.num_sensor_beams}")
+            raise ValueError(
+                f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
+                f"for a sensor of {self.num_sensor_beams}"
+            )
         self.steps += 1
         draw = float(self.rng.uniform())
-        self.inputs.upload(odom_step, draw, self.chosen_ranges(ranges_m), self.cfg.seed * 1_000_003 + self.steps,
-                           Resampler.seed_of(draw))
+        self.inputs.upload(
+            odom_step,
+            draw,
+            self.chosen_ranges(ranges_m),
+            self.cfg.seed * 1_000_003 + self.steps,
+            Resampler.seed_of(draw),
+        )
         limit = self.cfg.resample_threshold * self.num_particles
         p_inject = 0.0
         if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
@@ -263,8 +326,19 @@ class ParticleFilter:
         wp.synchronize_device(self.device)
         self.particles, self.scratch = self.scratch, self.particles
         if p_inject > 0 and self.free_xy is not None:
-            wp.launch(inject_kernel, self.particles.shape[0], [self.particles, self.free_xy, self.free_space.resolution_m,
-                      float(p_inject), self.cfg.seed * 7919 + self.steps, self.injected], device=self.device)
+            wp.launch(
+                inject_kernel,
+                self.particles.shape[0],
+                [
+                    self.particles,
+                    self.free_xy,
+                    self.free_space.resolution_m,
+                    float(p_inject),
+                    self.cfg.seed * 7919 + self.steps,
+                    self.injected,
+                ],
+                device=self.device,
+            )
         sums = self._readback
         pose, neff, self.spread = self.weights.summary(sums[:8])
         if self.estimator is not None:

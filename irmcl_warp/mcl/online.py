@@ -45,22 +45,48 @@ def weighting_maps(m, grid, device: str, nof_path=None, nog_cache: Path | None =
     return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=nog_cache, device=torch_device))
 
 
-def filter_in_map(map_file, m, T_base_laser, angles_rad, far_m: float, device: str = "auto", nof_path=None,
-                  nog_cache: Path | None = None):
+def filter_in_map(
+    map_file,
+    m,
+    T_base_laser,
+    angles_rad,
+    far_m: float,
+    device: str = "auto",
+    nof_path=None,
+    nog_cache: Path | None = None,
+):
     """(the particle filter on the map in ``map_file``, the map's grid); its generator seeded by ``m.seed``,
     the particles not yet placed."""
     device = pick_device(device)
     grid = load_map(resolve(map_file))
     view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
-    pf = build_filter(m, view, T_base_laser, np.asarray(angles_rad, float), far_m, device,
-                      weighting_maps(m, grid, device, nof_path, nog_cache))
+    pf = build_filter(
+        m,
+        view,
+        T_base_laser,
+        np.asarray(angles_rad, float),
+        far_m,
+        device,
+        weighting_maps(m, grid, device, nof_path, nog_cache),
+    )
     pf.rng = np.random.default_rng(m.seed)
     return pf, grid
 
 
-def open_localizer(map_file, m, T_base_laser, angles_rad, far_m: float, device: str = "auto", nof_path=None,
-                   initial_pose=None, initial_std=(0.5, 0.5, 0.3), reduce_after_s: float | None = None,
-                   covariance: bool = True, nog_cache: Path | None = None) -> Localizer:
+def open_localizer(
+    map_file,
+    m,
+    T_base_laser,
+    angles_rad,
+    far_m: float,
+    device: str = "auto",
+    nof_path=None,
+    initial_pose=None,
+    initial_std=(0.5, 0.5, 0.3),
+    reduce_after_s: float | None = None,
+    covariance: bool = True,
+    nog_cache: Path | None = None,
+) -> Localizer:
     """A ``Localizer`` on ``map_file``: particles around ``initial_pose`` [x, y, yaw] (spread ``initial_std``),
     or over the map's free space where it is None (global localization). ``angles_rad``: the scan's beam angles
     in the laser's frame; ``T_base_laser``: the laser's pose on the base [x, y, yaw]; ``far_m``: a beam at or

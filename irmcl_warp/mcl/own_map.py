@@ -52,8 +52,11 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
     preset = OmegaConf.load(CONF_DIR / "mcl" / "amcl.yaml")
     differ = sorted(k for k in preset if k != "num_particles" and m.get(k) != preset[k])
     if path is None or differ:
-        why = (f"no calibration for {m.weighting} with {m.num_particles} particles" if path is None else
-               f"the filter differs from the calibrated one (mcl=amcl) in {', '.join(differ)}")
+        why = (
+            f"no calibration for {m.weighting} with {m.num_particles} particles"
+            if path is None
+            else f"the filter differs from the calibrated one (mcl=amcl) in {', '.join(differ)}"
+        )
         return None, f"no confidence: {why}"
     occupancy = np.where(grid.known, grid.probability, 0.0)
     agreement = ScanAgreement(occupancy, grid.origin_xy, grid.resolution_m, m.field_occ_threshold)
@@ -91,8 +94,9 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     m, loc = cfg.mcl, cfg.localize
     log = load_stream(cfg)
     far = far_bound_m(cfg, log.info.range_max_m)
-    pf, grid = filter_in_map(map_file, m, log.T_base_laser, log.info.angles_rad, far, device, loc.nof_path,
-                             runs.cache_dir(cfg, "nog"))  # the online localizer's filter (mcl/online.py)
+    pf, grid = filter_in_map(
+        map_file, m, log.T_base_laser, log.info.angles_rad, far, device, loc.nof_path, runs.cache_dir(cfg, "nog")
+    )  # the online localizer's filter (mcl/online.py)
     if loc.initial_pose is not None:
         pose = np.asarray(list(loc.initial_pose), np.float64)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
@@ -121,22 +125,44 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     t_run = time.perf_counter()
     covariances, confidences = [], []
     judge, judged = calibrated_judge(cfg, grid, log)
-    est = follow(pf, log, idx, m, loc.reduce_after_s if loc.initial_pose is None else None, watch,
-                 covariances=covariances, progress=f"localize {Path(str(log.source)).name}", judge=judge,
-                 confidences=confidences)
+    est = follow(
+        pf,
+        log,
+        idx,
+        m,
+        loc.reduce_after_s if loc.initial_pose is None else None,
+        watch,
+        covariances=covariances,
+        progress=f"localize {Path(str(log.source)).name}",
+        judge=judge,
+        confidences=confidences,
+    )
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
     write_tum(out / "trajectory.tum", stamps, est)
-    atomic_write_bytes(out / "spread.csv", ("stamp,spread_m,particles,confidence\n" + "".join(
-        f"{s:.6f},{a:.4f},{int(n)},{c:.4f}\n" for s, (a, n), c in zip(stamps, spread, confidences))).encode())
+    atomic_write_bytes(
+        out / "spread.csv",
+        (
+            "stamp,spread_m,particles,confidence\n"
+            + "".join(f"{s:.6f},{a:.4f},{int(n)},{c:.4f}\n" for s, (a, n), c in zip(stamps, spread, confidences))
+        ).encode(),
+    )
     settled = np.flatnonzero(spread[:, 0] < 0.3)
-    metrics = {"log": str(log.source), "map": str(map_file), "weighting": m.weighting, "device": device,
-               "start": "initial pose" if loc.initial_pose is not None else "global", "scans": int(len(idx)),
-               "duration_s": float(stamps[-1] - stamps[0]), "ms_per_scan": ms_per_scan,
-               "final_spread_m": float(spread[-1, 0]),
-               "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None,
-               "confidence": judged, "confidence_at_end": None if np.isnan(confidences[-1]) else confidences[-1],
-               "localized_at_end": None if np.isnan(confidences[-1]) else bool(confidences[-1] >= CONFIDENT_ABOVE)}
+    metrics = {
+        "log": str(log.source),
+        "map": str(map_file),
+        "weighting": m.weighting,
+        "device": device,
+        "start": "initial pose" if loc.initial_pose is not None else "global",
+        "scans": int(len(idx)),
+        "duration_s": float(stamps[-1] - stamps[0]),
+        "ms_per_scan": ms_per_scan,
+        "final_spread_m": float(spread[-1, 0]),
+        "spread_below_0.3m_after_s": float(stamps[settled[0]] - stamps[0]) if len(settled) else None,
+        "confidence": judged,
+        "confidence_at_end": None if np.isnan(confidences[-1]) else confidences[-1],
+        "localized_at_end": None if np.isnan(confidences[-1]) else bool(confidences[-1] >= CONFIDENT_ABOVE),
+    }
     gt, gt_in_map = log.ground_truth[idx] if log.ground_truth is not None else None, None
     if gt is not None and np.isfinite(gt).all(1).sum() >= 3:
         # a map of your own need not share the ground truth's frame (a SLAM map starts where its drive did):
@@ -147,24 +173,49 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         metrics["aligned_whole_run"] = aligned_error(est, gt)
         s = converged_index(stamps, est, gt)
         if s is not None:
-            metrics["aligned_to_ground_truth"] = {**aligned_error(est[s:], gt[s:]), "from_s": float(stamps[s] - stamps[0])}
+            metrics["aligned_to_ground_truth"] = {
+                **aligned_error(est[s:], gt[s:]),
+                "from_s": float(stamps[s] - stamps[0]),
+            }
             gt_in_map = compose(inverse(align_rigid(est[s:], gt[s:])), gt)  # drawn in the map
         else:
             metrics["aligned_to_ground_truth"] = None
-            print(f"{log.source}: the estimate never converged on the ground truth (error below "
-                  f"{CONVERGED_M} m for {CONVERGED_FOR_S:g} s after a rigid alignment): no score after convergence")
+            print(
+                f"{log.source}: the estimate never converged on the ground truth (error below "
+                f"{CONVERGED_M} m for {CONVERGED_FOR_S:g} s after a rigid alignment): no score after convergence"
+            )
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
-    extent = (grid.origin_xy[0], grid.origin_xy[0] + grid.shape[1] * grid.resolution_m,
-              grid.origin_xy[1], grid.origin_xy[1] + grid.shape[0] * grid.resolution_m)
+    extent = (
+        grid.origin_xy[0],
+        grid.origin_xy[0] + grid.shape[1] * grid.resolution_m,
+        grid.origin_xy[1],
+        grid.origin_xy[1] + grid.shape[0] * grid.resolution_m,
+    )
     plot_own_map(out / "run.png", image, extent, stamps, est, pf.particles.numpy(), spread[:, 0], gt_in_map)
     animate_particles(out / "particles.gif", image, extent, frames, stamps, est)
     # the run for Foxglove / RViz: replay/replay.mcap (a ROS 2 bag folder; io/mcap_run.py lists the topics)
-    write_run_mcap(out / "replay", log=log, idx=idx, est=est, grid=grid, map_data=occupancy_data(grid),
-                   covariances=np.array(covariances), particle_frames=cloud.items(), ground_truth_in_map=gt_in_map)
+    write_run_mcap(
+        out / "replay",
+        log=log,
+        idx=idx,
+        est=est,
+        grid=grid,
+        map_data=occupancy_data(grid),
+        covariances=np.array(covariances),
+        particle_frames=cloud.items(),
+        ground_truth_in_map=gt_in_map,
+    )
     out = run.finish(metrics, device)
     c = metrics["confidence_at_end"]
-    verdict = (f"{judged}" if c is None else f"localized, confidence {c:.2f}" if metrics["localized_at_end"] else
-               f"NOT localized: confidence {c:.2f} at the end, below {CONFIDENT_ABOVE}")
-    print(f"{log.source}: {len(idx)} scans in {map_file} ({metrics['start']} start); particle spread "
-          f"{metrics['final_spread_m']:.2f} m at the end; {verdict} -> {out}")
+    verdict = (
+        f"{judged}"
+        if c is None
+        else f"localized, confidence {c:.2f}"
+        if metrics["localized_at_end"]
+        else f"NOT localized: confidence {c:.2f} at the end, below {CONFIDENT_ABOVE}"
+    )
+    print(
+        f"{log.source}: {len(idx)} scans in {map_file} ({metrics['start']} start); particle spread "
+        f"{metrics['final_spread_m']:.2f} m at the end; {verdict} -> {out}"
+    )
     return out

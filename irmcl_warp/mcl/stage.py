@@ -46,16 +46,22 @@ def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.nd
     p_occ, 0.5 where unknown) from the training split; ``nof``: the trained field (nof.pt) a NOF weighting reads."""
     train = prepare_beams(cfg)["train"]
     m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)
-    grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far,
-                           device=device)
+    grid = integrate_scans(
+        train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far, device=device
+    )
     free_view = free_space_view(grid.probability, grid.origin_xy, res, grid.known)
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
     if m.weighting not in NOF_WEIGHTINGS:
         return free_view, grid_maps(grid, m.weighting), image
     if m.weighting == "nof_direct":
         return free_view, WeightingMaps(model=load_nof(nof, "cuda" if device.startswith("cuda") else "cpu")[0]), image
-    nog = bake_nog(nof, laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far), res,
-                   cache_dir=runs.cache_dir(cfg, "nog"), device="cuda" if device.startswith("cuda") else "cpu")
+    nog = bake_nog(
+        nof,
+        laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far),
+        res,
+        cache_dir=runs.cache_dir(cfg, "nog"),
+        device="cuda" if device.startswith("cuda") else "cpu",
+    )
     return free_view, WeightingMaps(nog=nog), image
 
 
@@ -72,8 +78,9 @@ def start_indices(t: np.ndarray, starts: np.ndarray, k: int, loc) -> np.ndarray:
     idx = np.flatnonzero((t >= t0) & (t <= t0 + loc.run_s))
     if loc.kidnap_at_s > 0:
         t1 = starts[(k + 1) % len(starts)]
-        idx = np.concatenate([idx[t[idx] < t0 + loc.kidnap_at_s],
-                              np.flatnonzero((t >= t1) & (t <= t1 + loc.run_s - loc.kidnap_at_s))])
+        idx = np.concatenate(
+            [idx[t[idx] < t0 + loc.kidnap_at_s], np.flatnonzero((t >= t1) & (t <= t1 + loc.run_s - loc.kidnap_at_s))]
+        )
     return idx
 
 
@@ -81,8 +88,10 @@ def run_localize(cfg) -> Path:
     if cfg.localize.map_path:  # your own log in your own map (no ground truth needed)
         return run_in_map(cfg)
     if cfg.localize.run_s is None:
-        raise ValueError("localize.run_s=null (to the end of the log) needs localize.map_path; the benchmark "
-                         "protocol follows each start for localize.run_s seconds")
+        raise ValueError(
+            "localize.run_s=null (to the end of the log) needs localize.map_path; the benchmark "
+            "protocol follows each start for localize.run_s seconds"
+        )
     with runs.start(cfg, "localize") as run:
         return run.path if run.done else localize_starts(run)
 
@@ -101,8 +110,10 @@ def localize_starts(run: runs.Run) -> Path:
     times = start_times(t, loc)
     starts, kidnapped, all_steps = [], loc.kidnap_at_s > 0, []
     if kidnapped and not (0 < loc.kidnap_at_s < loc.run_s and loc.num_starts >= 2):
-        raise ValueError(f"localize.kidnap_at_s={loc.kidnap_at_s} must lie inside the run (localize.run_s={loc.run_s}) "
-                         f"and the robot needs another start time to be teleported to (localize.num_starts={loc.num_starts})")
+        raise ValueError(
+            f"localize.kidnap_at_s={loc.kidnap_at_s} must lie inside the run (localize.run_s={loc.run_s}) "
+            f"and the robot needs another start time to be teleported to (localize.num_starts={loc.num_starts})"
+        )
     for k, t0 in enumerate(times):
         pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
         pf.rng = np.random.default_rng(m.seed * 1000 + k)
@@ -115,8 +126,15 @@ def localize_starts(run: runs.Run) -> Path:
         t_run = time.perf_counter()
         # synchronous: every step reads its estimate back; IR-MCL reduces the particles in global runs only
         step_times = []
-        est = follow(pf, log, idx, m, loc.reduce_after_s if loc.mode == "global" else None, step_times=step_times,
-                     progress=f"start {k + 1}/{len(times)}")
+        est = follow(
+            pf,
+            log,
+            idx,
+            m,
+            loc.reduce_after_s if loc.mode == "global" else None,
+            step_times=step_times,
+            progress=f"start {k + 1}/{len(times)}",
+        )
         ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
         all_steps.extend(step_times)
         stamps = log.stamps[idx]
@@ -132,25 +150,52 @@ def localize_starts(run: runs.Run) -> Path:
         if kidnapped:
             before = localization_metrics(stamps[:cut], est[:cut], gt[:cut])
             recovery = localization_metrics(stamps[cut:], est[cut:], gt[cut:])
-            metrics = {**metrics, "localized_before_kidnap": before["converged"],
-                       "recovered": bool(before["converged"] and recovery["success"]),
-                       "recovery_time_s": recovery["time_to_converge_s"]}
-        starts.append({"start_s": float(t0), "ms_per_scan": ms_per_scan, "steps": len(step_times),
-                     "ms_per_step_median": 1e3 * float(np.median(step_times)) if step_times else None, **metrics})
-        print(f"start {k} at {t0:.0f} s: " + (f"converged after {metrics['time_to_converge_s']:.1f} s, RMSE "
-              f"{metrics['location_rmse_cm']:.1f} cm" if metrics["converged"] else "did not converge")
-              + (f"; recovered from the kidnapping: {metrics['recovered']}" if kidnapped else ""))
+            metrics = {
+                **metrics,
+                "localized_before_kidnap": before["converged"],
+                "recovered": bool(before["converged"] and recovery["success"]),
+                "recovery_time_s": recovery["time_to_converge_s"],
+            }
+        starts.append(
+            {
+                "start_s": float(t0),
+                "ms_per_scan": ms_per_scan,
+                "steps": len(step_times),
+                "ms_per_step_median": 1e3 * float(np.median(step_times)) if step_times else None,
+                **metrics,
+            }
+        )
+        print(
+            f"start {k} at {t0:.0f} s: "
+            + (
+                f"converged after {metrics['time_to_converge_s']:.1f} s, RMSE {metrics['location_rmse_cm']:.1f} cm"
+                if metrics["converged"]
+                else "did not converge"
+            )
+            + (f"; recovered from the kidnapping: {metrics['recovered']}" if kidnapped else "")
+        )
         if k == 0:
-            plot_run(out / "start0.png", view, image, stamps, gt, est, pf.particles.numpy(),
-                     metrics["time_to_converge_s"], stamps[cut] - stamps[0] if kidnapped else None)
+            plot_run(
+                out / "start0.png",
+                view,
+                image,
+                stamps,
+                gt,
+                est,
+                pf.particles.numpy(),
+                metrics["time_to_converge_s"],
+                stamps[cut] - stamps[0] if kidnapped else None,
+            )
     settings = {**OmegaConf.to_container(m), **OmegaConf.to_container(loc), "far_m": far}
     summary = summarise(starts, settings, device)
     # every filter step of every start: the figure to set beside the micro-benchmark (eval.bench mcl), free
     # of what a start costs once (building the filter, loading the kernels, capturing the step's graph)
     summary["ms_per_step_median"] = 1e3 * float(np.median(all_steps)) if all_steps else None
     if all_steps:
-        print(f"{len(all_steps)} filter steps, median {summary['ms_per_step_median']:.3f} ms per step "
-              f"({summary['ms_per_scan_median']:.3f} ms per scan, the starts' median, set up included)")
+        print(
+            f"{len(all_steps)} filter steps, median {summary['ms_per_step_median']:.3f} ms per step "
+            f"({summary['ms_per_scan_median']:.3f} ms per scan, the starts' median, set up included)"
+        )
     out = run.finish({"dataset": cfg.data.name, "summary": summary, "runs": starts, "settings": settings}, device)
     print(f"{cfg.data.name}, {m.weighting} ({loc.mode}): success {summary['successes']}/{len(starts)} -> {out}")
     return out
@@ -164,12 +209,31 @@ def summarise(starts: list[dict], s: dict, device: str) -> dict:
         vals = [r[key] for r in rows if r.get(key) is not None]
         return float(np.mean(vals)) if vals else None
 
-    summary = {"weighting": s["weighting"], "mode": s["mode"], "num_particles": s["num_particles"],
-               "map_resolution_m": s["map_resolution_m"], "device": device, "starts": len(starts), "successes": len(ok),
-               "success_rate": len(ok) / len(starts), "divergences": int(sum(r["divergences"] for r in starts))}
-    summary["ms_per_scan_median"] = float(np.median([r["ms_per_scan"] for r in starts]))  # the first start also compiles
-    for key in ("location_rmse_cm", "yaw_rmse_deg", "time_to_converge_s", "within_5cm_pct", "within_10cm_pct",
-                "within_20cm_pct", "within_0.5deg_pct", "within_1deg_pct", "within_2deg_pct"):
+    summary = {
+        "weighting": s["weighting"],
+        "mode": s["mode"],
+        "num_particles": s["num_particles"],
+        "map_resolution_m": s["map_resolution_m"],
+        "device": device,
+        "starts": len(starts),
+        "successes": len(ok),
+        "success_rate": len(ok) / len(starts),
+        "divergences": int(sum(r["divergences"] for r in starts)),
+    }
+    summary["ms_per_scan_median"] = float(
+        np.median([r["ms_per_scan"] for r in starts])
+    )  # the first start also compiles
+    for key in (
+        "location_rmse_cm",
+        "yaw_rmse_deg",
+        "time_to_converge_s",
+        "within_5cm_pct",
+        "within_10cm_pct",
+        "within_20cm_pct",
+        "within_0.5deg_pct",
+        "within_1deg_pct",
+        "within_2deg_pct",
+    ):
         summary[f"{key}_mean"] = mean(key, ok)
     if s["kidnap_at_s"] > 0:
         summary["kidnap_at_s"] = s["kidnap_at_s"]

@@ -21,8 +21,10 @@ def window(log: LaserLog, start_s: float, run_s: float | None, section: str) -> 
     end = np.inf if run_s is None else start_s + run_s
     idx = np.flatnonzero((t >= start_s) & (t <= end))
     if len(idx) < 2:
-        raise ValueError(f"{section}.start_s={start_s}, run_s={run_s}: {len(idx)} scans of a {t[-1]:.0f} s log "
-                         f"({log.source}) in the window")
+        raise ValueError(
+            f"{section}.start_s={start_s}, run_s={run_s}: {len(idx)} scans of a {t[-1]:.0f} s log "
+            f"({log.source}) in the window"
+        )
     return idx
 
 
@@ -46,6 +48,7 @@ class Estimate:
     """What the localizer says after a scan: the base's pose in the map [x, y, yaw] (NaN before the first
     update, with ``mcl.first_update=motion``), whether this scan weighed the particles, and, where asked for,
     the particles' covariance [3, 3] (x, y, yaw about the pose; NaN between updates and before the first)."""
+
     pose: np.ndarray
     updated: bool
     covariance: np.ndarray | None = None
@@ -75,8 +78,15 @@ class Localizer:
             est = loc.update(stamp, ranges, odom)
     """
 
-    def __init__(self, pf, m, reduce_after_s: float | None = None, covariance: bool = False,
-                 step_times: list | None = None, judge=None):
+    def __init__(
+        self,
+        pf,
+        m,
+        reduce_after_s: float | None = None,
+        covariance: bool = False,
+        step_times: list | None = None,
+        judge=None,
+    ):
         """``judge``: where given, ``judge(particles, log_w, ranges_m, odom_delta) -> probability`` after every
         update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge)."""
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
@@ -131,9 +141,19 @@ class Localizer:
         return Estimate(between_updates(self.pose, self.odom_at_update, odom), weigh, cov, self.confidence)
 
 
-def follow(pf, log: LaserLog, idx: np.ndarray, m, reduce_after_s: float | None = None, watch=None,
-           step_times: list | None = None, covariances: list | None = None, progress: str | None = None,
-           judge=None, confidences: list | None = None) -> np.ndarray:
+def follow(
+    pf,
+    log: LaserLog,
+    idx: np.ndarray,
+    m,
+    reduce_after_s: float | None = None,
+    watch=None,
+    step_times: list | None = None,
+    covariances: list | None = None,
+    progress: str | None = None,
+    judge=None,
+    confidences: list | None = None,
+) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
     it is zero. ``watch(j, pf)``, when given, sees the filter after every scan (plots, animations).

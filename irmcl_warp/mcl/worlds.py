@@ -29,8 +29,16 @@ from irmcl_warp import runs
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
-from irmcl_warp.mcl.confidence import (FEATURES, Confidence, FeatureTracker, ScanAgreement, auroc, reliability,
-                                       right, shipped)
+from irmcl_warp.mcl.confidence import (
+    FEATURES,
+    Confidence,
+    FeatureTracker,
+    ScanAgreement,
+    auroc,
+    reliability,
+    right,
+    shipped,
+)
 from irmcl_warp.mcl.track import between_updates, moved
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.metrics import localization_metrics
@@ -55,8 +63,10 @@ def world_names(split: str) -> tuple[str, ...]:
 
 def run_worlds(cfg) -> Path:
     if cfg.mcl.weighting in NOF_WEIGHTINGS:
-        raise ValueError(f"worlds: mcl.weighting={cfg.mcl.weighting} reads a NOF trained on each world, which this "
-                         "stage does not train yet; use likelihood_field or beam_model")
+        raise ValueError(
+            f"worlds: mcl.weighting={cfg.mcl.weighting} reads a NOF trained on each world, which this "
+            "stage does not train yet; use likelihood_field or beam_model"
+        )
     with runs.start(cfg, "worlds") as run:
         return run.path if run.done else localize_worlds(run)
 
@@ -71,8 +81,14 @@ def world_map(world, cfg, device):
     length = cfg.worlds.map_drive_m
     log = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(0), length), 0, device=device)
     T_map_laser = compose(log.ground_truth, log.T_base_laser)
-    return integrate_scans(T_map_laser, log.ranges_m, log.info.angles_rad, resolution_m=cfg.mcl.map_resolution_m,
-                           max_range_m=cfg.sim.max_range_m, device=device)
+    return integrate_scans(
+        T_map_laser,
+        log.ranges_m,
+        log.info.angles_rad,
+        resolution_m=cfg.mcl.map_resolution_m,
+        max_range_m=cfg.sim.max_range_m,
+        device=device,
+    )
 
 
 def query_log(world, cfg, k: int, device) -> tuple[LaserLog, int | None]:
@@ -84,12 +100,27 @@ def query_log(world, cfg, k: int, device) -> tuple[LaserLog, int | None]:
     if w.kidnap_at_s <= 0:
         return first, None
     cut = int(np.searchsorted(first.stamps - first.stamps[0], w.kidnap_at_s))
-    other = drive_log(world, s, floors.drive(world, np.random.default_rng(k + 1000), length), k + 1000,
-                      w.run_s - w.kidnap_at_s, device)
+    other = drive_log(
+        world,
+        s,
+        floors.drive(world, np.random.default_rng(k + 1000), length),
+        k + 1000,
+        w.run_s - w.kidnap_at_s,
+        device,
+    )
     odom = np.vstack([first.odom[:cut], compose(first.odom[cut - 1], relative(other.odom[0], other.odom))])
-    stamps = np.concatenate([first.stamps[:cut], first.stamps[cut - 1] + (other.stamps - other.stamps[0] + 1 / s.rate_hz)])
-    log = LaserLog(stamps, np.vstack([first.ranges_m[:cut], other.ranges_m]), odom, first.info, first.T_base_laser,
-                   np.vstack([first.ground_truth[:cut], other.ground_truth]), f"{first.source} kidnapped")
+    stamps = np.concatenate(
+        [first.stamps[:cut], first.stamps[cut - 1] + (other.stamps - other.stamps[0] + 1 / s.rate_hz)]
+    )
+    log = LaserLog(
+        stamps,
+        np.vstack([first.ranges_m[:cut], other.ranges_m]),
+        odom,
+        first.info,
+        first.T_base_laser,
+        np.vstack([first.ground_truth[:cut], other.ground_truth]),
+        f"{first.source} kidnapped",
+    )
     return log, cut
 
 
@@ -105,8 +136,9 @@ def localize_worlds(run: runs.Run) -> Path:
         grid = world_map(world, cfg, device)
         view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
         maps = grid_maps(grid, cfg.mcl.weighting)
-        agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m,
-                                  cfg.mcl.field_occ_threshold)
+        agreement = ScanAgreement(
+            np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m, cfg.mcl.field_occ_threshold
+        )
         search = search_grid(grid) if cfg.worlds.search_rivals_every > 0 else None
         results = []
         for k in range(1, cfg.worlds.runs + 1):
@@ -114,8 +146,19 @@ def localize_worlds(run: runs.Run) -> Path:
             pf = build_filter(cfg.mcl, view, log.T_base_laser, log.info.angles_rad, cfg.sim.max_range_m, device, maps)
             pf.rng = np.random.default_rng(cfg.mcl.seed * 1000 + k)
             pf.init_uniform()
-            trace = follow_with_confidence(pf, log, cfg.mcl, cfg.worlds, FeatureTracker(agreement, refine_rivals=cfg.worlds.refine_rivals, search_poses=search,
-                                                                      search_every=cfg.worlds.search_rivals_every), conf)
+            trace = follow_with_confidence(
+                pf,
+                log,
+                cfg.mcl,
+                cfg.worlds,
+                FeatureTracker(
+                    agreement,
+                    refine_rivals=cfg.worlds.refine_rivals,
+                    search_poses=search,
+                    search_every=cfg.worlds.search_rivals_every,
+                ),
+                conf,
+            )
             np.savez_compressed(out / f"{name}-run{k}.npz", stamps=log.stamps, truth=log.ground_truth, **trace)
             write_tum(out / f"{name}-run{k}.tum", log.stamps, trace["estimate"])
             result = score_run(log, trace, cut, cfg.worlds)
@@ -123,13 +166,21 @@ def localize_worlds(run: runs.Run) -> Path:
             judged.append(judged_updates(log, trace))
             bar.update()
             bar.set_postfix_str(f"{name}: {sum(r['success'] for r in results)}/{len(results)} right")
-        per_world[name] = {**world_summary(results), **separation(judged[-len(results):])}
+        per_world[name] = {**world_summary(results), **separation(judged[-len(results) :])}
         rows += results
     bar.close()
     plot_worlds(out / "worlds.png", names, out, cfg.worlds.confident_above)
-    summary = {"split": cfg.worlds.split, "worlds": list(names), "weighting": cfg.mcl.weighting,
-               "num_particles": cfg.mcl.num_particles, "device": device, "calibrated": conf is not None,
-               "calibration": conf.meta.get("source") if conf else None, **world_summary(rows), **separation(judged)}
+    summary = {
+        "split": cfg.worlds.split,
+        "worlds": list(names),
+        "weighting": cfg.mcl.weighting,
+        "num_particles": cfg.mcl.num_particles,
+        "device": device,
+        "calibrated": conf is not None,
+        "calibration": conf.meta.get("source") if conf else None,
+        **world_summary(rows),
+        **separation(judged),
+    }
     settings = {"mcl": OmegaConf.to_container(cfg.mcl), "worlds": OmegaConf.to_container(cfg.worlds)}
     path = run.finish({"summary": summary, "per_world": per_world, "runs": rows, "settings": settings}, device)
     print(verdict_line(summary, cfg.worlds) + f" -> {path}")
@@ -185,8 +236,13 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
                     low_since = None
         est[i] = between_updates(pose, last_odom, log.odom[i])
         prob[i] = p
-    return {"estimate": est, "features": feats, "confidence": prob, "updated": updated,
-            "lost_at_s": np.array(lost_at, float)}
+    return {
+        "estimate": est,
+        "features": feats,
+        "confidence": prob,
+        "updated": updated,
+        "lost_at_s": np.array(lost_at, float),
+    }
 
 
 def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
@@ -196,18 +252,28 @@ def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
     est, gt = trace["estimate"], log.ground_truth
     has = np.all(np.isfinite(est), 1)
     ok = right(np.where(has[:, None], est, 0.0), gt) & has
-    m = localization_metrics(log.stamps[:end], est[:end], gt[:end], success_within_s=w.run_s) if has[:end].sum() >= 2 \
+    m = (
+        localization_metrics(log.stamps[:end], est[:end], gt[:end], success_within_s=w.run_s)
+        if has[:end].sum() >= 2
         else {"converged": False, "success": False, "time_to_converge_s": None, "location_rmse_cm": None}
+    )
     p_end = float(trace["confidence"][-1])
-    out = {"success": bool(m["success"]), "converged": bool(m["converged"]), "time_to_converge_s": m["time_to_converge_s"],
-           "location_rmse_cm": m.get("location_rmse_cm"), "right_at_end": bool(ok[-1]),
-           "error_at_end_m": float(np.hypot(*(est[-1, :2] - gt[-1, :2]))) if has[-1] else None,
-           "confidence_at_end": None if np.isnan(p_end) else p_end,
-           "localized_at_end": bool(p_end >= w.confident_above) if not np.isnan(p_end) else None,
-           "lost_at_s": trace["lost_at_s"].tolist()}
+    out = {
+        "success": bool(m["success"]),
+        "converged": bool(m["converged"]),
+        "time_to_converge_s": m["time_to_converge_s"],
+        "location_rmse_cm": m.get("location_rmse_cm"),
+        "right_at_end": bool(ok[-1]),
+        "error_at_end_m": float(np.hypot(*(est[-1, :2] - gt[-1, :2]))) if has[-1] else None,
+        "confidence_at_end": None if np.isnan(p_end) else p_end,
+        "localized_at_end": bool(p_end >= w.confident_above) if not np.isnan(p_end) else None,
+        "lost_at_s": trace["lost_at_s"].tolist(),
+    }
     before = trace["lost_at_s"][trace["lost_at_s"] < (t[cut] if cut is not None else np.inf)]
-    right_when = [bool(ok[np.searchsorted(t, s) - 1 - int(round(w.lost_after_s / max(np.median(np.diff(t)), 1e-9)))])
-                  for s in before]  # was the estimate right when the confidence started to fall?
+    right_when = [
+        bool(ok[np.searchsorted(t, s) - 1 - int(round(w.lost_after_s / max(np.median(np.diff(t)), 1e-9)))])
+        for s in before
+    ]  # was the estimate right when the confidence started to fall?
     out["false_alarms"] = int(sum(right_when))
     out["tracking_right_s"] = float(np.sum(np.diff(t, append=t[-1])[:end][ok[:end]]))
     if cut is not None:
@@ -239,37 +305,51 @@ def separation(judged: list) -> dict:
         return {"auroc": None}
     p, y = np.concatenate([p for p, _ in judged]), np.concatenate([y for _, y in judged])
     a = auroc(p, y)
-    return {"auroc": None if np.isnan(a) else a, "updates": int(len(y)), "right_share": float(y.mean()),
-            "reliability": reliability(p, y)}
+    return {
+        "auroc": None if np.isnan(a) else a,
+        "updates": int(len(y)),
+        "right_share": float(y.mean()),
+        "reliability": reliability(p, y),
+    }
 
 
 def world_summary(rows: list[dict]) -> dict:
     n = len(rows)
-    s = {"runs": n, "successes": int(sum(r["success"] for r in rows)),
-         "right_at_end": int(sum(r["right_at_end"] for r in rows)),
-         "localized_at_end": int(sum(bool(r["localized_at_end"]) for r in rows)),
-         "confidently_wrong_at_end": int(sum(bool(r["localized_at_end"]) and not r["right_at_end"] for r in rows)),
-         "false_alarms": int(sum(r["false_alarms"] for r in rows)),
-         "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600)}
+    s = {
+        "runs": n,
+        "successes": int(sum(r["success"] for r in rows)),
+        "right_at_end": int(sum(r["right_at_end"] for r in rows)),
+        "localized_at_end": int(sum(bool(r["localized_at_end"]) for r in rows)),
+        "confidently_wrong_at_end": int(sum(bool(r["localized_at_end"]) and not r["right_at_end"] for r in rows)),
+        "false_alarms": int(sum(r["false_alarms"] for r in rows)),
+        "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600),
+    }
     kid = [r for r in rows if "kidnap_at_s" in r and r["right_before_kidnap"]]
     if kid:
         s["kidnaps"] = len(kid)
-        s["detected_within_2s"] = int(sum(r["detected_after_s"] is not None and r["detected_after_s"] <= 2.0 for r in kid))
-        s["reconverged_within_5s"] = int(sum(r["reconverged_after_s"] is not None and r["reconverged_after_s"] <= 5.0
-                                             for r in kid))
+        s["detected_within_2s"] = int(
+            sum(r["detected_after_s"] is not None and r["detected_after_s"] <= 2.0 for r in kid)
+        )
+        s["reconverged_within_5s"] = int(
+            sum(r["reconverged_after_s"] is not None and r["reconverged_after_s"] <= 5.0 for r in kid)
+        )
     return s
 
 
 def verdict_line(summary: dict, w) -> str:
     """The run's last line: how many runs ended right, and how many said so; never "localized" below the
     threshold (a run that is not confident says it is not)."""
-    line = (f"{summary['split']}, {summary['weighting']} {summary['num_particles']} particles: "
-            f"{summary['successes']}/{summary['runs']} runs localized correctly (protocol), "
-            f"{summary['right_at_end']}/{summary['runs']} right at the end")
+    line = (
+        f"{summary['split']}, {summary['weighting']} {summary['num_particles']} particles: "
+        f"{summary['successes']}/{summary['runs']} runs localized correctly (protocol), "
+        f"{summary['right_at_end']}/{summary['runs']} right at the end"
+    )
     if summary["calibrated"]:
-        line += (f"; {summary['localized_at_end']} ended confident (>= {w.confident_above}), "
-                 f"{summary['confidently_wrong_at_end']} of them wrong; {summary['runs'] - summary['localized_at_end']} "
-                 "ended NOT localized (confidence below the threshold)")
+        line += (
+            f"; {summary['localized_at_end']} ended confident (>= {w.confident_above}), "
+            f"{summary['confidently_wrong_at_end']} of them wrong; {summary['runs'] - summary['localized_at_end']} "
+            "ended NOT localized (confidence below the threshold)"
+        )
     else:
         line += "; no confidence calibration for this weighting: no run is declared localized"
     return line
@@ -296,11 +376,16 @@ def plot_worlds(path: Path, names, out: Path, confident_above: float) -> None:
             sure = bool(np.isfinite(p) and p >= confident_above)
             ax.plot([gt[0], est[0]], [gt[1], est[1]], "-", color="0.6", lw=0.6)
             ax.plot(*gt[:2], "k.", ms=4)
-            ax.plot(*est[:2], "o" if ok else "x", color="tab:green" if ok else "tab:red", ms=6,
-                    mfc=("tab:green" if ok else "tab:red") if sure else "none")
+            ax.plot(
+                *est[:2],
+                "o" if ok else "x",
+                color="tab:green" if ok else "tab:red",
+                ms=6,
+                mfc=("tab:green" if ok else "tab:red") if sure else "none",
+            )
         ax.set_title(f"{name} ({floors.split_of(name)})")
         ax.set_aspect("equal")
         ax.axis("off")
-    for ax in list(axes.flat)[len(names):]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     save_figure(fig, path)

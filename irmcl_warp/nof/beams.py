@@ -32,11 +32,15 @@ class BeamSet:
         if S is None:
             raise ValueError(f"{self.name}: ranges must be [scans, beams], got shape {self.ranges_m.shape}")
         if len(self.T_map_laser) != S or len(self.stamps) != S:
-            raise ValueError(f"{self.name}: {len(self.T_map_laser)} poses and {len(self.stamps)} stamps "
-                             f"for {S} scans: one pose and one stamp per scan expected")
+            raise ValueError(
+                f"{self.name}: {len(self.T_map_laser)} poses and {len(self.stamps)} stamps "
+                f"for {S} scans: one pose and one stamp per scan expected"
+            )
         if len(self.angles_rad) != B or self.valid.shape != (S, B):
-            raise ValueError(f"{self.name}: {len(self.angles_rad)} beam angles / valid mask {self.valid.shape} "
-                             f"do not match ranges {self.ranges_m.shape}")
+            raise ValueError(
+                f"{self.name}: {len(self.angles_rad)} beam angles / valid mask {self.valid.shape} "
+                f"do not match ranges {self.ranges_m.shape}"
+            )
         if S == 0:
             raise ValueError(f"{self.name}: no scans")
         bad_pose = ~np.all(np.isfinite(self.T_map_laser), axis=1)
@@ -46,8 +50,10 @@ class BeamSet:
         bad = self.valid & ~(np.isfinite(self.ranges_m) & (self.ranges_m > 0))
         if bad.any():
             s, b = map(int, np.argwhere(bad)[0])
-            raise ValueError(f"{self.name}: scan {s} (stamp {self.stamps[s]:.6f}), beam {b}: range "
-                             f"{self.ranges_m[s, b]} is marked valid; expected a positive finite range")
+            raise ValueError(
+                f"{self.name}: scan {s} (stamp {self.stamps[s]:.6f}), beam {b}: range "
+                f"{self.ranges_m[s, b]} is marked valid; expected a positive finite range"
+            )
         if not self.valid.any():
             raise ValueError(f"{self.name}: none of its {S} scans has a valid beam")
 
@@ -67,12 +73,22 @@ class BeamSet:
         dirs = np.stack([np.cos(yaw), np.sin(yaw)], -1)
         ranges = self.ranges_m.reshape(-1)
         keep = self.valid.reshape(-1) if valid_only else slice(None)
-        return (origins[keep].astype(np.float32), dirs[keep].astype(np.float32),
-                ranges[keep].astype(np.float32), scan[keep])
+        return (
+            origins[keep].astype(np.float32),
+            dirs[keep].astype(np.float32),
+            ranges[keep].astype(np.float32),
+            scan[keep],
+        )
 
     def subset(self, index, name: str | None = None) -> "BeamSet":
-        return BeamSet(self.stamps[index], self.T_map_laser[index], self.ranges_m[index], self.angles_rad,
-                       self.valid[index], name or self.name)
+        return BeamSet(
+            self.stamps[index],
+            self.T_map_laser[index],
+            self.ranges_m[index],
+            self.angles_rad,
+            self.valid[index],
+            name or self.name,
+        )
 
 
 def interleaved_splits(stamps: np.ndarray, block_share: float = 0.2) -> dict[str, np.ndarray]:
@@ -82,9 +98,14 @@ def interleaved_splits(stamps: np.ndarray, block_share: float = 0.2) -> dict[str
     k = np.arange(len(stamps))
     cut = int(round(len(stamps) * (1.0 - block_share)))
     early = k < cut
-    return {"train": stamps[(k % 10 != 0) & (k % 10 != 5)], "val": stamps[k % 10 == 5], "test": stamps[k % 10 == 0],
-            "train_block": stamps[early & (k % 10 != 5)], "val_block": stamps[early & (k % 10 == 5)],
-            "test_block": stamps[~early]}
+    return {
+        "train": stamps[(k % 10 != 0) & (k % 10 != 5)],
+        "val": stamps[k % 10 == 5],
+        "test": stamps[k % 10 == 0],
+        "train_block": stamps[early & (k % 10 != 5)],
+        "val_block": stamps[early & (k % 10 == 5)],
+        "test_block": stamps[~early],
+    }
 
 
 def beams_from_log(log: LaserLog, near_m: float, far_m: float, name: str = "beams") -> BeamSet:
@@ -98,8 +119,14 @@ def beams_from_log(log: LaserLog, near_m: float, far_m: float, name: str = "beam
     r = log.ranges_m
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(r) & (r > near_m) & (r < far_m)
-    return BeamSet(log.stamps.copy(), compose(log.ground_truth, log.T_base_laser), r.astype(np.float32),
-                   log.info.angles_rad.astype(np.float64), valid, name)
+    return BeamSet(
+        log.stamps.copy(),
+        compose(log.ground_truth, log.T_base_laser),
+        r.astype(np.float32),
+        log.info.angles_rad.astype(np.float64),
+        valid,
+        name,
+    )
 
 
 def split_beams(beams: BeamSet, splits: dict[str, np.ndarray], names, source: str = "splits") -> dict[str, BeamSet]:
@@ -111,7 +138,9 @@ def split_beams(beams: BeamSet, splits: dict[str, np.ndarray], names, source: st
             raise ValueError(f"{source}: split {name!r} is empty or missing (found {sorted(splits)})")
         idx = match_stamps(beams.stamps, ids)
         if (idx < 0).any():
-            raise ValueError(f"{source}: {int((idx < 0).sum())} of the {len(ids)} ids of split {name!r} match no "
-                             f"scan with a ground-truth pose (first: {ids[idx < 0][0]:.6f})")
+            raise ValueError(
+                f"{source}: {int((idx < 0).sum())} of the {len(ids)} ids of split {name!r} match no "
+                f"scan with a ground-truth pose (first: {ids[idx < 0][0]:.6f})"
+            )
         out[name] = beams.subset(np.sort(idx), name)
     return out

@@ -20,9 +20,19 @@ class NofDirect:
     normalised as in training), then |r - m| per valid beam and the Gaussian on its mean, as
     ``nog_raymarch``. The particle arrays stay on their device (zero-copy ``wp.to_torch``)."""
 
-    def __init__(self, checkpoint=None, model=None, num_particles: int = 1000, num_beams: int = 32,
-                 num_samples: int = 256, near_m: float = 0.02, far_m: float = 40.0, sigma_m: float = 0.5,
-                 chunk_rays: int = 4096, device: str = "auto"):
+    def __init__(
+        self,
+        checkpoint=None,
+        model=None,
+        num_particles: int = 1000,
+        num_beams: int = 32,
+        num_samples: int = 256,
+        near_m: float = 0.02,
+        far_m: float = 40.0,
+        sigma_m: float = 0.5,
+        chunk_rays: int = 4096,
+        device: str = "auto",
+    ):
         self.device = pick_device(device)
         self.torch_device = torch.device("cuda" if self.device.startswith("cuda") else "cpu")
         if model is None:
@@ -49,20 +59,27 @@ class NofDirect:
             out = torch.empty(origins.shape[0], device=self.torch_device)
             z = self.z
             for k in range(0, origins.shape[0], self.chunk):
-                o, d = origins[k:k + self.chunk], dirs[k:k + self.chunk]
+                o, d = origins[k : k + self.chunk], dirs[k : k + self.chunk]
                 occ = self.model((o[:, None, :] + d[:, None, :] * z[None, :, None]).reshape(-1, 2))
                 occ = occ.float().reshape(o.shape[0], z.shape[0])
-                out[k:k + self.chunk] = self.compositor.forward(occ, z.expand(o.shape[0], -1))[0]
+                out[k : k + self.chunk] = self.compositor.forward(occ, z.expand(o.shape[0], -1))[0]
             return out.reshape(p.shape[0], a.shape[0])
 
-    def __call__(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array,
-                 log_weights: wp.array) -> None:
+    def __call__(
+        self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array
+    ) -> None:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
-            raise ValueError(f"nof_direct: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
-                             f"built for {self.num_beams} beams")
+            raise ValueError(
+                f"nof_direct: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
+                f"built for {self.num_beams} beams"
+            )
         rendered = self.render(particles, T_base_laser, angles).contiguous().to(wp.device_to_torch(self.device))
-        wp.launch(self.likelihood_kernel, particles.shape[0], [wp.from_torch(rendered), measured, log_weights],
-                  device=self.device)
+        wp.launch(
+            self.likelihood_kernel,
+            particles.shape[0],
+            [wp.from_torch(rendered), measured, log_weights],
+            device=self.device,
+        )
 
 
 @WEIGHTING.register("nof_direct")

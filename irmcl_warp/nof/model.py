@@ -43,8 +43,9 @@ class NOF(nn.Module):
         d = self.encoding.out_dim
         first = cfg.skip_after or cfg.depth
         self.head = nn.Sequential(*[_block(d if i == 0 else cfg.width, cfg.width) for i in range(first)])
-        self.tail = nn.Sequential(*[_block(cfg.width + d if i == 0 else cfg.width, cfg.width)
-                                    for i in range(cfg.depth - first)])
+        self.tail = nn.Sequential(
+            *[_block(cfg.width + d if i == 0 else cfg.width, cfg.width) for i in range(cfg.depth - first)]
+        )
         self.out = nn.Linear(cfg.width, 1)
 
     def forward(self, xy: torch.Tensor) -> torch.Tensor:

@@ -49,8 +49,12 @@ def evaluating(model):
 
 class OccupancyGrid:
     def __init__(self, origins: np.ndarray, ends: np.ndarray, tc, device):
-        self.res, self.threshold, self.decay, self.dilate = (float(tc.grid_resolution_m), float(tc.grid_threshold),
-                                                             float(tc.grid_decay), int(tc.grid_dilate))
+        self.res, self.threshold, self.decay, self.dilate = (
+            float(tc.grid_resolution_m),
+            float(tc.grid_threshold),
+            float(tc.grid_decay),
+            int(tc.grid_dilate),
+        )
         pts = np.concatenate([origins, ends])
         margin = 2 * self.res * (1 + self.dilate)
         lo = pts.min(0) - margin
@@ -61,8 +65,12 @@ class OccupancyGrid:
         self.latest = torch.zeros(self.shape, dtype=torch.float32, device=device)  # last reading: the transmittance
         self.occupied = torch.ones(self.shape, dtype=torch.bool, device=device)
         self.end, self.t_min = tc.grid_end, float(tc.grid_t_min)
-        self.keep_fn = RENDER.build("occupied_samples", origin_xy=self.origin_xy, resolution_m=self.res,
-                                    t_min=self.t_min if self.end == "grid" else 0.0)
+        self.keep_fn = RENDER.build(
+            "occupied_samples",
+            origin_xy=self.origin_xy,
+            resolution_m=self.res,
+            t_min=self.t_min if self.end == "grid" else 0.0,
+        )
         H, W = self.shape
         iy, ix = torch.meshgrid(torch.arange(H, device=device), torch.arange(W, device=device), indexing="ij")
         self._corners = torch.stack([lo[0] + ix * self.res, lo[1] + iy * self.res], -1).reshape(-1, 2).float()
@@ -72,7 +80,7 @@ class OccupancyGrid:
         """Read the field once at a random point of every cell and refresh values and the occupied mask."""
         pts = self._corners + torch.rand(self._corners.shape, device=self.device) * self.res
         with evaluating(model), amp():
-            p = torch.cat([model(pts[s:s + chunk]).float() for s in range(0, len(pts), chunk)])
+            p = torch.cat([model(pts[s : s + chunk]).float() for s in range(0, len(pts), chunk)])
         self.latest = p.view(self.shape)
         self.values = torch.maximum(self.values * self.decay, self.latest)
         self._refresh_mask()
@@ -94,7 +102,9 @@ class OccupancyGrid:
         with torch.no_grad():
             flat = keep.reshape(-1).nonzero().squeeze(1)
             with evaluating(model), amp():
-                p_kept = model(points.reshape(-1, 2)[flat]).float() if len(flat) else torch.zeros(0, device=points.device)
+                p_kept = (
+                    model(points.reshape(-1, 2)[flat]).float() if len(flat) else torch.zeros(0, device=points.device)
+                )
             p = torch.zeros(keep.numel(), device=points.device).index_copy(0, flat, p_kept).view(keep.shape)
             T = torch.cumprod(torch.cat([torch.ones_like(p[:, :1]), 1.0 - p[:, :-1]], 1), 1)
         return keep & (T >= self.t_min)
@@ -103,7 +113,13 @@ class OccupancyGrid:
         return float(self.occupied.float().mean())
 
     def state_dict(self) -> dict:
-        return {"values": self.values, "latest": self.latest, "origin_xy": self.origin_xy, "res": self.res, "shape": self.shape}
+        return {
+            "values": self.values,
+            "latest": self.latest,
+            "origin_xy": self.origin_xy,
+            "res": self.res,
+            "shape": self.shape,
+        }
 
     def load_state_dict(self, s: dict) -> None:
         if tuple(s["shape"]) != self.shape or s["origin_xy"] != self.origin_xy or s["res"] != self.res:

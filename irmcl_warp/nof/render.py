@@ -40,8 +40,7 @@ def termination_weights(p: torch.Tensor, t_min: float = 0.0) -> torch.Tensor:
     return alpha
 
 
-def composite_torch(p: torch.Tensor, z: torch.Tensor, normalize: bool = True, t_min: float = 0.0,
-                    eps: float = 1e-10):
+def composite_torch(p: torch.Tensor, z: torch.Tensor, normalize: bool = True, t_min: float = 0.0, eps: float = 1e-10):
     """p, z [R, N] -> (ranges [R], opacity [R]); the same formula as the Warp kernels."""
     alpha = termination_weights(p, t_min)
     opacity = alpha.sum(-1)
@@ -68,8 +67,15 @@ def make_renderer(name: str = "warp", normalize: bool = True, t_min: float = 0.0
     return RENDERERS[name](normalize, t_min, eps)
 
 
-def sample_depths(num_rays: int, num_samples: int, near_m: float, far_m: float, perturb: bool,
-                  device=None, generator: torch.Generator | None = None) -> torch.Tensor:
+def sample_depths(
+    num_rays: int,
+    num_samples: int,
+    near_m: float,
+    far_m: float,
+    perturb: bool,
+    device=None,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Depths [R, N]: N values spread uniformly over [near, far] (both ends included, as the authors'
     linspace), each moved uniformly within its bin when ``perturb`` (bins end at the midpoints)."""
     z = torch.linspace(near_m, far_m, num_samples, device=device).expand(num_rays, num_samples)
@@ -87,8 +93,9 @@ def sample_points(origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor) ->
     return origins[:, None, :] + dirs[:, None, :] * z[..., None]
 
 
-def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor,
-                keep: torch.Tensor | None = None):
+def render_rays(
+    model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor, keep: torch.Tensor | None = None
+):
     """Query the model at the sample points and composite: (ranges [R], opacity [R], p [R, N]).
 
     ``keep`` [R, N] (occupancy-guided sampling): only those samples go through the model; the others
@@ -108,8 +115,9 @@ def render_rays(model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: t
 
 
 @torch.no_grad()
-def render_scans(model, beams, renderer, num_samples: int, near_m: float, far_m: float,
-                 chunk_rays: int = 2048, device="cpu") -> np.ndarray:
+def render_scans(
+    model, beams, renderer, num_samples: int, near_m: float, far_m: float, chunk_rays: int = 2048, device="cpu"
+) -> np.ndarray:
     """Ranges [S, B] rendered for every beam of a BeamSet (evaluation: fixed depths, model in eval mode)."""
 
     was_training = model.training
@@ -117,9 +125,9 @@ def render_scans(model, beams, renderer, num_samples: int, near_m: float, far_m:
     origins, dirs, _, _ = beams.rays(valid_only=False)
     out = np.empty(len(origins), dtype=np.float32)
     for s in range(0, len(origins), chunk_rays):
-        o = torch.from_numpy(origins[s:s + chunk_rays]).to(device)
-        d = torch.from_numpy(dirs[s:s + chunk_rays]).to(device)
+        o = torch.from_numpy(origins[s : s + chunk_rays]).to(device)
+        d = torch.from_numpy(dirs[s : s + chunk_rays]).to(device)
         z = sample_depths(len(o), num_samples, near_m, far_m, perturb=False, device=device)
-        out[s:s + chunk_rays] = render_rays(model, renderer, o, d, z)[0].cpu().numpy()
+        out[s : s + chunk_rays] = render_rays(model, renderer, o, d, z)[0].cpu().numpy()
     model.train(was_training)
     return out.reshape(beams.ranges_m.shape)

@@ -34,9 +34,16 @@ def torch_device(cfg) -> torch.device:
 def run_settings(cfg, train_split: str, far: float) -> dict:
     """What nof.pt stores beside the weights: the model config, the rendering bounds, the data and preset."""
     model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
-    return {"model_config": asdict(model_cfg), "near_m": cfg.render.near_m, "far_m": far,
-            "render": OmegaConf.to_container(cfg.render), "data": cfg.data.name, "split": cfg.data.split,
-            "train_split": train_split, "train_preset": cfg.train.name}
+    return {
+        "model_config": asdict(model_cfg),
+        "near_m": cfg.render.near_m,
+        "far_m": far,
+        "render": OmegaConf.to_container(cfg.render),
+        "data": cfg.data.name,
+        "split": cfg.data.split,
+        "train_split": train_split,
+        "train_preset": cfg.train.name,
+    }
 
 
 def make_validator(beams, cfg, near_m, far_m, device):
@@ -48,6 +55,7 @@ def make_validator(beams, cfg, near_m, far_m, device):
     def validate(model):
         pred = render_scans(model, sub, renderer, cfg.render.num_samples, near_m, far_m, cfg.render.chunk_rays, device)
         return scan_synthesis_metrics(pred, sub.ranges_m, sub.valid, sub.angles_rad)
+
     return validate
 
 
@@ -67,21 +75,44 @@ def train(run: runs.Run) -> Path:
     near, far = cfg.render.near_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)  # (data.far_m, else the log's)
     meta = run_settings(cfg, sets["train"].name, far)
     model_cfg = ModelConfig(**meta["model_config"])
-    trainer = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, near, far, device, out, run.ident.id,
-                      make_validator(sets["val"], cfg, near, far, device), meta)
+    trainer = Trainer(
+        NOF(model_cfg),
+        sets,
+        cfg.train,
+        cfg.render,
+        near,
+        far,
+        device,
+        out,
+        run.ident.id,
+        make_validator(sets["val"], cfg, near, far, device),
+        meta,
+    )
     trainer.try_resume()
-    print(f"{cfg.data.name}: training on {len(sets['train'])} scans ({sets['train'].num_rays:,} rays, split "
-          f"{sets['train'].name}), {trainer.steps_per_epoch} steps of {cfg.train.batch_rays} rays per epoch, "
-          f"preset {cfg.train.name}, renderer {cfg.render.name}, device {device}")
+    print(
+        f"{cfg.data.name}: training on {len(sets['train'])} scans ({sets['train'].num_rays:,} rays, split "
+        f"{sets['train'].name}), {trainer.steps_per_epoch} steps of {cfg.train.batch_rays} rays per epoch, "
+        f"preset {cfg.train.name}, renderer {cfg.render.name}, device {device}"
+    )
     history = trainer.run()
     if not history:
         raise RuntimeError("no epoch finished: raise train.max_time_s or lower the batch")
     best = trainer.best
-    metrics = {"preset": cfg.train.name, "device": str(device), "gpu": torch.cuda.get_device_name() if device.type == "cuda" else None,
-               "epochs_done": len(history), "best_epoch": best["epoch"], "val": best["val"],
-               "train_time_s": trainer.train_time_s, "train_rays": sets["train"].num_rays,
-               "rays_per_s": float(np.mean([h["rays_per_s"] for h in history])), "history": history}
+    metrics = {
+        "preset": cfg.train.name,
+        "device": str(device),
+        "gpu": torch.cuda.get_device_name() if device.type == "cuda" else None,
+        "epochs_done": len(history),
+        "best_epoch": best["epoch"],
+        "val": best["val"],
+        "train_time_s": trainer.train_time_s,
+        "train_rays": sets["train"].num_rays,
+        "rays_per_s": float(np.mean([h["rays_per_s"] for h in history])),
+        "history": history,
+    }
     path = run.finish(metrics, str(device))
-    print(f"best epoch {best['epoch']}: val MAE {best['val']['mae_m']:.3f} m -> {path / 'nof.pt'} "
-          f"({trainer.train_time_s:.0f} s of training)")
+    print(
+        f"best epoch {best['epoch']}: val MAE {best['val']['mae_m']:.3f} m -> {path / 'nof.pt'} "
+        f"({trainer.train_time_s:.0f} s of training)"
+    )
     return path

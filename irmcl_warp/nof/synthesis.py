@@ -31,12 +31,29 @@ GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 a
 
 def grid_ranges(train: BeamSet, test: BeamSet, resolution_m: float, far: float, cfg, device) -> np.ndarray:
     m = cfg.mapping
-    grid = integrate_scans(train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=resolution_m,
-                           max_range_m=far, l_occ=m.l_occ, l_free=m.l_free, l_min=m.l_min, l_max=m.l_max,
-                           kernel=m.kernel, device=device)
+    grid = integrate_scans(
+        train.T_map_laser,
+        train.ranges_m,
+        train.angles_rad,
+        resolution_m=resolution_m,
+        max_range_m=far,
+        l_occ=m.l_occ,
+        l_free=m.l_free,
+        l_min=m.l_min,
+        l_max=m.l_max,
+        kernel=m.kernel,
+        device=device,
+    )
     occupancy = np.where(grid.known, grid.probability, 1.0)  # unknown stops the beam (AMCL)
-    caster = RAYCAST.build("dda", occupancy=occupancy, origin_xy=grid.origin_xy, resolution_m=resolution_m,
-                           max_range_m=far, occ_threshold=cfg.raycast.occ_threshold, device=device)
+    caster = RAYCAST.build(
+        "dda",
+        occupancy=occupancy,
+        origin_xy=grid.origin_xy,
+        resolution_m=resolution_m,
+        max_range_m=far,
+        occ_threshold=cfg.raycast.occ_threshold,
+        device=device,
+    )
     return caster.cast_numpy(test.T_map_laser, test.angles_rad)
 
 
@@ -86,8 +103,12 @@ def score_scans(run: runs.Run) -> Path:
     pred, meta = nof_ranges(nof_path, test, cfg)
     name = f"NOF ({meta.get('train_preset', '?')})"
     preds[name] = pred
-    methods[name] = {"kind": "nof", "render_s": time.time() - t0, "checkpoint": str(nof_path),
-                     "best_epoch": meta.get("epoch")}
+    methods[name] = {
+        "kind": "nof",
+        "render_s": time.time() - t0,
+        "checkpoint": str(nof_path),
+        "best_epoch": meta.get("epoch"),
+    }
     for res in GRID_RESOLUTIONS_M:
         name = f"OGM {res * 100:.0f} cm"
         t0 = time.time()
@@ -95,10 +116,19 @@ def score_scans(run: runs.Run) -> Path:
         methods[name] = {"kind": "grid", "resolution_m": res, "render_s": time.time() - t0}
     for name, pred in preds.items():
         methods[name].update(scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad))
-    result = {"dataset": cfg.data.name, "split": test.name, "train_split": train.name, "test_scans": len(test),
-              "far_m": far, "device": device, "methods": methods}
+    result = {
+        "dataset": cfg.data.name,
+        "split": test.name,
+        "train_split": train.name,
+        "test_scans": len(test),
+        "far_m": far,
+        "device": device,
+        "methods": methods,
+    }
     plot_scan(out / "scan.png", test, preds, k=len(test) // 2)
     path = run.finish(result, device)
-    print(f"{cfg.data.name}, {test.name} ({len(test)} scans): " + "; ".join(
-        f"{n}: MAE {m['mae_m']:.3f} m, acc {m['accuracy_pct']:.1f} %" for n, m in methods.items()))
+    print(
+        f"{cfg.data.name}, {test.name} ({len(test)} scans): "
+        + "; ".join(f"{n}: MAE {m['mae_m']:.3f} m, acc {m['accuracy_pct']:.1f} %" for n, m in methods.items())
+    )
     return path

@@ -58,6 +58,7 @@ def make_scheduler(opt, tc, total_steps: int):
             return (step + 1) / warm
         t = min(1.0, (step - warm) / max(1, total_steps - 1 - warm))
         return final + (1.0 - final) * 0.5 * (1.0 + math.cos(math.pi * t))
+
     return torch.optim.lr_scheduler.LambdaLR(opt, factor), True
 
 
@@ -110,14 +111,23 @@ class Trainer:
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
         if self.grid is not None:  # its readings grow with the map's area: say what they cost
             cells = self.grid.values.numel()
-            print(f"occupancy grid: {self.grid.shape[0]} x {self.grid.shape[1]} cells of {tc.grid_resolution_m} m, "
-                  f"read every {tc.grid_every} steps ({cells:,} points, {cells / (tc.batch_rays * tc.num_samples):.0%} "
-                  f"of a batch's samples)")
+            print(
+                f"occupancy grid: {self.grid.shape[0]} x {self.grid.shape[1]} cells of {tc.grid_resolution_m} m, "
+                f"read every {tc.grid_every} steps ({cells:,} points, {cells / (tc.batch_rays * tc.num_samples):.0%} "
+                f"of a batch's samples)"
+            )
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
-        self.opt = torch.optim.Adam(model.parameters(), lr=tc.lr, weight_decay=tc.weight_decay,
-                                    fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None)
+        self.opt = torch.optim.Adam(
+            model.parameters(),
+            lr=tc.lr,
+            weight_decay=tc.weight_decay,
+            fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None,
+        )
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
-        self.epoch_loss = (0.0, 0)  # (sum, steps) of the epoch's losses before an interruption: a resumed epoch's mean is the whole epoch's
+        self.epoch_loss = (
+            0.0,
+            0,
+        )  # (sum, steps) of the epoch's losses before an interruption: a resumed epoch's mean is the whole epoch's
         # an epoch is one pass over the rays, or ``steps_per_epoch`` batches (fewer or more than a pass)
         self.steps_per_epoch = tc.steps_per_epoch or -(-len(self.ranges) // tc.batch_rays)
         self.sched, self.sched_per_step = make_scheduler(self.opt, tc, tc.epochs * self.steps_per_epoch)
@@ -133,12 +143,21 @@ class Trainer:
         rng = {"cpu": torch.get_rng_state()}
         if torch.cuda.is_available():
             rng["cuda"] = torch.cuda.get_rng_state_all()
-        return {"key": self.key, "model": self.model.state_dict(), "opt": self.opt.state_dict(),
-                "sched": self.sched.state_dict(), "epoch": self.epoch, "step_in_epoch": self.step_in_epoch,
-                "history": self.history, "best": self.best, "train_time_s": self.train_time_s, "rng": rng,
-                "epoch_loss": self.epoch_loss,
-                "grid": None if self.grid is None else self.grid.state_dict(),
-                "ema": None if self.ema is None else self.ema.state_dict()}
+        return {
+            "key": self.key,
+            "model": self.model.state_dict(),
+            "opt": self.opt.state_dict(),
+            "sched": self.sched.state_dict(),
+            "epoch": self.epoch,
+            "step_in_epoch": self.step_in_epoch,
+            "history": self.history,
+            "best": self.best,
+            "train_time_s": self.train_time_s,
+            "rng": rng,
+            "epoch_loss": self.epoch_loss,
+            "grid": None if self.grid is None else self.grid.state_dict(),
+            "ema": None if self.ema is None else self.ema.state_dict(),
+        }
 
     def try_resume(self) -> bool:
         path = self.out / "last.pt"
@@ -147,8 +166,9 @@ class Trainer:
         try:
             s = torch.load(path, map_location=self.device, weights_only=False)
         except Exception as e:  # truncated by a full disk or a copy cut short: say what to do, no traceback
-            raise ValueError(f"{path}: damaged checkpoint ({type(e).__name__}: {e}); delete it to train this run "
-                             f"afresh (rm {path})") from e
+            raise ValueError(
+                f"{path}: damaged checkpoint ({type(e).__name__}: {e}); delete it to train this run afresh (rm {path})"
+            ) from e
         if s.get("key") != self.key:
             print(f"{path}: made with other settings; starting afresh")
             return False
@@ -209,8 +229,15 @@ class Trainer:
         drawn = []
         for _ in range(batches):
             idx = torch.randint(len(self.ranges), (self.tc.batch_rays,), device=self.device, generator=gen)
-            z = sample_depths(len(idx), self.tc.num_samples, self.near_m, self.far_m, self.tc.perturb,
-                              device=self.device, generator=gen)
+            z = sample_depths(
+                len(idx),
+                self.tc.num_samples,
+                self.near_m,
+                self.far_m,
+                self.tc.perturb,
+                device=self.device,
+                generator=gen,
+            )
             o, d = self.origins[idx], self.dirs[idx]
             keep = None if self.grid is None else self.grid.keep(sample_points(o, d, z), self.model, self.amp)
             drawn.append((o, d, z, keep))
@@ -243,20 +270,31 @@ class Trainer:
         passes = -(-self.steps_per_epoch * B // len(self.ranges))
         perm = torch.cat([torch.randperm(len(self.ranges), generator=gen) for _ in range(passes)]).to(self.device)
         self.model.train()
-        bar = tqdm(range(self.step_in_epoch, self.steps_per_epoch), desc=f"epoch {self.epoch + 1}/{tc.epochs}",
-                   unit="step", dynamic_ncols=True, mininterval=1.0)
+        bar = tqdm(
+            range(self.step_in_epoch, self.steps_per_epoch),
+            desc=f"epoch {self.epoch + 1}/{tc.epochs}",
+            unit="step",
+            dynamic_ncols=True,
+            mininterval=1.0,
+        )
         t_epoch, t_ckpt, losses, self.kept, self.read = time.time(), time.time(), [], [], []
         for b in bar:
-            losses.append(self.step(perm[b * B:(b + 1) * B]))
+            losses.append(self.step(perm[b * B : (b + 1) * B]))
             self.step_in_epoch = b + 1
             if (b % 20 == 0 or b + 1 == self.steps_per_epoch) and losses:
                 elapsed = time.time() - t_epoch
-                bar.set_postfix(loss=f"{float(losses[-1]):.3f}",
-                                rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}", refresh=False)
+                bar.set_postfix(
+                    loss=f"{float(losses[-1]):.3f}",
+                    rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}",
+                    refresh=False,
+                )
             if time.time() - t_ckpt > tc.checkpoint_every_s:
                 self.train_time_s += time.time() - t_ckpt
                 t_ckpt = time.time()
-                self.epoch_loss = (self.epoch_loss[0] + float(torch.stack(losses).sum()), self.epoch_loss[1] + len(losses))
+                self.epoch_loss = (
+                    self.epoch_loss[0] + float(torch.stack(losses).sum()),
+                    self.epoch_loss[1] + len(losses),
+                )
                 losses = []
                 atomic_torch_save(self.state(), self.out / "last.pt")
             if tc.max_time_s is not None and self.train_time_s + time.time() - t_ckpt >= tc.max_time_s:
@@ -272,17 +310,28 @@ class Trainer:
         loss_sum = self.epoch_loss[0] + (float(torch.stack(losses).sum()) if losses else 0.0)
         loss_steps = self.epoch_loss[1] + len(losses)
         self.epoch_loss = (0.0, 0)
-        record = {"epoch": self.epoch + 1, "steps": steps, "loss": loss_sum / loss_steps if loss_steps else None,
-                  "epoch_s": epoch_s, "rays_per_s": steps * B / max(epoch_s, 1e-9), "train_time_s": self.train_time_s,
-                  "lr": self.opt.param_groups[0]["lr"],
-                  "samples_per_beam": float(torch.stack(self.kept).float().mean()) if self.kept else self.tc.num_samples}
+        record = {
+            "epoch": self.epoch + 1,
+            "steps": steps,
+            "loss": loss_sum / loss_steps if loss_steps else None,
+            "epoch_s": epoch_s,
+            "rays_per_s": steps * B / max(epoch_s, 1e-9),
+            "train_time_s": self.train_time_s,
+            "lr": self.opt.param_groups[0]["lr"],
+            "samples_per_beam": float(torch.stack(self.kept).float().mean()) if self.kept else self.tc.num_samples,
+        }
         # the MLP's work: forward + backward (~3x a forward) per sample with gradient, a forward per sample read
         # without (ending the beams), and the grid's readings; against the epoch's time, the rate achieved
         read = float(torch.stack(self.read).float().mean()) if self.read else 0.0
         grid_points = 0 if self.grid is None else self.grid.values.numel() * -(-steps // tc.grid_every)
         flop = self.model.flops_per_point() * ((3 * record["samples_per_beam"] + read) * B * steps + grid_points)
-        record.update({"read_per_beam": read, "mlp_gflop_per_step": flop / max(steps, 1) / 1e9,
-                       "mlp_tflop_per_s": flop / max(epoch_s, 1e-9) / 1e12})
+        record.update(
+            {
+                "read_per_beam": read,
+                "mlp_gflop_per_step": flop / max(steps, 1) / 1e9,
+                "mlp_tflop_per_s": flop / max(epoch_s, 1e-9) / 1e12,
+            }
+        )
         if self.grid is not None:
             record["grid_occupied_share"] = self.grid.occupied_share()
         if tc.bn_recalibrate:  # part of making the field: counted as training time
@@ -298,11 +347,14 @@ class Trainer:
         improved = self.best is None or record["val"]["mae_m"] < self.best["val"]["mae_m"]
         if improved:
             self.best = record
-            atomic_torch_save({**self.meta, "model": self.kept_model.state_dict(), "epoch": record["epoch"],
-                               "val": record["val"]}, self.out / "nof.pt")
-        print(f"epoch {record['epoch']}: loss {record['loss']:.4f}, val MAE {record['val']['mae_m']:.3f} m, "
-              f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s, "
-              f"{record['samples_per_beam']:.1f} samples per beam through the MLP"
-              + (" (best)" if improved else ""))
+            atomic_torch_save(
+                {**self.meta, "model": self.kept_model.state_dict(), "epoch": record["epoch"], "val": record["val"]},
+                self.out / "nof.pt",
+            )
+        print(
+            f"epoch {record['epoch']}: loss {record['loss']:.4f}, val MAE {record['val']['mae_m']:.3f} m, "
+            f"accuracy {record['val']['accuracy_pct']:.1f} %, {record['rays_per_s']:,.0f} rays/s, "
+            f"{record['samples_per_beam']:.1f} samples per beam through the MLP" + (" (best)" if improved else "")
+        )
         atomic_torch_save(self.state(), self.out / "last.pt")
         return improved

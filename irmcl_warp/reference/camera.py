@@ -26,7 +26,7 @@ def ray_segment(o, d, a, b) -> float:
 
 def hash3(a: int, b: int, c: int) -> float:
     def i32(v):
-        return (v + 2 ** 31) % 2 ** 32 - 2 ** 31
+        return (v + 2**31) % 2**32 - 2**31
 
     h = i32(a * 73856093 + b * 19349663 + c * 83492791)
     h = i32((h ^ (h >> 13)) * 1274126177)
@@ -47,8 +47,23 @@ def paint(segments, colours, posters, k, u, z, light=np.array([0.6, 0.8])):
     return (0.65 + 0.35 * abs(e[0] * light[1] - e[1] * light[0])) * c
 
 
-def render(segments, heights, colours, posters, cam_pose, W, H, fx, fy, cx, cy, cam_height, wall_height,
-           exposure=1.0, tint=(1.0, 1.0, 1.0)):
+def render(
+    segments,
+    heights,
+    colours,
+    posters,
+    cam_pose,
+    W,
+    H,
+    fx,
+    fy,
+    cx,
+    cy,
+    cam_height,
+    wall_height,
+    exposure=1.0,
+    tint=(1.0, 1.0, 1.0),
+):
     """(rgb [H, W, 3] 0..255, depth [H, W]) of one camera pose, no pixel noise."""
     segments = np.asarray(segments, np.float64)
     rgb, depth = np.zeros((H, W, 3)), np.zeros((H, W))

@@ -11,7 +11,9 @@ def top_share_mean(particles, log_w, share: float = 0.8) -> np.ndarray:
     idx = np.argsort(-np.asarray(log_w), kind="stable")[:k]
     w = np.exp(np.asarray(log_w, np.float64)[idx] - np.max(log_w))
     p = np.asarray(particles, np.float64)[idx]
-    return np.array([w @ p[:, 0] / w.sum(), w @ p[:, 1] / w.sum(), np.arctan2(w @ np.sin(p[:, 2]), w @ np.cos(p[:, 2]))])
+    return np.array(
+        [w @ p[:, 0] / w.sum(), w @ p[:, 1] / w.sum(), np.arctan2(w @ np.sin(p[:, 2]), w @ np.cos(p[:, 2]))]
+    )
 
 
 def best_cluster_mean(particles, log_w, bounds, cell_m: float = 0.5, yaw_bins: int = 8) -> np.ndarray:
@@ -29,12 +31,13 @@ def best_cluster_mean(particles, log_w, bounds, cell_m: float = 0.5, yaw_bins: i
     np.add.at(hist, (ia, iy, ix), w)
     padded = np.pad(hist, ((1, 1), (0, 0), (0, 0)), mode="wrap")
     padded = np.pad(padded, ((0, 0), (1, 1), (1, 1)))
-    smooth = sum(padded[a:a + yaw_bins, b:b + ny, c:c + nx] for a in range(3) for b in range(3) for c in range(3))
+    smooth = sum(padded[a : a + yaw_bins, b : b + ny, c : c + nx] for a in range(3) for b in range(3) for c in range(3))
     ba, by, bx = np.unravel_index(np.argmax(smooth), hist.shape)
     bin_yaw = 2 * np.pi / yaw_bins
     cx, cy, ca = xmin + (bx + 0.5) * cell_m, ymin + (by + 0.5) * cell_m, -np.pi + (ba + 0.5) * bin_yaw
     da = np.arctan2(np.sin(p[:, 2] - ca), np.cos(p[:, 2] - ca))
     near = (np.hypot(p[:, 0] - cx, p[:, 1] - cy) <= 1.5 * cell_m) & (np.abs(da) <= 1.5 * bin_yaw)
     wn, pn = w[near], p[near]
-    return np.array([wn @ pn[:, 0] / wn.sum(), wn @ pn[:, 1] / wn.sum(),
-                     np.arctan2(wn @ np.sin(pn[:, 2]), wn @ np.cos(pn[:, 2]))])
+    return np.array(
+        [wn @ pn[:, 0] / wn.sum(), wn @ pn[:, 1] / wn.sum(), np.arctan2(wn @ np.sin(pn[:, 2]), wn @ np.cos(pn[:, 2]))]
+    )

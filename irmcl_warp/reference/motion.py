@@ -10,9 +10,9 @@ def sample_odometry(particles, step, alphas, rng):
     a1, a2, a3, a4 = alphas
     r1, t, r2 = step
     n = len(particles)
-    r1h = r1 - np.sqrt(a1 * r1 ** 2 + a2 * t ** 2) * rng.standard_normal(n)
-    th = t - np.sqrt(a3 * t ** 2 + a4 * (r1 ** 2 + r2 ** 2)) * rng.standard_normal(n)
-    r2h = r2 - np.sqrt(a1 * r2 ** 2 + a2 * t ** 2) * rng.standard_normal(n)
+    r1h = r1 - np.sqrt(a1 * r1**2 + a2 * t**2) * rng.standard_normal(n)
+    th = t - np.sqrt(a3 * t**2 + a4 * (r1**2 + r2**2)) * rng.standard_normal(n)
+    r2h = r2 - np.sqrt(a1 * r2**2 + a2 * t**2) * rng.standard_normal(n)
     x, y, yaw = particles.T
     out = np.stack([x + th * np.cos(yaw + r1h), y + th * np.sin(yaw + r1h), yaw + r1h + r2h], -1)
     out[:, 2] = np.arctan2(np.sin(out[:, 2]), np.cos(out[:, 2]))
@@ -27,7 +27,13 @@ def sample_irmcl(particles, step, noise, rng):
     n = len(particles)
     du = u + std * rng.standard_normal((n, 3))
     x, y, yaw = np.asarray(particles, float).T
-    out = np.stack([x + np.cos(yaw) * du[:, 0] - np.sin(yaw) * du[:, 1],
-                    y + np.sin(yaw) * du[:, 0] + np.cos(yaw) * du[:, 1], yaw + du[:, 2]], -1)
+    out = np.stack(
+        [
+            x + np.cos(yaw) * du[:, 0] - np.sin(yaw) * du[:, 1],
+            y + np.sin(yaw) * du[:, 0] + np.cos(yaw) * du[:, 1],
+            yaw + du[:, 2],
+        ],
+        -1,
+    )
     out[:, 2] = np.arctan2(np.sin(out[:, 2]), np.cos(out[:, 2]))
     return out

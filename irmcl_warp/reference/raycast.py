@@ -63,6 +63,9 @@ def cast(method, grid, origin, res, poses, angles, max_range, occ_threshold=0.5)
     for p, pose in enumerate(np.asarray(poses, dtype=f32)):
         for b, a in enumerate(np.asarray(angles, dtype=f32)):
             d = np.array([np.cos(pose[2] + a), np.sin(pose[2] + a)], dtype=f32)
-            out[p, b] = (dda_range(grid, origin, res, pose[:2], d, max_range, occ_threshold) if method == "dda"
-                         else field_range(grid, origin, res, pose[:2], d, max_range))
+            out[p, b] = (
+                dda_range(grid, origin, res, pose[:2], d, max_range, occ_threshold)
+                if method == "dda"
+                else field_range(grid, origin, res, pose[:2], d, max_range)
+            )
     return out

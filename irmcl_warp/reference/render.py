@@ -12,8 +12,6 @@ from __future__ import annotations
 from irmcl_warp.nof.render import composite_torch, termination_weights  # noqa: F401
 
 
-
-
 def occupied_samples_torch(points, values, occupied, origin_xy, resolution_m: float, t_min: float = 0.0):
     """Twin of RENDER["occupied_samples"]: keep [R, N] (bool) for sample points [R, N, 2] along beams.
 

@@ -16,8 +16,9 @@ def effective_sample_size(log_w) -> float:
 
 def weighted_mean(particles, log_w):
     w = normalise(log_w)
-    return np.array([w @ particles[:, 0], w @ particles[:, 1],
-                     np.arctan2(w @ np.sin(particles[:, 2]), w @ np.cos(particles[:, 2]))])
+    return np.array(
+        [w @ particles[:, 0], w @ particles[:, 1], np.arctan2(w @ np.sin(particles[:, 2]), w @ np.cos(particles[:, 2]))]
+    )
 
 
 def weighted_spread(particles, log_w) -> float:

@@ -9,8 +9,13 @@ import numpy as np
 def laser_pose(pose, T_base_laser):
     x, y, t = pose
     c, s = np.cos(t), np.sin(t)
-    return np.array([x + c * T_base_laser[0] - s * T_base_laser[1], y + s * T_base_laser[0] + c * T_base_laser[1],
-                     t + T_base_laser[2]])
+    return np.array(
+        [
+            x + c * T_base_laser[0] - s * T_base_laser[1],
+            y + s * T_base_laser[0] + c * T_base_laser[1],
+            t + T_base_laser[2],
+        ]
+    )
 
 
 def cell(x, y, origin, res):
@@ -86,8 +91,24 @@ def occupancy(maps, ix, iy):
     return maps["hits"][iy, ix] / maps["visits"][iy, ix]
 
 
-def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_size=1, fullness=0.1, sigma=0.05,
-          lsigma=0.075, null_likelihood=-0.5, free_delta=0.05 * np.sqrt(2), lskip=0, free_check=True):
+def score(
+    maps,
+    pose,
+    T_base_laser,
+    ranges,
+    angles,
+    usable,
+    origin,
+    res,
+    kernel_size=1,
+    fullness=0.1,
+    sigma=0.05,
+    lsigma=0.075,
+    null_likelihood=-0.5,
+    free_delta=0.05 * np.sqrt(2),
+    lskip=0,
+    free_check=True,
+):
     """(score, log-likelihood) of one pose against one map (GMapping's matcher model); ``free_check=False``
     accepts an occupied cell whatever the cell before it holds (what the released code does in effect)."""
     lp = laser_pose(pose, T_base_laser)
@@ -103,7 +124,8 @@ def score(maps, pose, T_base_laser, ranges, angles, usable, origin, res, kernel_
         for ox in range(-kernel_size, kernel_size + 1):
             for oy in range(-kernel_size, kernel_size + 1):
                 if occupancy(maps, hx + ox, hy + oy) > fullness and (
-                        not free_check or occupancy(maps, fx + ox, fy + oy) < fullness):
+                    not free_check or occupancy(maps, fx + ox, fy + oy) < fullness
+                ):
                     n = maps["hits"][hy + oy, hx + ox]
                     mx = origin[0] + (hx + ox) * res + maps["sx"][hy + oy, hx + ox] / n  # the cell's mean hit point
                     my = origin[1] + (hy + oy) * res + maps["sy"][hy + oy, hx + ox] / n
@@ -121,8 +143,13 @@ def motion_std(delta, srr=0.1, srt=0.2, str_=0.1, stt=0.2):
     """Standard deviations of GMapping's motion noise on (x, y, theta) of an odometry step in the old frame."""
     ax, ay, at = np.abs(delta)
     sxy = 0.3 * srr
-    return np.array([srr * ax + str_ * at + sxy * ay, srr * ay + str_ * at + sxy * ax,
-                     stt * at + srt * np.hypot(delta[0], delta[1])])
+    return np.array(
+        [
+            srr * ax + str_ * at + sxy * ay,
+            srr * ay + str_ * at + sxy * ax,
+            stt * at + srt * np.hypot(delta[0], delta[1]),
+        ]
+    )
 
 
 MOVES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)

@@ -9,12 +9,19 @@ from irmcl_warp.reference.raycast import dda_range
 def laser_poses(particles, T_base_laser):
     x, y, t = (np.asarray(particles, np.float64)[:, i] for i in range(3))
     c, s = np.cos(t), np.sin(t)
-    return np.stack([x + c * T_base_laser[0] - s * T_base_laser[1], y + s * T_base_laser[0] + c * T_base_laser[1],
-                     t + T_base_laser[2]], -1)
+    return np.stack(
+        [
+            x + c * T_base_laser[0] - s * T_base_laser[1],
+            y + s * T_base_laser[0] + c * T_base_laser[1],
+            t + T_base_laser[2],
+        ],
+        -1,
+    )
 
 
-def nog_render(grid, origin, res, particles, T_base_laser, angles, num_samples, near, far, t_min=0.0, empty_below=0.0,
-               eps=1e-10):
+def nog_render(
+    grid, origin, res, particles, T_base_laser, angles, num_samples, near, far, t_min=0.0, empty_below=0.0, eps=1e-10
+):
     """Rendered ranges [P, B] from nearest-node lookups along num_samples fixed depths, every sample evaluated
     (the kernel's jumps over empty space must not change this); nodes below ``empty_below`` read as 0."""
     pose = laser_poses(particles, T_base_laser)
@@ -68,11 +75,12 @@ def nog_log_weights(rendered, measured, sigma):
     """-0.5 D^2 / sigma^2 with D the mean absolute error over the valid (non-NaN) measured beams."""
     valid = np.isfinite(measured)
     D = np.abs(rendered[:, valid] - measured[valid]).sum(1) / max(valid.sum(), 1)
-    return -0.5 * D ** 2 / sigma ** 2
+    return -0.5 * D**2 / sigma**2
 
 
-def likelihood_field_log_weights(dist, origin, res, particles, T_base_laser, angles, measured, z_hit, z_rand,
-                                 sigma_hit, max_range, max_dist):
+def likelihood_field_log_weights(
+    dist, origin, res, particles, T_base_laser, angles, measured, z_hit, z_rand, sigma_hit, max_range, max_dist
+):
     """Thrun et al. Table 6.3 in logs: sum over valid beams of log(z_hit exp(-d^2 / 2 s^2) + z_rand / max_range)."""
     pose = laser_poses(particles, T_base_laser)
     valid = np.isfinite(measured)
@@ -83,11 +91,26 @@ def likelihood_field_log_weights(dist, origin, res, particles, T_base_laser, ang
     H, W = dist.shape
     inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
     d = np.where(inside, np.minimum(dist[np.clip(iy, 0, H - 1), np.clip(ix, 0, W - 1)], max_dist), max_dist)
-    return np.log(z_hit * np.exp(-d ** 2 / (2 * sigma_hit ** 2)) + z_rand / max_range).sum(1)
+    return np.log(z_hit * np.exp(-(d**2) / (2 * sigma_hit**2)) + z_rand / max_range).sum(1)
 
 
-def beam_model_log_weights(occ, origin, res, particles, T_base_laser, angles, measured, z_hit, z_short, z_max,
-                           z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
+def beam_model_log_weights(
+    occ,
+    origin,
+    res,
+    particles,
+    T_base_laser,
+    angles,
+    measured,
+    z_hit,
+    z_short,
+    z_max,
+    z_rand,
+    sigma_hit,
+    lambda_short,
+    max_range,
+    occ_threshold,
+):
     """Thrun et al. Table 6.1 in logs, expected ranges from the DDA twin (one Python loop per ray)."""
     pose = laser_poses(particles, T_base_laser)
     out = np.zeros(len(pose))
@@ -96,17 +119,31 @@ def beam_model_log_weights(occ, origin, res, particles, T_base_laser, angles, me
             if not np.isfinite(z):
                 continue
             d = np.array([np.cos(yaw + a), np.sin(yaw + a)], np.float32)
-            exp_r = dda_range(occ, np.asarray(origin, np.float32), res, np.array([x, y], np.float32), d, max_range,
-                              occ_threshold)
-            q = z_hit * np.exp(-(z - exp_r) ** 2 / (2 * sigma_hit ** 2))
+            exp_r = dda_range(
+                occ, np.asarray(origin, np.float32), res, np.array([x, y], np.float32), d, max_range, occ_threshold
+            )
+            q = z_hit * np.exp(-((z - exp_r) ** 2) / (2 * sigma_hit**2))
             q += z_short * lambda_short * np.exp(-lambda_short * z) if z < exp_r else 0.0
             q += z_max if z >= max_range else z_rand / max_range
             out[p] += np.log(q)
     return out
 
 
-def nog_log_weights_torch(grid, origin, res, particles, T_base_laser, angles, measured, num_samples: int, near: float,
-                          far: float, sigma: float, chunk: int = 500, eps: float = 1e-10):
+def nog_log_weights_torch(
+    grid,
+    origin,
+    res,
+    particles,
+    T_base_laser,
+    angles,
+    measured,
+    num_samples: int,
+    near: float,
+    far: float,
+    sigma: float,
+    chunk: int = 500,
+    eps: float = 1e-10,
+):
     """IR-MCL's weighting as the authors formulate it, in torch: every sample of every beam of ``chunk``
     particles at a time, nearest-node lookups, the transmittance by a cumulative product, normalised
     weights, then the Gaussian on the mean L1 error. The speed reference of ``eval.bench mcl`` (all
@@ -135,5 +172,5 @@ def nog_log_weights_torch(grid, origin, res, particles, T_base_laser, angles, me
         w = occ * T
         r = (w * z).sum(-1) / (w.sum(-1) + eps)  # [p, B]
         D = (r[:, valid] - measured[valid]).abs().mean(1)
-        out.append(-0.5 * D ** 2 / sigma ** 2)
+        out.append(-0.5 * D**2 / sigma**2)
     return torch.cat(out)

@@ -18,8 +18,16 @@ from irmcl_warp.io.atomic import DiskFullError
 from irmcl_warp.io.errors import LogFormatError
 
 # what a user's input or settings cause; a bug surfaces as another type and keeps its traceback
-EXPECTED = (LogFormatError, ConfigError, DiskFullError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
-            ValueError)
+EXPECTED = (
+    LogFormatError,
+    ConfigError,
+    DiskFullError,
+    FileNotFoundError,
+    IsADirectoryError,
+    NotADirectoryError,
+    PermissionError,
+    ValueError,
+)
 
 
 def _fail(e: BaseException) -> None:

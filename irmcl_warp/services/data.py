@@ -18,8 +18,17 @@ import warnings
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.io import (GEOMETRY_FIELDS, LogDefectWarning, apply_laser_geometry, attach_ground_truth, check_ground_truth,
-                           read_ground_truth, read_log, read_splits, resolve)
+from irmcl_warp.io import (
+    GEOMETRY_FIELDS,
+    LogDefectWarning,
+    apply_laser_geometry,
+    attach_ground_truth,
+    check_ground_truth,
+    read_ground_truth,
+    read_log,
+    read_splits,
+    resolve,
+)
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.nof.beams import SPLITS, BeamSet, beams_from_log, interleaved_splits, split_beams
 from irmcl_warp.runs import cache_dir, content_digest, digest
@@ -67,8 +76,16 @@ def load_stream(cfg) -> LaserLog:
             info = LaserInfo(int(v[0]), *map(float, v[1:]))
             gt = z["ground_truth"] if z["ground_truth"].size else None
             defects = json.loads(str(z["defects"]))
-            log = LaserLog(z["stamps"], z["ranges_m"], z["odom"], info, z["T_base_laser"], gt,
-                           source=str(z["source"]), defects=DefectReport(defects["counts"], defects["notes"]))
+            log = LaserLog(
+                z["stamps"],
+                z["ranges_m"],
+                z["odom"],
+                info,
+                z["T_base_laser"],
+                gt,
+                source=str(z["source"]),
+                defects=DefectReport(defects["counts"], defects["notes"]),
+            )
         _warn_again(defects["warnings"])
         return apply_laser_geometry(log, cfg.data)
     except (OSError, KeyError, ValueError):
@@ -82,13 +99,21 @@ def load_stream(cfg) -> LaserLog:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     i = log.info
     buf = io.BytesIO()
-    np.savez_compressed(buf, key=np.array(key), stamps=log.stamps, ranges_m=log.ranges_m, odom=log.odom,
-                        T_base_laser=log.T_base_laser, source=np.array(str(log.source)),
-                        defects=np.array(json.dumps({"warnings": notes, "counts": log.defects.counts,
-                                                          "notes": log.defects.notes})),
-                        ground_truth=log.ground_truth if log.ground_truth is not None else np.zeros(0),
-                        info=np.array([i.num_beams, i.angle_min_rad, i.angle_increment_rad, i.range_min_m,
-                                       i.range_max_m, i.no_return_m], np.float64))
+    np.savez_compressed(
+        buf,
+        key=np.array(key),
+        stamps=log.stamps,
+        ranges_m=log.ranges_m,
+        odom=log.odom,
+        T_base_laser=log.T_base_laser,
+        source=np.array(str(log.source)),
+        defects=np.array(json.dumps({"warnings": notes, "counts": log.defects.counts, "notes": log.defects.notes})),
+        ground_truth=log.ground_truth if log.ground_truth is not None else np.zeros(0),
+        info=np.array(
+            [i.num_beams, i.angle_min_rad, i.angle_increment_rad, i.range_min_m, i.range_max_m, i.no_return_m],
+            np.float64,
+        ),
+    )
     atomic_write_bytes(path, buf.getvalue())
     _warn_again(notes)
     return apply_laser_geometry(log, cfg.data)

@@ -43,6 +43,7 @@ def free_space_view(probability: np.ndarray, origin_xy, resolution_m: float, kno
 @dataclass
 class WeightingMaps:
     """What an observation model reads; only the one ``mcl.weighting`` names needs to be set."""
+
     nog: NOG | None = None  # nog_raymarch, nog_table
     model: object | None = None  # nof_direct: a NOF (torch module)
     occupancy: np.ndarray | None = None  # grid models: p_occ per cell (unknown cells as the model wants them)
@@ -65,32 +66,72 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
     """The WEIGHTING entry ``mcl.weighting`` for ``num_particles`` x ``num_beams``."""
     w = mcl.weighting
     if w in NOF_WEIGHTINGS:
-        shared = dict(num_particles=num_particles, num_beams=num_beams, num_samples=mcl.num_samples,
-                      near_m=mcl.near_m, far_m=far_m, sigma_m=mcl.sigma_m, device=device)
+        shared = dict(
+            num_particles=num_particles,
+            num_beams=num_beams,
+            num_samples=mcl.num_samples,
+            near_m=mcl.near_m,
+            far_m=far_m,
+            sigma_m=mcl.sigma_m,
+            device=device,
+        )
         if w == "nof_direct":
             import irmcl_warp.nof.direct  # noqa: F401  (registers nof_direct; lazy: it needs torch)
 
             return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
         if w == "nog_table":
             nog = _need(maps.nog, w, "a NOG")
-            march = dict(num_angles=mcl.table_angles, num_samples=mcl.num_samples, near_m=mcl.near_m, far_m=far_m,
-                         t_min=mcl.t_min, empty_below=mcl.empty_below)
+            march = dict(
+                num_angles=mcl.table_angles,
+                num_samples=mcl.num_samples,
+                near_m=mcl.near_m,
+                far_m=far_m,
+                t_min=mcl.t_min,
+                empty_below=mcl.empty_below,
+            )
             dev = pick_device(device)
             key = ("nog_table", *march.values(), dev)
             if key not in maps.built:  # one table at a time in memory; on disk, one per map and settings
                 maps.built = {key: cached_table(nog, march, dev, lambda: NogTable.build(nog, device=dev, **march))}
-            return WEIGHTING.build(w, nog=nog, num_angles=mcl.table_angles, t_min=mcl.t_min,
-                                   empty_below=mcl.empty_below, table=maps.built[key], **shared)
-        return WEIGHTING.build(w, nog=_need(maps.nog, w, "a NOG"), t_min=mcl.t_min, empty_below=mcl.empty_below,
-                             batch=mcl.march_batch, beam_major=_march_order(mcl.march_order), **shared)
-    grid = dict(occupancy=_need(maps.occupancy, w, "an occupancy grid"), origin_xy=maps.origin_xy,
-                resolution_m=maps.resolution_m, max_range_m=far_m, z_hit=mcl.z_hit, z_rand=mcl.z_rand,
-                sigma_hit_m=mcl.sigma_hit_m, device=device)
+            return WEIGHTING.build(
+                w,
+                nog=nog,
+                num_angles=mcl.table_angles,
+                t_min=mcl.t_min,
+                empty_below=mcl.empty_below,
+                table=maps.built[key],
+                **shared,
+            )
+        return WEIGHTING.build(
+            w,
+            nog=_need(maps.nog, w, "a NOG"),
+            t_min=mcl.t_min,
+            empty_below=mcl.empty_below,
+            batch=mcl.march_batch,
+            beam_major=_march_order(mcl.march_order),
+            **shared,
+        )
+    grid = dict(
+        occupancy=_need(maps.occupancy, w, "an occupancy grid"),
+        origin_xy=maps.origin_xy,
+        resolution_m=maps.resolution_m,
+        max_range_m=far_m,
+        z_hit=mcl.z_hit,
+        z_rand=mcl.z_rand,
+        sigma_hit_m=mcl.sigma_hit_m,
+        device=device,
+    )
     if w == "likelihood_field":
         return WEIGHTING.build(w, max_dist_m=mcl.field_max_dist_m, occ_threshold=mcl.field_occ_threshold, **grid)
     if w == "beam_model":
-        return WEIGHTING.build(w, z_short=mcl.z_short, z_max=mcl.z_max, lambda_short=mcl.lambda_short,
-                               occ_threshold=mcl.beam_occ_threshold, **grid)
+        return WEIGHTING.build(
+            w,
+            z_short=mcl.z_short,
+            z_max=mcl.z_max,
+            lambda_short=mcl.lambda_short,
+            occ_threshold=mcl.beam_occ_threshold,
+            **grid,
+        )
     return WEIGHTING.build(w, **grid)
 
 
@@ -106,8 +147,10 @@ def _need(value, weighting: str, what: str):
     return value
 
 
-def build_filter(mcl, free_space: NOG, T_base_laser, scan_angles_rad, far_m: float, device: str,
-                 maps: WeightingMaps) -> ParticleFilter:
+def build_filter(
+    mcl, free_space: NOG, T_base_laser, scan_angles_rad, far_m: float, device: str, maps: WeightingMaps
+) -> ParticleFilter:
     """The particle filter of ``mcl`` on this map, its weighting sized by the filter."""
-    return ParticleFilter(free_space, mcl, T_base_laser, scan_angles_rad, far_m,
-                          partial(make_weighting, mcl, far_m, device, maps), device)
+    return ParticleFilter(
+        free_space, mcl, T_base_laser, scan_angles_rad, far_m, partial(make_weighting, mcl, far_m, device, maps), device
+    )

@@ -11,7 +11,9 @@ from irmcl_warp.types import match_stamps
 
 # --- the protocols' constants: each changes published numbers, so each is named here with its origin ------
 FULL_COVERAGE = 0.9  # a relations score on a smaller share of the relations is shouted, never printed bare
-SYNTHESIS_THRESHOLD_M = 0.5  # IR-MCL Table I (the authors' nof/criteria code): accuracy and F-score count errors below this
+SYNTHESIS_THRESHOLD_M = (
+    0.5  # IR-MCL Table I (the authors' nof/criteria code): accuracy and F-score count errors below this
+)
 EVALUATE_AFTER_S = 20.0  # IR-MCL Sec. IV-C: localization errors are scored on the poses after 20 s
 CONVERGED_M, CONVERGED_FOR_S = 0.5, 5.0  # ours: converged once the position error stays below 0.5 m for 5 s
 SUCCESS_WITHIN_S = 60.0  # ours: a success converges within the 60 s of a start (IR-MCL's run length) ...
@@ -28,8 +30,10 @@ def coverage_warning(rel: dict, what: str) -> str | None:
     share = used / max(used + unmatched, 1)
     if share >= FULL_COVERAGE:
         return None
-    return (f"WARNING: {what}: only {used} of {used + unmatched} relations ({100 * share:.0f} %) match a pose by stamp; "
-            f"the figure is the error of those, not of the whole log")
+    return (
+        f"WARNING: {what}: only {used} of {used + unmatched} relations ({100 * share:.0f} %) match a pose by stamp; "
+        f"the figure is the error of those, not of the whole log"
+    )
 
 
 def relations_error(stamps, poses, relations, tol_s: float = 1e-4, max_gap_s: float | None = None) -> dict:
@@ -59,12 +63,17 @@ def relations_error(stamps, poses, relations, tol_s: float = 1e-4, max_gap_s: fl
     e_t = np.hypot(est[:, 0] - gt[:, 0], est[:, 1] - gt[:, 1])
     e_r = np.degrees(np.abs(wrap_angle(est[:, 2] - gt[:, 2])))
     return {
-        "relations_used": int(ok.sum()), "relations_unmatched": int((~ok).sum()),
+        "relations_used": int(ok.sum()),
+        "relations_unmatched": int((~ok).sum()),
         "relations_matched_share": float(ok.mean()),
-        "trans_abs_mean_m": float(e_t.mean()), "trans_abs_std_m": float(e_t.std()),
-        "trans_sq_mean_m2": float((e_t ** 2).mean()), "trans_sq_std_m2": float((e_t ** 2).std()),
-        "rot_abs_mean_deg": float(e_r.mean()), "rot_abs_std_deg": float(e_r.std()),
-        "rot_sq_mean_deg2": float((e_r ** 2).mean()), "rot_sq_std_deg2": float((e_r ** 2).std()),
+        "trans_abs_mean_m": float(e_t.mean()),
+        "trans_abs_std_m": float(e_t.std()),
+        "trans_sq_mean_m2": float((e_t**2).mean()),
+        "trans_sq_std_m2": float((e_t**2).std()),
+        "rot_abs_mean_deg": float(e_r.mean()),
+        "rot_abs_std_deg": float(e_r.std()),
+        "rot_sq_mean_deg2": float((e_r**2).mean()),
+        "rot_sq_std_deg2": float((e_r**2).std()),
     }
 
 
@@ -105,16 +114,30 @@ def scan_synthesis_metrics(pred_m, meas_m, valid, angles_rad, threshold_m: float
     if not per_scan:
         raise ValueError("no scan has a valid beam to score")
     a = np.array(per_scan)
-    return {"mae_m": float(a[:, 0].mean()), "accuracy_pct": float(a[:, 1].mean()), "chamfer_m": float(a[:, 2].mean()),
-            "fscore_pct": float(a[:, 3].mean()), "median_error_m": float(np.median(np.concatenate(errors))),
-            "scans": len(per_scan), "beams": int(sum(len(e) for e in errors))}
+    return {
+        "mae_m": float(a[:, 0].mean()),
+        "accuracy_pct": float(a[:, 1].mean()),
+        "chamfer_m": float(a[:, 2].mean()),
+        "fscore_pct": float(a[:, 3].mean()),
+        "median_error_m": float(np.median(np.concatenate(errors))),
+        "scans": len(per_scan),
+        "beams": int(sum(len(e) for e in errors)),
+    }
 
 
-def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float = EVALUATE_AFTER_S,
-                         success_within_s: float = SUCCESS_WITHIN_S, success_rmse_m: float = SUCCESS_RMSE_M,
-                         converged_m: float = CONVERGED_M, diverged_m: float = DIVERGED_M,
-                         success_yaw_deg: float = SUCCESS_YAW_DEG,
-                         pos_thresholds_m=(0.05, 0.10, 0.20), yaw_thresholds_deg=(0.5, 1.0, 2.0)) -> dict:
+def localization_metrics(
+    stamps,
+    estimate,
+    ground_truth,
+    converge_after_s: float = EVALUATE_AFTER_S,
+    success_within_s: float = SUCCESS_WITHIN_S,
+    success_rmse_m: float = SUCCESS_RMSE_M,
+    converged_m: float = CONVERGED_M,
+    diverged_m: float = DIVERGED_M,
+    success_yaw_deg: float = SUCCESS_YAW_DEG,
+    pos_thresholds_m=(0.05, 0.10, 0.20),
+    yaw_thresholds_deg=(0.5, 1.0, 2.0),
+) -> dict:
     """IR-MCL's protocol (Kuang et al. 2023, Sec. IV-C) plus success, time to converge and divergence.
 
     * converged: the first time from which the position error stays below ``converged_m`` for CONVERGED_FOR_S
@@ -152,8 +175,9 @@ def localization_metrics(stamps, estimate, ground_truth, converge_after_s: float
     for th in yaw_thresholds_deg:
         out[f"within_{th:g}deg_pct"] = float(100 * (e_yaw[after] < th).mean())
     rmse_since = float(np.sqrt(np.mean(e_xy[t >= t_conv] ** 2)))
-    out["success"] = bool(t_conv <= success_within_s and rmse_since < success_rmse_m
-                          and out["yaw_rmse_deg"] < success_yaw_deg)
+    out["success"] = bool(
+        t_conv <= success_within_s and rmse_since < success_rmse_m and out["yaw_rmse_deg"] < success_yaw_deg
+    )
     tracking = t >= t_conv
     high = (e_xy > diverged_m) & tracking
     out["divergences"] = int(np.sum(high[1:] & ~high[:-1]) + (high[0] if len(high) else 0))
@@ -166,5 +190,8 @@ def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
     ok = np.all(np.isfinite(est), 1) & np.all(np.isfinite(gt), 1)
     moved = compose(align_rigid(est, gt), est[ok])
     e_yaw = np.degrees(np.abs(wrap_angle(moved[:, 2] - gt[ok, 2])))
-    return {"poses": int(ok.sum()), "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved[:, :2] - gt[ok, :2]) ** 2, 1)))),
-            "yaw_mae_deg": float(e_yaw.mean())}
+    return {
+        "poses": int(ok.sum()),
+        "ate_rmse_m": float(np.sqrt(np.mean(np.sum((moved[:, :2] - gt[ok, :2]) ** 2, 1)))),
+        "yaw_mae_deg": float(e_yaw.mean()),
+    }

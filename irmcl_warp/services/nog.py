@@ -10,8 +10,7 @@ from irmcl_warp.nog import NOG, evaluate_grid
 from irmcl_warp.runs import digest, file_digest
 
 
-def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None,
-             device="cpu") -> NOG:
+def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None, device="cpu") -> NOG:
     """Bake (or read from the cache) the NOG of a nof.pt checkpoint."""
     key = digest([file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m)])[:16]
     path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None

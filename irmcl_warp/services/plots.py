@@ -9,8 +9,7 @@ import numpy as np
 from irmcl_warp.services.outputs import save_figure
 
 
-def plot_run(path: Path, view, image: np.ndarray, stamps, gt, est, particles, converged_s=None,
-             kidnap_s=None) -> None:
+def plot_run(path: Path, view, image: np.ndarray, stamps, gt, est, particles, converged_s=None, kidnap_s=None) -> None:
     """Left: the map (white free, black occupied, grey unknown) with ground truth, estimates and the final
     particles; right: position error over time, the convergence (and kidnapping) time marked."""
     import matplotlib
@@ -100,8 +99,8 @@ def animate_particles(path: Path, image, extent, frames, stamps, est, fps: int =
     t = np.asarray(stamps) - stamps[0]
     fig, ax = plt.subplots(figsize=(7, 5))
     _map_axes(ax, image, extent)
-    dots, = ax.plot([], [], ".", color="tab:blue", ms=1.5, alpha=0.6)
-    line, = ax.plot([], [], "-", color="tab:red", lw=1)
+    (dots,) = ax.plot([], [], ".", color="tab:blue", ms=1.5, alpha=0.6)
+    (line,) = ax.plot([], [], "-", color="tab:red", lw=1)
     title = ax.set_title("")
 
     def draw(k):

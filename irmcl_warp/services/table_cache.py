@@ -41,8 +41,14 @@ def table_name(nog, settings: dict, device: str) -> str:
     """The file name of the table of ``nog`` built with ``settings`` on ``device``'s kind (cpu or cuda)."""
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(nog.occupancy, dtype=np.float32).tobytes())
-    made_of = dict(format=TABLE_FORMAT, shape=list(nog.occupancy.shape), origin=[float(v) for v in nog.origin_xy],
-                   resolution=float(nog.resolution_m), device=str(device).split(":")[0], **settings)
+    made_of = dict(
+        format=TABLE_FORMAT,
+        shape=list(nog.occupancy.shape),
+        origin=[float(v) for v in nog.origin_xy],
+        resolution=float(nog.resolution_m),
+        device=str(device).split(":")[0],
+        **settings,
+    )
     h.update(json.dumps(made_of, sort_keys=True).encode())
     return f"nog_table-{h.hexdigest()[:24]}.npy"
 

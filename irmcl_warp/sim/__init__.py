@@ -15,18 +15,34 @@ from irmcl_warp.types import LaserInfo, LaserLog
 from irmcl_warp.kernels import SIM
 
 
-def drive_log(world: World, cfg, waypoints_xy, path_seed: int, duration_s: float | None = None,
-              device: str = "auto", source: str = "sim", rng=None) -> LaserLog:
+def drive_log(
+    world: World,
+    cfg,
+    waypoints_xy,
+    path_seed: int,
+    duration_s: float | None = None,
+    device: str = "auto",
+    source: str = "sim",
+    rng=None,
+) -> LaserLog:
     """The log of a drive through ``world`` along ``waypoints_xy`` with the sensor, speeds and odometry noise
     of the ``sim`` config ``cfg`` (its seed and layout settings aside): exact ground truth, noisy odometry.
     The lidar's noise comes from ``path_seed``, the odometry's from ``rng`` (None: a generator of ``path_seed``)."""
     rng = np.random.default_rng(path_seed) if rng is None else rng
     T_world_base = follow(np.asarray(waypoints_xy, float), cfg.speed_mps, cfg.turn_rate_rps, cfg.rate_hz, duration_s)
-    info = LaserInfo(cfg.num_beams, -cfg.fov_rad / 2, cfg.fov_rad / max(cfg.num_beams - 1, 1), 0.0,
-                     cfg.max_range_m, cfg.max_range_m)
+    info = LaserInfo(
+        cfg.num_beams, -cfg.fov_rad / 2, cfg.fov_rad / max(cfg.num_beams - 1, 1), 0.0, cfg.max_range_m, cfg.max_range_m
+    )
     T_base_laser = np.array([cfg.laser_x_m, 0.0, 0.0])
-    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=info.angles_rad, max_range_m=cfg.max_range_m,
-                      noise_std_m=cfg.range_noise_std_m, dropout_prob=cfg.dropout_prob, device=device)
+    lidar = SIM.build(
+        "segment_lidar",
+        segments=world.segments,
+        angles_rad=info.angles_rad,
+        max_range_m=cfg.max_range_m,
+        noise_std_m=cfg.range_noise_std_m,
+        dropout_prob=cfg.dropout_prob,
+        device=device,
+    )
     ranges = lidar.scan(compose(T_world_base, T_base_laser), seed=path_seed)
     odom = noisy_odometry(T_world_base, list(cfg.odom_alphas), rng)
     stamps = cfg.start_stamp_s + np.arange(len(T_world_base)) / cfg.rate_hz
@@ -37,8 +53,25 @@ def simulate(cfg, device: str = "auto") -> tuple[LaserLog, World]:
     """``cfg``: the ``sim`` config node (see irmcl_warp/config.py, SimConfig)."""
     path_seed = cfg.seed if cfg.get("path_seed") is None else int(cfg.path_seed)  # the world stays that of seed
     rng = np.random.default_rng(path_seed)
-    world = office(cfg.seed, cfg.width_m, cfg.height_m, cfg.corridor_width_m, cfg.room_min_width_m,
-                   cfg.room_max_width_m, cfg.door_width_m, cfg.furniture_per_room, cfg.repetitive)
-    log = drive_log(world, cfg, waypoints(world, rng, cfg.visit_prob), path_seed, cfg.duration_s, device,
-                    f"sim:office(seed={cfg.seed}, path {path_seed})", rng)  # the odometry draws after the waypoints
+    world = office(
+        cfg.seed,
+        cfg.width_m,
+        cfg.height_m,
+        cfg.corridor_width_m,
+        cfg.room_min_width_m,
+        cfg.room_max_width_m,
+        cfg.door_width_m,
+        cfg.furniture_per_room,
+        cfg.repetitive,
+    )
+    log = drive_log(
+        world,
+        cfg,
+        waypoints(world, rng, cfg.visit_prob),
+        path_seed,
+        cfg.duration_s,
+        device,
+        f"sim:office(seed={cfg.seed}, path {path_seed})",
+        rng,
+    )  # the odometry draws after the waypoints
     return log, world

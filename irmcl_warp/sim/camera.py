@@ -52,6 +52,7 @@ def appearance(world, seed: int = 0, lookalike_share: float = 0.2, poster_prob: 
 @dataclass
 class Session:
     """What changes between the mapping run and a query run."""
+
     exposure: float = 1.0
     tint: tuple = (1.0, 1.0, 1.0)
     noise_std: float = 0.01  # pixel noise, 0..1 units
@@ -60,21 +61,45 @@ class Session:
     @staticmethod
     def draw(rng, lighting: float = 0.0) -> "Session":
         """A session with lighting changes of relative size ``lighting`` (0: the mapping run's light)."""
-        return Session(float(1.0 + lighting * rng.uniform(-1, 1)),
-                       tuple(float(v) for v in 1.0 + 0.5 * lighting * rng.uniform(-1, 1, 3)),
-                       0.01, int(rng.integers(1 << 30)))
+        return Session(
+            float(1.0 + lighting * rng.uniform(-1, 1)),
+            tuple(float(v) for v in 1.0 + 0.5 * lighting * rng.uniform(-1, 1, 3)),
+            0.01,
+            int(rng.integers(1 << 30)),
+        )
 
 
 class Camera:
     """Pinhole RGB-D camera on the robot: ``T_base_cam`` (x, y, yaw in the base frame); 320 x 240 and a
     58 deg horizontal field of view by default."""
 
-    def __init__(self, segments, look: Appearance, width: int = 320, height: int = 240, hfov_deg: float = 58.0,
-                 cam_height_m: float = 1.0, T_base_cam=(0.15, 0.0, 0.0), device: str = "auto"):
+    def __init__(
+        self,
+        segments,
+        look: Appearance,
+        width: int = 320,
+        height: int = 240,
+        hfov_deg: float = 58.0,
+        cam_height_m: float = 1.0,
+        T_base_cam=(0.15, 0.0, 0.0),
+        device: str = "auto",
+    ):
         self.T_base_cam = np.asarray(T_base_cam, np.float64)
-        self.kernel = SIM.build("camera", segments=segments, heights=look.heights, colours=look.colours,
-                                posters=look.posters, poster_m=POSTER_M, poster_cells=POSTER_CELLS, width=width, height=height, hfov_rad=np.radians(hfov_deg),
-                                cam_height_m=cam_height_m, wall_height_m=WALL_HEIGHT_M, device=device)
+        self.kernel = SIM.build(
+            "camera",
+            segments=segments,
+            heights=look.heights,
+            colours=look.colours,
+            posters=look.posters,
+            poster_m=POSTER_M,
+            poster_cells=POSTER_CELLS,
+            width=width,
+            height=height,
+            hfov_rad=np.radians(hfov_deg),
+            cam_height_m=cam_height_m,
+            wall_height_m=WALL_HEIGHT_M,
+            device=device,
+        )
 
     @property
     def K(self) -> np.ndarray:
@@ -89,8 +114,9 @@ class Camera:
         cams = compose(np.asarray(robot_poses, np.float64).reshape(-1, 3), self.T_base_cam)
         rgbs, depths = [], []
         for i in range(0, len(cams), batch):
-            rgb, depth = self.kernel.render(cams[i:i + batch], session.exposure, session.tint, session.noise_std,
-                                            session.seed + i)
+            rgb, depth = self.kernel.render(
+                cams[i : i + batch], session.exposure, session.tint, session.noise_std, session.seed + i
+            )
             rgbs.append(np.round(rgb).astype(np.uint8))
             depths.append(depth)
         return np.concatenate(rgbs), np.concatenate(depths)

@@ -51,8 +51,13 @@ def build(name: str) -> World:
 
 
 def _office(rng, seed) -> World:
-    return office(seed, width_m=float(rng.uniform(24, 40)), height_m=float(rng.uniform(13, 18)),
-                  corridor_width_m=float(rng.uniform(2.0, 3.0)), furniture_per_room=int(rng.integers(1, 4)))
+    return office(
+        seed,
+        width_m=float(rng.uniform(24, 40)),
+        height_m=float(rng.uniform(13, 18)),
+        corridor_width_m=float(rng.uniform(2.0, 3.0)),
+        furniture_per_room=int(rng.integers(1, 4)),
+    )
 
 
 def _rect(x0, y0, x1, y1):
@@ -103,10 +108,15 @@ def _hall(rng, seed) -> World:
 def _twin(rng, seed) -> World:
     """An office floor whose walls are repeated after a half turn about the floor's centre: the left half's
     rooms are the right half's, turned. Its furniture is drawn afresh for the whole floor (not repeated)."""
-    half = office(seed, width_m=float(rng.uniform(12, 18)), height_m=float(rng.uniform(13, 16)),
-                  corridor_width_m=2.5, furniture_per_room=0)
+    half = office(
+        seed,
+        width_m=float(rng.uniform(12, 18)),
+        height_m=float(rng.uniform(13, 16)),
+        corridor_width_m=2.5,
+        furniture_per_room=0,
+    )
     W, H = 2 * half.width_m, half.height_m
-    walls = [s for s in half.segments[:half.n_walls] if not (s[0] == s[2] == half.width_m)]  # drop the right wall
+    walls = [s for s in half.segments[: half.n_walls] if not (s[0] == s[2] == half.width_m)]  # drop the right wall
     turned = [(W - x0, H - y0, W - x1, H - y1) for x0, y0, x1, y1 in walls]
     segs = walls + turned
     n_walls = len(segs)
@@ -125,6 +135,7 @@ def _twin(rng, seed) -> World:
 
 
 # --- drives ------------------------------------------------------------------------------------------------
+
 
 def distance_to_segments(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Distance of each point [n, 2] to the nearest segment [K, 4] (x0 y0 x1 y1): [n]."""

@@ -14,8 +14,13 @@ def waypoints(world, rng, visit_prob: float = 0.6) -> np.ndarray:
     rooms = sorted(world.rooms, key=lambda r: r.door_x)
     for room in rooms:
         if rng.random() < visit_prob:
-            pts += [(room.door_x, y), (room.door_x, room.door_y), tuple(room.centre), (room.door_x, room.door_y),
-                    (room.door_x, y)]
+            pts += [
+                (room.door_x, y),
+                (room.door_x, room.door_y),
+                tuple(room.centre),
+                (room.door_x, room.door_y),
+                (room.door_x, y),
+            ]
     pts += [(world.width_m - 1.0, y), (1.0, y + 0.4)]
     return np.array(pts)
 
@@ -29,7 +34,9 @@ def follow(points, speed_mps: float, turn_rate_rps: float, rate_hz: float, durat
         cur = poses[-1]
         turn = wrap_angle(heading - cur[2])
         for k in range(1, int(np.ceil(abs(turn) / (turn_rate_rps * dt))) + 1):
-            poses.append(np.array([cur[0], cur[1], wrap_angle(cur[2] + turn * min(1.0, k * turn_rate_rps * dt / abs(turn)))]))
+            poses.append(
+                np.array([cur[0], cur[1], wrap_angle(cur[2] + turn * min(1.0, k * turn_rate_rps * dt / abs(turn)))])
+            )
         length = np.hypot(*(q - p))
         steps = int(np.ceil(length / (speed_mps * dt)))
         for k in range(1, steps + 1):
@@ -51,9 +58,9 @@ def noisy_odometry(T_world_base, alphas, rng) -> np.ndarray:
     rot1 = np.where(trans > 1e-6, np.arctan2(steps[:, 1], steps[:, 0]), 0.0)
     rot2 = wrap_angle(steps[:, 2] - rot1)
     n = len(steps)
-    r1 = rot1 + rng.normal(0, 1, n) * np.sqrt(a1 * rot1 ** 2 + a2 * trans ** 2)
-    tr = trans + rng.normal(0, 1, n) * np.sqrt(a3 * trans ** 2 + a4 * (rot1 ** 2 + rot2 ** 2))
-    r2 = rot2 + rng.normal(0, 1, n) * np.sqrt(a1 * rot2 ** 2 + a2 * trans ** 2)
+    r1 = rot1 + rng.normal(0, 1, n) * np.sqrt(a1 * rot1**2 + a2 * trans**2)
+    tr = trans + rng.normal(0, 1, n) * np.sqrt(a3 * trans**2 + a4 * (rot1**2 + rot2**2))
+    r2 = rot2 + rng.normal(0, 1, n) * np.sqrt(a1 * rot2**2 + a2 * trans**2)
     noisy = np.stack([tr * np.cos(r1), tr * np.sin(r1), wrap_angle(r1 + r2)], -1)
     odom = [np.zeros(3)]
     for step in noisy:

@@ -79,8 +79,17 @@ def _furniture(rng, room: Room, count, door_w, repetitive_template=None):
     return boxes
 
 
-def office(seed: int, width_m=30.0, height_m=16.0, corridor_width_m=2.5, room_min_width_m=3.5,
-           room_max_width_m=6.0, door_width_m=1.0, furniture_per_room=2, repetitive=False) -> World:
+def office(
+    seed: int,
+    width_m=30.0,
+    height_m=16.0,
+    corridor_width_m=2.5,
+    room_min_width_m=3.5,
+    room_max_width_m=6.0,
+    door_width_m=1.0,
+    furniture_per_room=2,
+    repetitive=False,
+) -> World:
     rng = np.random.default_rng(seed)
     yc0, yc1 = height_m / 2 - corridor_width_m / 2, height_m / 2 + corridor_width_m / 2
     segs = [(0, 0, width_m, 0), (width_m, 0, width_m, height_m), (width_m, height_m, 0, height_m), (0, height_m, 0, 0)]

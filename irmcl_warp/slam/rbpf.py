@@ -60,6 +60,7 @@ class StepStats:
 @dataclass
 class History:
     """Per processed scan: its index in the log, every particle's pose, and the parents chosen after it."""
+
     scans: list = field(default_factory=list)
     poses: list = field(default_factory=list)
     parents: list = field(default_factory=list)
@@ -69,11 +70,12 @@ class RBPF:
     PROPOSALS = {"paper": "propose_paper", "gmapping_code": "propose_match", "odometry": "propose_odometry"}
     FIRST_LOOK = 24  # hill-climbing rounds launched before the host first reads the active flags (GPU way)
 
-    def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float,
-                 device: str = "auto"):
+    def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float, device: str = "auto"):
         if cfg.proposal not in self.PROPOSALS:
             raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {sorted(self.PROPOSALS)}")
-        self.propose = getattr(self, self.PROPOSALS[cfg.proposal])  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
+        self.propose = getattr(
+            self, self.PROPOSALS[cfg.proposal]
+        )  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
         if cfg.resample not in ("selective", "always"):
             raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
         if not isinstance(cfg, SlamConfig):  # a DictConfig: plain attributes instead (microseconds a read there)
@@ -82,12 +84,22 @@ class RBPF:
         P, d = int(cfg.num_particles), self.device
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
         self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
-        self.integrator = SLAM.build("integrate", usable_range_m=usable_range_m, line=cfg.line,
-                                     free_space=bool(cfg.generate_map), device=d)
-        self.scorer = SLAM.build("score", usable_range_m=usable_range_m, kernel_size=cfg.kernel_size,
-                                 fullness=cfg.fullness, sigma=cfg.sigma, lsigma=cfg.lsigma,
-                                 null_likelihood=cfg.null_likelihood, free_delta_m=cfg.resolution_m * np.sqrt(2.0),
-                                 lskip=cfg.lskip, free_check=bool(cfg.free_check), device=d)
+        self.integrator = SLAM.build(
+            "integrate", usable_range_m=usable_range_m, line=cfg.line, free_space=bool(cfg.generate_map), device=d
+        )
+        self.scorer = SLAM.build(
+            "score",
+            usable_range_m=usable_range_m,
+            kernel_size=cfg.kernel_size,
+            fullness=cfg.fullness,
+            sigma=cfg.sigma,
+            lsigma=cfg.lsigma,
+            null_likelihood=cfg.null_likelihood,
+            free_delta_m=cfg.resolution_m * np.sqrt(2.0),
+            lskip=cfg.lskip,
+            free_check=bool(cfg.free_check),
+            device=d,
+        )
         self.motion = SLAM.build("motion", srr=cfg.srr, srt=cfg.srt, str_=cfg.str, stt=cfg.stt, device=d)
         self.angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=d)
         self.ranges = wp.zeros(len(angles_rad), dtype=wp.float32, device=d)
@@ -100,7 +112,10 @@ class RBPF:
         self.grid_offsets = offs * np.array([ls, ls, as_])
         self._buffers = {}
         self._cuda, self._mirrors = wp.get_device(d).is_cuda, {}  # pinned host mirrors of device arrays (_read)
-        self._sources, self._in_flight = {}, set()  # pinned host sources of device arrays (_write), copies not yet waited for
+        self._sources, self._in_flight = (
+            {},
+            set(),
+        )  # pinned host sources of device arrays (_write), copies not yet waited for
         self.log_w = np.zeros(P)  # since the last resampling
         self.log_w_total = np.zeros(P)  # over the whole run (inherited on resampling): picks the best particle
         self.history = History()
@@ -159,16 +174,20 @@ class RBPF:
     def _buf(self, C: int):
         if C not in self._buffers:
             d = self.device
-            self._buffers[C] = (wp.zeros((self.P, C), dtype=wp.vec3, device=d),
-                                wp.zeros((self.P, C), dtype=wp.float32, device=d),
-                                wp.zeros((self.P, C), dtype=wp.float32, device=d))
+            self._buffers[C] = (
+                wp.zeros((self.P, C), dtype=wp.vec3, device=d),
+                wp.zeros((self.P, C), dtype=wp.float32, device=d),
+                wp.zeros((self.P, C), dtype=wp.float32, device=d),
+            )
         return self._buffers[C]
 
     def _set_ranges(self, ranges_m) -> None:
         r = np.asarray(ranges_m, np.float32)
         if r.shape != (self.ranges.shape[0],):
-            raise ValueError(f"slam: a scan of {r.size} beams, the filter was built for {self.ranges.shape[0]} "
-                             f"(set data.beam_policy to reject or resample such scans when reading the log)")
+            raise ValueError(
+                f"slam: a scan of {r.size} beams, the filter was built for {self.ranges.shape[0]} "
+                f"(set data.beam_policy to reject or resample such scans when reading the log)"
+            )
         self._write(self.ranges, r)
         self._ranges_np = r.astype(np.float64)
 
@@ -185,8 +204,9 @@ class RBPF:
         reach = float(rr.max()) if rr.size else 0.0
         # most scans lie well inside: a box around every laser position, the scan's longest beam wide, holds all
         # end points (in floating point too), so where the frame holds it the end points need not be computed
-        if self.maps.holds(((lp[:, 0] - reach).min(), (lp[:, 1] - reach).min()),
-                           ((lp[:, 0] + reach).max(), (lp[:, 1] + reach).max())):
+        if self.maps.holds(
+            ((lp[:, 0] - reach).min(), (lp[:, 1] - reach).min()), ((lp[:, 0] + reach).max(), (lp[:, 1] + reach).max())
+        ):
             return
         a = lp[:, 2:3] + self._angles_np[keep][None]
         xs = np.concatenate([lp[:, 0], (lp[:, :1] + rr * np.cos(a)).ravel()])
@@ -261,7 +281,7 @@ class RBPF:
         self.log_w_total += gain
         self._write(self.poses, new.astype(np.float32))
         w = self.smoothed_weights()
-        neff = 1.0 / np.sum(w ** 2)
+        neff = 1.0 / np.sum(w**2)
         parents = np.arange(self.P)
         resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
         if resampled:
@@ -305,12 +325,16 @@ class RBPF:
         Rounds: the most any particle took (``rounds``: the rounds launched)."""
         c, d, P = self.cfg, self.device, self.P
         if not hasattr(self, "_climb"):
-            self._climb = dict(pose=wp.zeros(P, dtype=wp.vec3, device=d), best=wp.zeros(P, dtype=wp.float32, device=d),
-                               steps=wp.zeros(P, dtype=wp.vec3, device=d), halvings=wp.zeros(P, dtype=wp.int32, device=d),
-                               active=wp.zeros(P, dtype=wp.int32, device=d), start=wp.zeros(P, dtype=wp.vec3, device=d),
-                               rounds=wp.zeros(P, dtype=wp.int32, device=d),
-                               steps0=wp.array(np.tile(np.float32([c.lstep, c.lstep, c.astep]), (P, 1)), dtype=wp.vec3,
-                                               device=d))  # every climb's first steps
+            self._climb = dict(
+                pose=wp.zeros(P, dtype=wp.vec3, device=d),
+                best=wp.zeros(P, dtype=wp.float32, device=d),
+                steps=wp.zeros(P, dtype=wp.vec3, device=d),
+                halvings=wp.zeros(P, dtype=wp.int32, device=d),
+                active=wp.zeros(P, dtype=wp.int32, device=d),
+                start=wp.zeros(P, dtype=wp.vec3, device=d),
+                rounds=wp.zeros(P, dtype=wp.int32, device=d),
+                steps0=wp.array(np.tile(np.float32([c.lstep, c.lstep, c.astep]), (P, 1)), dtype=wp.vec3, device=d),
+            )  # every climb's first steps
         st = self._climb
         how = how or default_climb(wp.get_device(d).is_cuda, self.ranges.shape[0])
         if how not in self.CLIMBS:
@@ -320,8 +344,19 @@ class RBPF:
         else:
             self._write(st["start"], start.astype(np.float32))
             climb = self.scorer.climb_blocks if how == "blocks" else self.scorer.climb
-            climb(self.maps, st["start"], self.T_base_laser, self.ranges, self.angles, (c.lstep, c.lstep, c.astep),
-                  int(c.iterations), int(max_rounds), st["pose"], st["best"], st["rounds"])
+            climb(
+                self.maps,
+                st["start"],
+                self.T_base_laser,
+                self.ranges,
+                self.angles,
+                (c.lstep, c.lstep, c.astep),
+                int(c.iterations),
+                int(max_rounds),
+                st["pose"],
+                st["best"],
+                st["rounds"],
+            )
             rounds = int(self._read(st["rounds"]).max())
         pose = self._read(st["pose"]).astype(np.float64)
         pose[:, 2] = wrap_angle(pose[:, 2])
@@ -345,8 +380,12 @@ class RBPF:
             for _ in range(check_every):
                 wp.launch(climb_candidates_kernel, (P, 6), [st["pose"], st["steps"], cand], device=d)
                 self.scorer(self.maps, cand, self.T_base_laser, self.ranges, self.angles, score, loglik, st["active"])
-                wp.launch(climb_update_kernel, P, [cand, score, st["pose"], st["best"], st["steps"], st["halvings"],
-                                                   st["active"], int(c.iterations)], device=d)
+                wp.launch(
+                    climb_update_kernel,
+                    P,
+                    [cand, score, st["pose"], st["best"], st["steps"], st["halvings"], st["active"], int(c.iterations)],
+                    device=d,
+                )
 
         self.scorer.reserve(P, 6, self.ranges.shape[0])  # no allocation inside the captured block
         if self._graph is None and wp.get_device(d).is_cuda:
@@ -477,8 +516,13 @@ def fit_gaussian(cand: np.ndarray, log_tau: np.ndarray, floor=(1e-6, 1e-6, 1e-7)
 def motion_std(delta, cfg) -> np.ndarray:
     ax, ay, at = np.abs(np.asarray(delta, np.float64))
     sxy = 0.3 * cfg.srr
-    return np.array([cfg.srr * ax + cfg.str * at + sxy * ay, cfg.srr * ay + cfg.str * at + sxy * ax,
-                     cfg.stt * at + cfg.srt * np.hypot(delta[0], delta[1])])
+    return np.array(
+        [
+            cfg.srr * ax + cfg.str * at + sxy * ay,
+            cfg.srr * ay + cfg.str * at + sxy * ax,
+            cfg.stt * at + cfg.srt * np.hypot(delta[0], delta[1]),
+        ]
+    )
 
 
 def per_scan_poses(stamps_idx: np.ndarray, processed_idx: np.ndarray, processed_poses: np.ndarray, odom: np.ndarray):

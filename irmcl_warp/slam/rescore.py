@@ -26,7 +26,6 @@ def mounting(cfg, metrics: dict) -> np.ndarray:
     if "relations_frame" in metrics:
         return np.asarray(metrics["relations_frame"]["T_base_laser"], np.float64)
     if cfg.data.get("laser_frame_path"):
-
         return read_bag_extrinsic(resolve(cfg.data.laser_frame_path), base_frame=cfg.data.get("base_frame"))
     return np.zeros(3)
 
@@ -36,8 +35,10 @@ def rescore(run: Path) -> dict:
     if not cfg.data.relations_path:
         raise ValueError(f"{run}: data={cfg.data.name} has no relations file")
     if cfg.data.get("relation_stamps_path"):
-        raise ValueError(f"{run}: data={cfg.data.name} matches its relations through {cfg.data.relation_stamps_path}, "
-                         f"not through the trajectory's stamps: rerun the slam stage to score it")
+        raise ValueError(
+            f"{run}: data={cfg.data.name} matches its relations through {cfg.data.relation_stamps_path}, "
+            f"not through the trajectory's stamps: rerun the slam stage to score it"
+        )
     metrics = json.loads((run / "metrics.json").read_text())
     stamps, poses = read_tum(run / "trajectory.tum")
     T = mounting(cfg, metrics)
@@ -50,7 +51,9 @@ def rescore(run: Path) -> dict:
 def main(argv=None) -> None:
     for run in map(Path, argv if argv is not None else sys.argv[1:]):
         r = rescore(run)
-        print(f"{run}: {r['trans_abs_mean_m']:.3f} m / {r['rot_abs_mean_deg']:.2f} deg over {r['relations_used']} relations")
+        print(
+            f"{run}: {r['trans_abs_mean_m']:.3f} m / {r['rot_abs_mean_deg']:.2f} deg over {r['relations_used']} relations"
+        )
 
 
 if __name__ == "__main__":

@@ -84,7 +84,7 @@ def maps_memory(log, odom, usable_m: float, resolution_m: float, particles: int)
     x0, y0, x1, y1 = laser_bounds(compose(odom, log.T_base_laser), ended, log.info.angles_rad, usable_m, margin_m=1.0)
     W, H = int(np.ceil((x1 - x0) / resolution_m)), int(np.ceil((y1 - y0) / resolution_m))
     box = particles * W * H * 16
-    return box, int(2 * 1.25 ** 2 * box), (W, H)
+    return box, int(2 * 1.25**2 * box), (W, H)
 
 
 def check_maps_fit(cfg, log, odom, usable_m: float, device: str) -> None:
@@ -93,15 +93,20 @@ def check_maps_fit(cfg, log, odom, usable_m: float, device: str) -> None:
     s = cfg.slam
     box, peak, (W, H) = maps_memory(log, odom, usable_m, s.resolution_m, s.num_particles)
     have = available_memory(device)
-    gib = 2.0 ** 30
+    gib = 2.0**30
     if box > 0.9 * have:
         fits = s.resolution_m * np.sqrt(box / (0.3 * have))  # the area in cells goes as 1 / resolution^2
-        raise ValueError(f"slam: {s.num_particles} particle maps over the {W} x {H} cells the log spans at "
-                         f"{s.resolution_m} m (on its odometry) need about {box / gib:.1f} GiB, {have / gib:.1f} GiB is "
-                         f"free on {device}: set slam.resolution_m={np.ceil(fits * 100) / 100:g} or fewer slam.num_particles")
+        raise ValueError(
+            f"slam: {s.num_particles} particle maps over the {W} x {H} cells the log spans at "
+            f"{s.resolution_m} m (on its odometry) need about {box / gib:.1f} GiB, {have / gib:.1f} GiB is "
+            f"free on {device}: set slam.resolution_m={np.ceil(fits * 100) / 100:g} or fewer slam.num_particles"
+        )
     if peak > 0.5 * have:
-        print(f"warning: slam: the particle maps take about {box / gib:.1f} GiB over the log's extent and may reach "
-              f"{peak / gib:.1f} GiB while they grow, of the {have / gib:.1f} GiB free on {device}", file=sys.stderr)
+        print(
+            f"warning: slam: the particle maps take about {box / gib:.1f} GiB over the log's extent and may reach "
+            f"{peak / gib:.1f} GiB while they grow, of the {have / gib:.1f} GiB free on {device}",
+            file=sys.stderr,
+        )
 
 
 def start_filter(cfg, log, device: str) -> tuple[RBPF, np.ndarray]:
@@ -128,8 +133,9 @@ def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, marg
         if log is None:
             raise ValueError("best_map: the particles' maps hold end points only; pass the log to cast the map")
         _, H, W = rbpf.maps.shape
-        full = ParticleMaps(1, (H, W), (float(rbpf.maps.origin[0]), float(rbpf.maps.origin[1])), rbpf.maps.res,
-                            device=rbpf.device)
+        full = ParticleMaps(
+            1, (H, W), (float(rbpf.maps.origin[0]), float(rbpf.maps.origin[1])), rbpf.maps.res, device=rbpf.device
+        )
         cast = SLAM.build("integrate", usable_range_m=rbpf.integrator.usable, line=rbpf.cfg.line, device=rbpf.device)
         scans, poses = rbpf.trajectory(particle)
         pose = wp.zeros(1, dtype=wp.vec3, device=rbpf.device)
@@ -171,9 +177,11 @@ def map_log(run: runs.Run) -> Path:
     log = load_stream(cfg)
     jumps = count_odometry_jumps(log.stamps, log.odom, cfg.data.max_speed_mps, cfg.data.max_step_m)
     if jumps:  # documented handling: kept as the motion model's input, counted in metrics.json
-        print(f"{cfg.data.name}: {jumps} odometry steps jump (over {cfg.data.max_step_m} m or {cfg.data.max_speed_mps} "
-              f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
-              f"map there; the derived logs of ../shared/data repair known jumps")
+        print(
+            f"{cfg.data.name}: {jumps} odometry steps jump (over {cfg.data.max_step_m} m or {cfg.data.max_speed_mps} "
+            f"m/s); the motion model takes them as they are (its noise grows with the step), so expect a broken "
+            f"map there; the derived logs of ../shared/data repair known jumps"
+        )
     rbpf, odom = start_filter(cfg, log, device)
     neff_rows, t0 = [], time.perf_counter()
     try:
@@ -195,17 +203,29 @@ def map_log(run: runs.Run) -> Path:
     if s.frame == "laser":  # the laser's poses carried: written as the base's, as in every run's files
         every = compose(every, inverse(np.asarray(log.T_base_laser, float)))
     write_tum(out / "trajectory.tum", log.stamps, every)
-    atomic_write_bytes(out / "neff.csv", ("scan,neff,resampled,match_rounds\n" + "".join(
-        f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode())
+    atomic_write_bytes(
+        out / "neff.csv",
+        ("scan,neff,resampled,match_rounds\n" + "".join(f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode(),
+    )
     save_map(best_map(rbpf, best, log), out / "map")
-    metrics = {"dataset": cfg.data.name, "particles": s.num_particles, "proposal": s.proposal, "resample": s.resample,
-               "seed": s.seed, "device": device, "scans": len(log), "processed_scans": len(scans),
-               "odometry_jumps": int(jumps),
-               "resamplings": int(sum(r for _, _, r, _ in neff_rows)), "wall_time_s": wall,
-               "map_cells": list(rbpf.maps.shape[1:]), "map_grown": rbpf.maps.grown,
-               "time_s": dict(rbpf.timing),
-               "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
-               "settings": OmegaConf.to_container(s)}
+    metrics = {
+        "dataset": cfg.data.name,
+        "particles": s.num_particles,
+        "proposal": s.proposal,
+        "resample": s.resample,
+        "seed": s.seed,
+        "device": device,
+        "scans": len(log),
+        "processed_scans": len(scans),
+        "odometry_jumps": int(jumps),
+        "resamplings": int(sum(r for _, _, r, _ in neff_rows)),
+        "wall_time_s": wall,
+        "map_cells": list(rbpf.maps.shape[1:]),
+        "map_grown": rbpf.maps.grown,
+        "time_s": dict(rbpf.timing),
+        "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
+        "settings": OmegaConf.to_container(s),
+    }
     if cfg.data.relations_path:
         try:
             rel = read_relations(resolve(cfg.data.relations_path))
@@ -225,13 +245,23 @@ def map_log(run: runs.Run) -> Path:
         metrics["trajectory_odometry"] = aligned_error(log.odom, log.ground_truth)
     out = run.finish(metrics, device)
     rel = metrics.get("relations")
-    print(f"{cfg.data.name}: {len(scans)} of {len(log)} scans processed in {wall:.1f} s, "
-          f"{metrics['resamplings']} resamplings"
-          + (f"; relations {rel['trans_abs_mean_m']:.3f} m / {rel['rot_abs_mean_deg']:.2f} deg (odometry "
-             f"{metrics['relations_odometry']['trans_abs_mean_m']:.3f} m)" if isinstance(rel, dict) else "")
-          + (f"; ATE {metrics['trajectory']['ate_rmse_m']:.3f} m (odometry "
-             f"{metrics['trajectory_odometry']['ate_rmse_m']:.3f} m)" if "trajectory" in metrics else "")
-          + f" -> {out}")
+    print(
+        f"{cfg.data.name}: {len(scans)} of {len(log)} scans processed in {wall:.1f} s, "
+        f"{metrics['resamplings']} resamplings"
+        + (
+            f"; relations {rel['trans_abs_mean_m']:.3f} m / {rel['rot_abs_mean_deg']:.2f} deg (odometry "
+            f"{metrics['relations_odometry']['trans_abs_mean_m']:.3f} m)"
+            if isinstance(rel, dict)
+            else ""
+        )
+        + (
+            f"; ATE {metrics['trajectory']['ate_rmse_m']:.3f} m (odometry "
+            f"{metrics['trajectory_odometry']['ate_rmse_m']:.3f} m)"
+            if "trajectory" in metrics
+            else ""
+        )
+        + f" -> {out}"
+    )
     return out
 
 
