@@ -193,6 +193,7 @@ def pipeline(run: runs.Run) -> Path:
     nog = bake_nog(
         train_out / "nof.pt",
         laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
+        far,
         cfg.mcl.map_resolution_m,
         cache_dir=runs.cache_dir(cfg, "nog"),
         device="cuda" if device.startswith("cuda") else "cpu",

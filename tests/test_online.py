@@ -217,3 +217,31 @@ def test_the_judge_changes_no_pose(world):
         conf = []
         runs_.append(follow(pf, log, np.arange(60), m, judge=judge if judged else None, confidences=conf))
     assert np.array_equal(runs_[0], runs_[1], equal_nan=True)
+
+
+@pytest.mark.parametrize("weighting", ["nog_raymarch", "nof_direct"])
+def test_a_nof_trained_for_another_far_bound_is_refused_naming_both(world, tmp_path, monkeypatch, weighting):
+    """A NOF answers for the ranges it was trained on: localizing with another far bound is an error that names
+    the two bounds (and the setting that picks the run's), before any scan is weighed; the trained bound goes."""
+    from irmcl_warp.config import ModelConfig
+    from irmcl_warp.nof.checkpoint import atomic_torch_save
+    from irmcl_warp.nof.model import NOF
+
+    map_yaml, bag, _ = world
+    monkeypatch.chdir(tmp_path)
+    cfg = _cfg(bag, map_yaml)
+    far = far_bound_m(cfg, load_stream(cfg).info.range_max_m)
+    model = NOF(ModelConfig(width=16, depth=2, skip_after=1, num_freqs=2)).eval()
+    ckpt = tmp_path / "nof.pt"
+    trained = far + 10.0
+    atomic_torch_save({"model": model.state_dict(), "model_config": model.config_dict(), "far_m": trained}, ckpt)
+    common = (f"mcl.weighting={weighting}", f"localize.nof_path={ckpt}", "mcl.num_particles=200", "localize.run_s=3")
+    with pytest.raises(
+        ValueError,
+        match=rf"nof.pt: this NOF was trained with the far bound {trained:g} m, and this "
+        rf"run localizes with {far:g} m .*data.far_m={trained:g}",
+    ):
+        run_localize(_cfg(bag, map_yaml, *common))
+    assert not list(Path("outputs").rglob("trajectory.tum"))
+    out = run_localize(_cfg(bag, map_yaml, *common, f"data.far_m={trained}"))  # the bound it was trained with
+    assert (out / "trajectory.tum").is_file()

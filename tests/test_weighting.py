@@ -154,11 +154,11 @@ def test_bake_from_a_checkpoint_is_cached_by_hash(tmp_path):
     model = NOF(ModelConfig(width=16, depth=2, skip_after=1, num_freqs=2)).eval()
     ckpt = tmp_path / "nof.pt"
     atomic_torch_save({"model": model.state_dict(), "model_config": model.config_dict()}, ckpt)
-    a = bake_nog(ckpt, (0, 0, 1, 1), 0.1, cache_dir=tmp_path / "nog")
+    a = bake_nog(ckpt, (0, 0, 1, 1), 40.0, 0.1, cache_dir=tmp_path / "nog")
     assert len(list((tmp_path / "nog").glob("nog-*.npz"))) == 1
-    b = bake_nog(ckpt, (0, 0, 1, 1), 0.1, cache_dir=tmp_path / "nog")
+    b = bake_nog(ckpt, (0, 0, 1, 1), 40.0, 0.1, cache_dir=tmp_path / "nog")
     assert np.array_equal(a.occupancy, b.occupancy)
-    bake_nog(ckpt, (0, 0, 1, 1), 0.05, cache_dir=tmp_path / "nog")
+    bake_nog(ckpt, (0, 0, 1, 1), 40.0, 0.05, cache_dir=tmp_path / "nog")
     assert len(list((tmp_path / "nog").glob("nog-*.npz"))) == 2
 
 

@@ -8,7 +8,7 @@ set -uo pipefail
 export IRMCL_TEST_DEVICE=cuda:0 PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
 python -c "import warp as wp; wp.init(); print('warp', wp.config.version, wp.get_cuda_devices())"
-python -m pytest -q -p no:cacheprovider -m "not data and not slow" --timeout 300 \
+python -m pytest -q -p no:cacheprovider -m "not data and not slow and not cpu_only" --timeout 300 \
   tests/test_render.py tests/test_weighting.py tests/test_particles.py tests/test_raycast.py tests/test_mapping.py \
   tests/test_sim.py tests/test_slam.py tests/test_mcl.py 2>&1 | tee "${OUT:-.}/gpu-kernel-tests.log" | tail -25
 python -m pytest -q -p no:cacheprovider -m gpu --timeout 300 tests/test_gpu.py 2>&1 | tee "${OUT:-.}/gpu-tests.log" | tail -25

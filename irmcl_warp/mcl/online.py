@@ -22,13 +22,13 @@ import numpy as np
 from irmcl_warp.io import resolve
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.track import Localizer
-from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.nof.checkpoint import load_nof_for
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, WeightingMaps, build_filter, free_space_view, grid_maps
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp.kernels import pick_device
 
 
-def weighting_maps(m, grid, device: str, nof_path=None, nog_cache: Path | None = None) -> WeightingMaps:
+def weighting_maps(m, grid, device: str, far_m: float, nof_path=None, nog_cache: Path | None = None) -> WeightingMaps:
     """What the observation model ``m.weighting`` reads: the grid (AMCL's models), or the NOF at ``nof_path``
     (as the torch MLP, or baked into a NOG over the grid's extent, cached in ``nog_cache``)."""
     if m.weighting not in NOF_WEIGHTINGS:
@@ -38,11 +38,13 @@ def weighting_maps(m, grid, device: str, nof_path=None, nog_cache: Path | None =
     ckpt = resolve(nof_path)
     torch_device = "cuda" if device.startswith("cuda") else "cpu"
     if m.weighting == "nof_direct":
-        return WeightingMaps(model=load_nof(ckpt, torch_device)[0])
+        return WeightingMaps(model=load_nof_for(ckpt, far_m, torch_device)[0])
     H, W = grid.shape
     x0, y0 = grid.origin_xy
     bounds = (x0, y0, x0 + W * grid.resolution_m, y0 + H * grid.resolution_m)
-    return WeightingMaps(nog=bake_nog(ckpt, bounds, m.map_resolution_m, cache_dir=nog_cache, device=torch_device))
+    return WeightingMaps(
+        nog=bake_nog(ckpt, bounds, far_m, m.map_resolution_m, cache_dir=nog_cache, device=torch_device)
+    )
 
 
 def filter_in_map(
@@ -67,7 +69,7 @@ def filter_in_map(
         np.asarray(angles_rad, float),
         far_m,
         device,
-        weighting_maps(m, grid, device, nof_path, nog_cache),
+        weighting_maps(m, grid, device, far_m, nof_path, nog_cache),
     )
     pf.rng = np.random.default_rng(m.seed)
     return pf, grid

@@ -30,7 +30,7 @@ from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mapping.grid import laser_bounds
 from irmcl_warp.mcl.own_map import run_in_map
 from irmcl_warp.mcl.track import follow
-from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.nof.checkpoint import load_nof_for
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.nog import bake_nog
 from irmcl_warp import runs
@@ -54,10 +54,15 @@ def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.nd
     if m.weighting not in NOF_WEIGHTINGS:
         return free_view, grid_maps(grid, m.weighting), image
     if m.weighting == "nof_direct":
-        return free_view, WeightingMaps(model=load_nof(nof, "cuda" if device.startswith("cuda") else "cpu")[0]), image
+        return (
+            free_view,
+            WeightingMaps(model=load_nof_for(nof, far, "cuda" if device.startswith("cuda") else "cpu")[0]),
+            image,
+        )
     nog = bake_nog(
         nof,
         laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far),
+        far,
         res,
         cache_dir=runs.cache_dir(cfg, "nog"),
         device="cuda" if device.startswith("cuda") else "cpu",

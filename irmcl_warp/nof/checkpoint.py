@@ -41,3 +41,22 @@ def load_nof(path, device="cpu"):
     except (KeyError, RuntimeError, EOFError) as e:
         raise ValueError(f"{path}: not a usable nof.pt ({type(e).__name__}: {e})") from e
     return model.to(device).eval(), {k: v for k, v in ckpt.items() if k != "model"}
+
+
+def check_trained_far_bound(path, meta: dict, far_m: float) -> None:
+    """A NOF answers for the ranges it was trained on: localizing with another far bound than its training's
+    (``far_m`` in nof.pt) renders and scores beams the field never learned, so it is an error naming both."""
+    trained = meta.get("far_m")
+    if trained is not None and abs(float(trained) - float(far_m)) > 1e-6:
+        raise ValueError(
+            f"{path}: this NOF was trained with the far bound {float(trained):g} m, and this run localizes with "
+            f"{float(far_m):g} m (data.far_m, else the floor of the log's range_max): localize with "
+            f"data.far_m={float(trained):g}, or train a NOF for {float(far_m):g} m"
+        )
+
+
+def load_nof_for(path, far_m: float, device="cpu"):
+    """``load_nof``, refused (``check_trained_far_bound``) when the NOF was trained for another far bound."""
+    model, meta = load_nof(path, device)
+    check_trained_far_bound(path, meta, far_m)
+    return model, meta

@@ -5,13 +5,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from irmcl_warp.nof.checkpoint import load_nof
+from irmcl_warp.nof.checkpoint import check_trained_far_bound, load_nof
 from irmcl_warp.nog import NOG, evaluate_grid
 from irmcl_warp.runs import digest, file_digest
 
 
-def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Path | None = None, device="cpu") -> NOG:
-    """Bake (or read from the cache) the NOG of a nof.pt checkpoint."""
+def bake_nog(
+    checkpoint: Path, bounds, far_m: float, resolution_m: float = 0.05, cache_dir: Path | None = None, device="cpu"
+) -> NOG:
+    """Bake (or read from the cache) the NOG of a nof.pt checkpoint, for localizing with the far bound ``far_m``
+    (an error when the NOF was trained with another: nof/checkpoint.check_trained_far_bound)."""
+    model, meta = load_nof(checkpoint, device)
+    check_trained_far_bound(checkpoint, meta, far_m)
     key = digest([file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m)])[:16]
     path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None
     if path is not None and path.is_file():
@@ -19,7 +24,6 @@ def bake_nog(checkpoint: Path, bounds, resolution_m: float = 0.05, cache_dir: Pa
             return NOG.load(path)
         except (OSError, KeyError, ValueError):
             pass  # unreadable cache (interrupted write of an older version): bake again
-    model, _ = load_nof(checkpoint, device)
     nog = evaluate_grid(model, bounds, resolution_m, device)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
