@@ -12,6 +12,9 @@
 #            the authors' motion model (mcl.motion=odometry,irmcl), fr079 and intel
 #   width    issue 17: the NOG with the authors' motion model and sigma 0.25 m (the likelihood field's heading width
 #            per scan, docs/fidelity.md), global, 100k, train=fast, fr079 and intel
+#   hw       issue 36: fr079's NOF (train=fast) and its NOG, then the step benchmark on that NOG: the default march,
+#            the table, and AMCL's grid models at 10k / 100k / 1M, 5 repeats, the torch reference up to 100k; the NOF
+#            and NOG come back in $OUT/fr079-nof-nog.tgz for the CPU measurements (python -m eval.bench mcl --device cpu)
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field
 #   table    issue 18: mcl.weighting=nog_table beside nog_raymarch: the step benchmark on the fr079 NOG (10k / 100k /
 #            1M, the torch reference) and global (100k) and tracking (10k) runs on fr079 and intel, train=fast
@@ -69,6 +72,13 @@ for part in "$@"; do
              python -m irmcl_warp.localize -m +exp="$exp" train=fast localize.mode=tracking mcl.num_particles=10000 \
                mcl.weighting=nog_raymarch,nog_table 2>&1 | grep -E "success|Error|ms"
            done ;;
+    hw) python -m irmcl_warp.train +exp=fr079 train=fast 2>&1 | grep -v "^\[" | tail -3
+        python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=tracking localize.num_starts=1 localize.run_s=5 \
+          mcl.num_particles=1000 2>&1 | grep -E "success|Error" | tail -3  # bakes the NOG (outputs/fr079/nog/)
+        python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --step-graph on \
+          --variants warp+et+beam table likelihood_field beam_model --repeats 5 --torch-max 100000 --out "$OUT/bench-hw" \
+          2>&1 | grep -v "^{" | tail -24
+        tar czf "$OUT/fr079-nof-nog.tgz" outputs/fr079/train/fast-* outputs/fr079/nog ;;
     kidnap) EXPS="sim_office fr079" sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field \
               localize.kidnap_at_s=30 mcl.recovery_alpha_slow=0.01 mcl.recovery_alpha_fast=0.2 ;;
     *) echo "unknown part $part" >&2 ;;
