@@ -101,12 +101,14 @@ def test_scan_metrics_on_known_errors():
 
 
 def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch):
-    """A minute of CPU training must cut the validation range error to well below an untrained field's."""
+    """A minute of CPU training must cut the validation range error to well below an untrained field's (with the
+    progress bars turned off as a user may, TQDM_DISABLE=1: a disabled bar lacks attributes a live one has)."""
     from irmcl_warp.services.data import prepare_beams
     from irmcl_warp.nof.render import make_renderer, render_scans
     from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("TQDM_DISABLE", "1")
     cfg = _cfg(
         [
             "+exp=sim_office",

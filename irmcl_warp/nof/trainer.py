@@ -278,6 +278,7 @@ class Trainer:
             mininterval=1.0,
         )
         t_epoch, t_ckpt, losses, self.kept, self.read = time.time(), time.time(), [], [], []
+        first = self.step_in_epoch  # a resumed epoch starts part way (the bar itself may be off: TQDM_DISABLE=1)
         for b in bar:
             losses.append(self.step(perm[b * B : (b + 1) * B]))
             self.step_in_epoch = b + 1
@@ -285,7 +286,7 @@ class Trainer:
                 elapsed = time.time() - t_epoch
                 bar.set_postfix(
                     loss=f"{float(losses[-1]):.3f}",
-                    rays_s=f"{(b + 1 - bar.initial) * B / max(elapsed, 1e-9):,.0f}",
+                    rays_s=f"{(b + 1 - first) * B / max(elapsed, 1e-9):,.0f}",
                     refresh=False,
                 )
             if time.time() - t_ckpt > tc.checkpoint_every_s:
