@@ -108,7 +108,11 @@ def test_short_training_on_the_simulator_learns_the_walls(tmp_path, monkeypatch)
     from irmcl_warp.nof.stage import run_train
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("TQDM_DISABLE", "1")
+    import functools
+
+    import irmcl_warp.nof.trainer as trainer
+
+    monkeypatch.setattr(trainer, "tqdm", functools.partial(trainer.tqdm, disable=True))  # what TQDM_DISABLE=1 makes
     cfg = _cfg(
         [
             "+exp=sim_office",

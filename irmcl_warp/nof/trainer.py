@@ -301,7 +301,7 @@ class Trainer:
             if tc.max_time_s is not None and self.train_time_s + time.time() - t_ckpt >= tc.max_time_s:
                 break
         bar.close()
-        steps = self.step_in_epoch - bar.initial
+        steps = self.step_in_epoch - first
         if self.device.type == "cuda":
             torch.cuda.synchronize(self.device)  # the epoch's time includes the work still queued
         self.train_time_s += time.time() - t_ckpt
