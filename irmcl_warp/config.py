@@ -390,6 +390,8 @@ class Config:
     worlds: WorldsConfig = field(default_factory=WorldsConfig)
     exp: str = "default"
     device: str = "auto"  # auto = cuda:0 when Warp sees a GPU, else cpu
+    plugins: List[str] = field(default_factory=list)  # your own observation models / SLAM proposals: .py files or
+    # modules imported before the settings are checked (irmcl_warp/extend.py)
 
 
 def register() -> None:
@@ -581,9 +583,10 @@ def _in_range(v, lo, hi) -> bool:
     return ok and (hi is None or v <= hi)
 
 
-def validate(cfg) -> None:
+def validate(cfg, registered: dict | None = None) -> None:
     """Raise ConfigError naming the key and what it allows for a setting no schema declares (``+mcl.foo=1``),
-    a choice that is not one of its choices, or a number outside its range."""
+    a choice that is not one of its choices, or a number outside its range. ``registered``: more choices per key,
+    the names plugins registered (irmcl_warp/extend.py)."""
     import dataclasses
 
     from omegaconf import OmegaConf
@@ -603,6 +606,7 @@ def validate(cfg) -> None:
                     f"{key}.{extra[0]}: no such setting in {key} (declared: {', '.join(sorted(declared))})"
                 )
     for key, choices in CHOICES.items():
+        choices = tuple(choices) + tuple(c for c in (registered or {}).get(key, ()) if c not in choices)
         sec, name = key.split(".")
         v = c.get(sec, {}).get(name)
         if v is not None and v not in choices:

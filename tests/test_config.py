@@ -81,7 +81,7 @@ def test_config_choices_are_what_the_code_implements():
     from irmcl_warp.mcl.filter import ESTIMATORS
     from irmcl_warp.nof.beams import SPLITS
     from irmcl_warp.nof.render import RENDERERS
-    from irmcl_warp.slam.rbpf import RBPF
+    from irmcl_warp.slam.rbpf import PROPOSALS
     from irmcl_warp.kernels import MAPPING, RAYCAST, RESAMPLE, WEIGHTING
 
     implemented = {
@@ -92,7 +92,7 @@ def test_config_choices_are_what_the_code_implements():
         "raycast.name": RAYCAST.names(),
         "mapping.kernel": MAPPING.names(),
         "data.split": SPLITS,
-        "slam.proposal": RBPF.PROPOSALS,
+        "slam.proposal": PROPOSALS.names(),
     }
     for key, names in implemented.items():
         assert sorted(CHOICES[key]) == sorted(names), key

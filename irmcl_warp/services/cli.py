@@ -14,6 +14,7 @@ import os
 import sys
 
 from irmcl_warp.config import ConfigError, settings_warnings, validate
+from irmcl_warp.extend import load_plugins
 from irmcl_warp.io.atomic import DiskFullError
 from irmcl_warp.io.errors import LogFormatError
 
@@ -80,6 +81,14 @@ class _IntoLogFiles:
         return getattr(self.stream, name)
 
 
+def registered_choices() -> dict:
+    """The choices the registries hold (built-in and plugins'), for the settings a registry implements."""
+    from irmcl_warp.kernels import WEIGHTING
+    from irmcl_warp.slam.rbpf import PROPOSALS
+
+    return {"mcl.weighting": WEIGHTING.names(), "slam.proposal": PROPOSALS.names()}
+
+
 def run_entry(run, cfg):
     """``run(cfg)`` after the settings are checked; an expected error becomes one line and exit status 2. What
     the run prints also goes to Hydra's log file (``outputs/<exp>/<job>.log``), warnings and errors as such."""
@@ -89,7 +98,8 @@ def run_entry(run, cfg):
     if files:
         sys.stdout, sys.stderr = _IntoLogFiles(out, files, logging.INFO), _IntoLogFiles(err, files, logging.WARNING)
     try:
-        validate(cfg)
+        load_plugins(cfg.get("plugins"))
+        validate(cfg, registered_choices())
         for line in settings_warnings(cfg):
             print(f"warning: {line}", file=sys.stderr)
         return run(cfg)

@@ -35,7 +35,7 @@ from omegaconf import OmegaConf
 
 from irmcl_warp.config import SlamConfig
 from irmcl_warp.geometry import compose, relative, relative_one, wrap_angle, wrap_angle_one
-from irmcl_warp.kernels import SLAM, pick_device
+from irmcl_warp.kernels import SLAM, Registry, pick_device
 from irmcl_warp.kernels.slam import MAX_BLOCK_BEAMS, ParticleMaps, climb_candidates_kernel, climb_update_kernel
 
 
@@ -66,16 +66,17 @@ class History:
     parents: list = field(default_factory=list)
 
 
+PROPOSALS = Registry("slam proposal")  # name -> factory(rbpf) -> Proposal (irmcl_warp/extend.py); built-in below
+
+
 class RBPF:
-    PROPOSALS = {"paper": "propose_paper", "gmapping_code": "propose_match", "odometry": "propose_odometry"}
     FIRST_LOOK = 24  # hill-climbing rounds launched before the host first reads the active flags (GPU way)
 
     def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float, device: str = "auto"):
-        if cfg.proposal not in self.PROPOSALS:
-            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {sorted(self.PROPOSALS)}")
-        self.propose = getattr(
-            self, self.PROPOSALS[cfg.proposal]
-        )  # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
+        if cfg.proposal not in PROPOSALS.names():
+            raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {PROPOSALS.names()}")
+        # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
+        self.propose = PROPOSALS.build(cfg.proposal, rbpf=self)
         if cfg.resample not in ("selective", "always"):
             raise ValueError(f"slam.resample={cfg.resample!r}: choose selective or always")
         if not isinstance(cfg, SlamConfig):  # a DictConfig: plain attributes instead (microseconds a read there)
@@ -534,3 +535,18 @@ def per_scan_poses(stamps_idx: np.ndarray, processed_idx: np.ndarray, processed_
     since = relative(odom[processed_idx[j[ok]]], odom[stamps_idx[ok]])
     out[ok] = compose(base, since)
     return out
+
+
+@PROPOSALS.register("paper")
+def _paper(rbpf: RBPF):
+    return rbpf.propose_paper
+
+
+@PROPOSALS.register("gmapping_code")
+def _gmapping_code(rbpf: RBPF):
+    return rbpf.propose_match
+
+
+@PROPOSALS.register("odometry")
+def _odometry(rbpf: RBPF):
+    return rbpf.propose_odometry
