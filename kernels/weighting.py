@@ -630,6 +630,7 @@ class LikelihoodField(_GridModel):
     ):
         occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
         dist = distance_to_occupied(occupancy, resolution_m, occ_threshold).astype(np.float32)
+        self.distance = dist  # to the nearest occupied cell, per cell (m; for inspection, the kernel reads log q)
         padded = np.full((dist.shape[0] + 1, dist.shape[1]), max_dist_m, np.float32)  # + the off-map row
         padded[:-1] = dist
         self.grid = wp.empty(padded.shape, dtype=wp.float32, device=self.device)  # log q per cell

@@ -234,7 +234,7 @@ def test_grid_maps_treat_unknown_as_amcl_does(tmp_path, monkeypatch):
     lf = make_weighting(cfg.mcl, 20.0, DEVICE, maps, 1, 32)
     unknown = image == 0.5
     assert unknown.mean() > 0.05  # the training scans leave parts of the office unseen
-    dist = lf.grid.numpy()
+    dist = lf.distance
     assert dist[unknown].max() > 0.5 and np.median(dist[unknown]) > 0.0
     cfg = _sim_cfg("mcl.weighting=beam_model")
     beam = make_weighting(cfg.mcl, 20.0, DEVICE, build_maps(cfg, DEVICE, None)[1], 1, 32)

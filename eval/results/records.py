@@ -49,7 +49,8 @@ def _schema_defaults() -> dict:
     out = {}
     for f in dataclasses.fields(Config):
         if f.default_factory is not dataclasses.MISSING:
-            out[f.name] = dataclasses.asdict(f.default_factory())
+            made = f.default_factory()
+            out[f.name] = dataclasses.asdict(made) if dataclasses.is_dataclass(made) else made
     return out
 
 

@@ -1,0 +1,90 @@
+"""``python -m eval.analyses.own_slam_map --slam <slam run> --runs <localize runs>... [--out FILE.json]``
+
+Global localization of a log in its own SLAM map (issue 33), scored against that SLAM run's poses of the same
+scans: both live in the map's frame, so no alignment is fitted (a rigid fit to the truth would explain away a
+filter that settled on a look-alike place and followed the robot there). Each localization run (an own-map run:
+``localize.map_path=<slam run>/map.yaml``, its ``trajectory.tum``) is judged by the benchmark protocol
+(services.metrics.localization_metrics: converged = within CONVERGED_M for CONVERGED_FOR_S, success = converged
+within SUCCESS_WITHIN_S with the location and heading RMSE after it under the protocol's bounds), with the time
+from the first scan. Prints a table and writes the JSON record.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from irmcl_warp.io import read_tum
+from irmcl_warp.services.cli import guard
+from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.outputs import write_json
+
+
+def on_reference(stamps: np.ndarray, est: np.ndarray, ref_stamps: np.ndarray, ref: np.ndarray, tol_s: float = 1e-3):
+    """The reference pose at each estimate's stamp (the same scans of the same log); NaN where none is within
+    ``tol_s``."""
+    k = np.clip(np.searchsorted(ref_stamps, stamps), 1, len(ref_stamps) - 1)
+    k = np.where(np.abs(ref_stamps[k - 1] - stamps) <= np.abs(ref_stamps[k] - stamps), k - 1, k)
+    out = ref[k].astype(float).copy()
+    out[np.abs(ref_stamps[k] - stamps) > tol_s] = np.nan
+    return out
+
+
+def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
+    stamps, est = read_tum(run / "trajectory.tum")
+    on_ref = on_reference(stamps, est, ref_stamps, ref)
+    if np.isfinite(on_ref).all(1).sum() < 0.9 * len(stamps):
+        raise ValueError(f"{run}: fewer than 90 % of its scans have a SLAM pose: was it localized in this log's map?")
+    m = json.loads((run / "metrics.json").read_text())
+    cfg = OmegaConf.load(run / "config.yaml")  # the settings the run read
+    scored = localization_metrics(stamps, est, on_ref)
+    last = np.isfinite(est).all(1) & np.isfinite(on_ref).all(1)
+    end_error = float(np.hypot(*(est[last][-1, :2] - on_ref[last][-1, :2]))) if last.any() else None
+    return {
+        "run": str(run),
+        "seed": OmegaConf.select(cfg, "mcl.seed"),
+        "particles": OmegaConf.select(cfg, "mcl.num_particles"),
+        "scans": int(len(stamps)),
+        "log_s": float(stamps[-1] - stamps[0]),
+        **{
+            k: scored[k]
+            for k in ("converged", "time_to_converge_s", "success", "location_rmse_cm", "yaw_rmse_deg", "divergences")
+        },
+        "error_at_end_m": end_error,
+        "confidence_at_end": m.get("confidence_at_end"),
+        "localized_at_end": m.get("localized_at_end"),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.own_slam_map", description=__doc__.split("\n\n")[1])
+    ap.add_argument("--slam", required=True, type=Path, help="the SLAM run whose map.yaml the runs localized in")
+    ap.add_argument("--runs", required=True, nargs="+", type=Path, help="own-map localization runs")
+    ap.add_argument("--out", type=Path, default=None)
+    a = ap.parse_args(argv)
+    ref_stamps, ref = read_tum(a.slam / "trajectory.tum")
+    rows = [score_run(r, ref_stamps, ref) for r in sorted(a.runs)]
+    ok = sum(bool(r["success"]) for r in rows)
+    print(f"{a.slam}: {len(rows)} runs localized in its map, scored against its poses")
+    print("| seed | scans | converged after (s) | success | RMSE after (cm) | error at end (m) | confidence at end |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        conv = "-" if r["time_to_converge_s"] is None else f"{r['time_to_converge_s']:.1f}"
+        rmse = "-" if r["location_rmse_cm"] is None else f"{r['location_rmse_cm']:.1f}"
+        end = "-" if r["error_at_end_m"] is None else f"{r['error_at_end_m']:.2f}"
+        conf = "-" if r["confidence_at_end"] is None else f"{r['confidence_at_end']:.2f}"
+        print(f"| {r['seed']} | {r['scans']} | {conv} | {r['success']} | {rmse} | {end} | {conf} |")
+    print(f"success {ok}/{len(rows)}")
+    if a.out:
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        write_json(a.out, {"slam_run": str(a.slam), "runs": rows, "successes": ok, "of": len(rows)})
+        print(f"-> {a.out}")
+    return rows
+
+
+if __name__ == "__main__":
+    guard(main)

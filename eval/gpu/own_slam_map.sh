@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Issue 33 on the lent GPU: every real log localized globally from its first scan, over the whole log, in its own
+# SLAM map (GMapping with the experiment's settings), mcl=amcl with N particles (default 100k), one run per seed;
+# each run scored against the SLAM run's poses of the same scans (python -m eval.analyses.own_slam_map).
+# Usage (after the packages and the logs are unpacked: ../shared/tools/gpu/README.md, eval/gpu/stage_data.sh):
+#   LOGS="fr079 intel" SEEDS=0,1,2,3,4 bash eval/gpu/own_slam_map.sh
+# Results: $OUT/own_slam_map-<log>.json (the scores) and $OUT/own_slam_map.tgz (the runs' trajectories, metrics and
+# settings, the SLAM runs' maps and poses; not the MCAP replays or animations). Unpack into the repository root.
+set -uo pipefail
+export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
+OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
+N=${N:-100000}
+SEEDS=${SEEDS:-0,1,2,3,4,5,6,7,8,9}
+for log in ${LOGS:-fr079 intel mit_csail}; do
+  echo "=== $log: SLAM"
+  python -m irmcl_warp.slam +exp="gmapping_$log" 2>&1 | grep -E "ATE|scans processed|Error" | tail -2
+  slam=$(dirname "$(ls -td outputs/gmapping_"$log"/slam/*/map.yaml | head -1)")
+  echo "=== $log: localized in $slam/map.yaml, $N particles, seeds $SEEDS"
+  python -m irmcl_warp.localize -m +exp="$log" mcl=amcl mcl.num_particles="$N" localize.map_path="$slam/map.yaml" \
+    localize.run_s=null mcl.seed="$SEEDS" 2>&1 | grep -E "localized|Error" | sed 's/ -> .*//' | tail -12
+  runs=$(grep -l "$slam/map.yaml" outputs/"$log"/localize/*-in-map-*/config.yaml | xargs -n1 dirname)
+  python -m eval.analyses.own_slam_map --slam "$slam" --runs $runs --out "$OUT/own_slam_map-$log.json" | tail -14
+done
+find outputs -path "*/localize/*-in-map-*" \( -name trajectory.tum -o -name metrics.json -o -name config.yaml \
+  -o -name manifest.json -o -name spread.csv -o -name run.png \) > "$OUT/own-files.txt"
+find outputs -path "*/slam/*" \( -name trajectory.tum -o -name "map.*" -o -name metrics.json -o -name config.yaml \
+  -o -name manifest.json \) >> "$OUT/own-files.txt"
+tar czf "$OUT/own_slam_map.tgz" -T "$OUT/own-files.txt"
