@@ -25,6 +25,22 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 PLUGINS = Path(__file__).resolve().parent / "plugins"
 
 
+@pytest.fixture(autouse=True)
+def plugins_forgotten():
+    """A plugin registers into the package's registries for the rest of the process: each test leaves them (and
+    the plugin modules) as it found them, so no other test sees a toy."""
+    from irmcl_warp.kernels import WEIGHTING
+    from irmcl_warp.slam.rbpf import PROPOSALS
+
+    saved = {r: dict(r._factories) for r in (WEIGHTING, PROPOSALS)}
+    yield
+    for registry, factories in saved.items():
+        registry._factories.clear()
+        registry._factories.update(factories)
+    for name in [m for m in sys.modules if m.startswith("irmcl_plugin_")]:
+        del sys.modules[name]
+
+
 def _compose(*overrides):
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
