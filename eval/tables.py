@@ -10,7 +10,9 @@ docs/REPRODUCTION.md (the claims registry's verdicts) and docs/fidelity.md.
 from __future__ import annotations
 
 import argparse
+import json
 import re
+from pathlib import Path
 
 from eval.report.facts import facts, write_facts
 from eval.report.reproduction import reproduction_markdown
@@ -23,6 +25,7 @@ from eval.report.tables import (
     released_table,
     slam_table,
     synthesis_table,
+    own_slam_map_table,
     worlds_table,
 )
 from eval.results.claims import Evidence, load_bench, verdicts
@@ -95,6 +98,13 @@ def tables(ev: Evidence, pipe: list, worlds: list = ()) -> dict[str, tuple[str, 
             "localized = within 0.5 m and 15 deg to the end of the run or of the part before the kidnapping)",
             globloc_table(ev.globloc),
         )
+    own = own_slam_map_records()
+    if own:
+        out["own_slam_map"] = (
+            "Real logs localized from their first scan over the whole log in their own SLAM map, scored against the "
+            "SLAM poses (python -m eval.analyses.own_slam_map)",
+            own_slam_map_table(own),
+        )
     if worlds:
         out["worlds"] = (
             "Global localization from the first scan on held-out simulated floors (test split; settings and "
@@ -102,6 +112,11 @@ def tables(ev: Evidence, pipe: list, worlds: list = ()) -> dict[str, tuple[str, 
             worlds_table(worlds),
         )
     return out
+
+
+def own_slam_map_records(repo=REPO) -> list:
+    """The kept records of eval.analyses.own_slam_map (results/own_slam_map/*.json)."""
+    return [json.loads(p.read_text()) for p in sorted((Path(repo) / "results" / "own_slam_map").glob("*.json"))]
 
 
 def replace_block(text: str, name: str, table: str) -> str:

@@ -41,6 +41,7 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         raise ValueError(f"{run}: fewer than 90 % of its scans have a SLAM pose: was it localized in this log's map?")
     m = json.loads((run / "metrics.json").read_text())
     cfg = OmegaConf.load(run / "config.yaml")  # the settings the run read
+    manifest = json.loads((run / "manifest.json").read_text())
     scored = localization_metrics(stamps, est, on_ref)
     last = np.isfinite(est).all(1) & np.isfinite(on_ref).all(1)
     end_error = float(np.hypot(*(est[last][-1, :2] - on_ref[last][-1, :2]))) if last.any() else None
@@ -48,6 +49,9 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "run": str(run),
         "seed": OmegaConf.select(cfg, "mcl.seed"),
         "particles": OmegaConf.select(cfg, "mcl.num_particles"),
+        "weighting": OmegaConf.select(cfg, "mcl.weighting"),
+        "device": manifest.get("device"),
+        "wall_time_s": manifest.get("wall_time_s"),
         "scans": int(len(stamps)),
         "log_s": float(stamps[-1] - stamps[0]),
         **{
@@ -81,7 +85,8 @@ def main(argv=None):
     print(f"success {ok}/{len(rows)}")
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        write_json(a.out, {"slam_run": str(a.slam), "runs": rows, "successes": ok, "of": len(rows)})
+        log = OmegaConf.select(OmegaConf.load(a.slam / "config.yaml"), "data.name")
+        write_json(a.out, {"log": log, "slam_run": str(a.slam), "runs": rows, "successes": ok, "of": len(rows)})
         print(f"-> {a.out}")
     return rows
 

@@ -421,3 +421,27 @@ def worlds_table(runs: list) -> str:
             f"| {_f(fa)} | {detected} | {back} | {per} |"
         )
     return "\n".join(rows)
+
+
+def own_slam_map_table(records: list) -> str:
+    """Real logs localized globally from their first scan, over the whole log, in their own SLAM map (issue 33): one
+    row per record of eval.analyses.own_slam_map (results/own_slam_map/), its runs scored against the SLAM poses."""
+    rows = [
+        "| log | weighting | particles | device | runs (seeds) | success (protocol) | converged after (s), median "
+        "[min-max] | RMSE after (cm), median | ended confident (>= 0.8) |",
+        "|" + "---|" * 9,
+    ]
+    for rec in sorted(records, key=lambda r: r["log"]):
+        runs = rec["runs"]
+        first = runs[0]
+        t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
+        e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
+        conf = sum(bool(r["localized_at_end"]) for r in runs)
+        span = f"{np.median(t):.1f} [{min(t):.1f}-{max(t):.1f}]" if t else "-"
+        seeds = ",".join(str(r["seed"]) for r in sorted(runs, key=lambda r: r["seed"]))
+        rows.append(
+            f"| {rec['log']} | {first['weighting'].replace('_', ' ')} | {first['particles'] // 1000}k | {first['device']} "
+            f"| {len(runs)} ({seeds}) | {rec['successes']}/{len(runs)} | {span} | {_f(np.median(e) if e else None)} "
+            f"| {conf}/{len(runs)} |"
+        )
+    return "\n".join(rows)

@@ -1,0 +1,50 @@
+"""eval.analyses.own_slam_map: a log localized in its own SLAM map is scored against the SLAM poses in the map's
+frame, so a filter that settled on a look-alike place and followed the robot there fails (a fitted alignment
+would have called it right), and the README's table is made from its records."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from eval.analyses.own_slam_map import main as score
+from eval.report.tables import own_slam_map_table
+from irmcl_warp.io import write_tum
+
+
+def _run(folder, stamps, poses, seed, confidence):
+    folder.mkdir(parents=True)
+    write_tum(folder / "trajectory.tum", stamps, poses)
+    (folder / "metrics.json").write_text(
+        json.dumps({"confidence_at_end": confidence, "localized_at_end": confidence >= 0.8})
+    )
+    (folder / "manifest.json").write_text(json.dumps({"device": "cpu", "wall_time_s": 1.0}))
+    OmegaConf.save(
+        OmegaConf.create({"mcl": {"seed": seed, "num_particles": 2000, "weighting": "likelihood_field"}}),
+        folder / "config.yaml",
+    )
+    return folder
+
+
+def test_a_run_on_a_look_alike_place_fails_where_an_alignment_would_pass_it(tmp_path, rng):
+    t = np.arange(0.0, 60.0, 0.2)
+    path = np.column_stack([np.cos(t / 10) * 5, np.sin(t / 10) * 3, t / 10 + np.pi / 2])  # the SLAM poses
+    slam = tmp_path / "slam"
+    slam.mkdir()
+    write_tum(slam / "trajectory.tum", t, path)
+    OmegaConf.save(OmegaConf.create({"data": {"name": "toy"}}), slam / "config.yaml")
+    right = path + rng.normal(0, 0.03, path.shape)
+    right[:20] += [3.0, -2.0, 1.0]  # a global start: wrong for 4 s, then right
+    shifted = path + [4.0, 0.0, 0.0]  # the same path, 4 m along: a look-alike place followed to the end
+    runs = [_run(tmp_path / "a", t, right, 0, 0.9), _run(tmp_path / "b", t, shifted, 1, 0.95)]
+    out = tmp_path / "own.json"
+    rows = score(["--slam", str(slam), "--runs", *map(str, runs), "--out", str(out)])
+    good, wrong = rows
+    assert good["success"] and 3.5 < good["time_to_converge_s"] < 5.0 and good["location_rmse_cm"] < 6
+    assert not wrong["success"] and not wrong["converged"] and abs(wrong["error_at_end_m"] - 4.0) < 1e-4
+    rec = json.loads(out.read_text())
+    assert rec["log"] == "toy" and (rec["successes"], rec["of"]) == (1, 2)
+    table = own_slam_map_table([rec])
+    assert "| toy | likelihood field | 2k | cpu | 2 (0,1) | 1/2 |" in table and table.endswith("| 2/2 |")
