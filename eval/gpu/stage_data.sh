@@ -9,6 +9,7 @@ DATA=${IRMCL_DATA:-../shared/data}
 tar czf .gpu/c/data.tgz -C "$(dirname "$DATA")" \
   "$(basename "$DATA")"/kuemmerle2009/derived "$(basename "$DATA")"/kuemmerle2009/relations \
   "$(basename "$DATA")"/kuemmerle2009/bags/fr079.bag "$(basename "$DATA")"/kuemmerle2009/bags/intel.bag \
-  "$(basename "$DATA")"/kuemmerle2009/bags/mit-csail.bag "$(basename "$DATA")"/kuemmerle2009/killian.g2o.zip \
+  "$(basename "$DATA")"/kuemmerle2009/bags/mit-csail.bag "$(basename "$DATA")"/kuemmerle2009/bags/mit-killian.bag \
+  "$(basename "$DATA")"/kuemmerle2009/killian.g2o.zip \
   "$(basename "$DATA")"/corrected/matched "$(basename "$DATA")"/splits ${EXTRA:-}
 ls -la .gpu/c
