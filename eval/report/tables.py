@@ -431,7 +431,7 @@ def own_slam_map_table(records: list) -> str:
         "[min-max] | RMSE after (cm), median | ended confident (>= 0.8) |",
         "|" + "---|" * 9,
     ]
-    for rec in sorted(records, key=lambda r: r["log"]):
+    for rec in sorted(records, key=lambda r: (r["log"], r["runs"][0]["particles"])):
         runs = rec["runs"]
         first = runs[0]
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
