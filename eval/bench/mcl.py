@@ -38,7 +38,7 @@ import warp as wp
 from eval.bench.timing import record_path, repeated, time_per_call
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
-from irmcl_warp.services.filters import WeightingMaps, build_filter
+from irmcl_warp.services.filters import WeightingMaps, build_filter, nog_table_settings
 from irmcl_warp.services import table_cache
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.reference.weighting import nog_log_weights_torch
@@ -163,18 +163,8 @@ def bench_filter(
     )
     cached = None
     if cfg.weighting == "nog_table":  # was its table on disk already (irmcl_warp/services/table_cache.py)?
-        march = dict(
-            num_angles=cfg.table_angles,
-            num_samples=cfg.num_samples,
-            near_m=cfg.near_m,
-            far_m=far,
-            t_min=cfg.t_min,
-            empty_below=cfg.empty_below,
-        )
-        cached = (
-            table_cache.cache_dir() is not None
-            and (table_cache.cache_dir() / table_cache.table_name(nog, march, pick_device(device))).is_file()
-        )
+        kept = table_cache.table_path(nog, nog_table_settings(cfg, far), pick_device(device))
+        cached = kept is not None and kept.is_file()
     started = time.perf_counter()
     pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, maps)
     _sync(device)

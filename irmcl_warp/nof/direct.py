@@ -8,7 +8,7 @@ from __future__ import annotations
 import torch
 import warp as wp
 
-from irmcl_warp.nof.checkpoint import check_trained_far_bound, load_nof
+from irmcl_warp.nof.checkpoint import load_nof_for
 from irmcl_warp.kernels import RENDER, WEIGHTING, pick_device
 from irmcl_warp.kernels.weighting import make_likelihood_kernel
 
@@ -38,8 +38,7 @@ class NofDirect:
         if model is None:
             if checkpoint is None:
                 raise ValueError("nof_direct: give a NOF checkpoint (nof.pt) or a model")
-            model, meta = load_nof(checkpoint, self.torch_device)
-            check_trained_far_bound(checkpoint, meta, far_m)
+            model, _ = load_nof_for(checkpoint, far_m, self.torch_device)
         self.model = model.to(self.torch_device).eval()
         self.num_beams, self.chunk = num_beams, int(chunk_rays)
         self.z = torch.linspace(near_m, far_m, num_samples, device=self.torch_device)

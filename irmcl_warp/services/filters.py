@@ -81,14 +81,7 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             return WEIGHTING.build(w, model=_need(maps.model, w, "a NOF model"), **shared)
         if w == "nog_table":
             nog = _need(maps.nog, w, "a NOG")
-            march = dict(
-                num_angles=mcl.table_angles,
-                num_samples=mcl.num_samples,
-                near_m=mcl.near_m,
-                far_m=far_m,
-                t_min=mcl.t_min,
-                empty_below=mcl.empty_below,
-            )
+            march = nog_table_settings(mcl, far_m)
             dev = pick_device(device)
             key = ("nog_table", *march.values(), dev)
             if key not in maps.built:  # one table at a time in memory; on disk, one per map and settings
@@ -133,6 +126,18 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             **grid,
         )
     return WEIGHTING.build(w, **grid)
+
+
+def nog_table_settings(mcl, far_m: float) -> dict:
+    """The march settings a ``nog_table`` range table is built from (and named by, on disk)."""
+    return dict(
+        num_angles=mcl.table_angles,
+        num_samples=mcl.num_samples,
+        near_m=mcl.near_m,
+        far_m=far_m,
+        t_min=mcl.t_min,
+        empty_below=mcl.empty_below,
+    )
 
 
 def _march_order(order: str) -> bool:

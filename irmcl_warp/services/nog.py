@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from irmcl_warp.nof.checkpoint import check_trained_far_bound, load_nof
+from irmcl_warp.nof.checkpoint import load_nof_for
 from irmcl_warp.nog import NOG, evaluate_grid
 from irmcl_warp.runs import digest, file_digest
 
@@ -15,8 +15,7 @@ def bake_nog(
 ) -> NOG:
     """Bake (or read from the cache) the NOG of a nof.pt checkpoint, for localizing with the far bound ``far_m``
     (an error when the NOF was trained with another: nof/checkpoint.check_trained_far_bound)."""
-    model, meta = load_nof(checkpoint, device)
-    check_trained_far_bound(checkpoint, meta, far_m)
+    model, _ = load_nof_for(checkpoint, far_m, "cpu")  # checked even when the NOG is cached; evaluate_grid moves it
     key = digest([file_digest(checkpoint), [float(b) for b in bounds], float(resolution_m)])[:16]
     path = Path(cache_dir) / f"nog-{key}.npz" if cache_dir else None
     if path is not None and path.is_file():

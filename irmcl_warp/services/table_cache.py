@@ -53,12 +53,18 @@ def table_name(nog, settings: dict, device: str) -> str:
     return f"nog_table-{h.hexdigest()[:24]}.npy"
 
 
+def table_path(nog, settings: dict, device: str) -> Path | None:
+    """Where the table of ``nog`` built with ``settings`` on ``device`` is kept; None when nothing is kept."""
+    folder = cache_dir()
+    return None if folder is None else folder / table_name(nog, settings, device)
+
+
 def cached_table(nog, settings: dict, device: str, build: Callable[[], wp.array]) -> wp.array:
     """The table from the cache when it holds one made of the same inputs, else ``build()``, kept for next time."""
-    folder = cache_dir()
-    if folder is None:
+    path = table_path(nog, settings, device)
+    if path is None:
         return build()
-    path = folder / table_name(nog, settings, device)
+    folder = path.parent
     expected = (int(np.prod(nog.occupancy.shape)), int(settings["num_angles"]))
     if path.is_file():
         try:
