@@ -70,7 +70,7 @@ class SimConfig:
     duration_s: Optional[float] = None
     num_beams: int = 360
     fov_rad: float = 4.71238898  # 270 deg
-    max_range_m: float = 20.0
+    range_max_m: float = 20.0  # the simulated lidar's largest reading (LaserScan.range_max)
     range_noise_std_m: float = 0.02
     dropout_prob: float = 0.01
     laser_x_m: float = 0.1
@@ -82,7 +82,6 @@ class SimConfig:
 class MappingConfig:
     kernel: str = "logodds"
     resolution_m: float = 0.05
-    max_range_m: float = 30.0
     l_occ: float = 0.85
     l_free: float = -0.4
     l_min: float = -4.0
@@ -464,14 +463,13 @@ RANGES = {
     "data.ground_truth_tolerance_s": (0, 1.0),
     "sim.rate_hz": ("> 0", None),
     "sim.num_beams": (1, None),
-    "sim.max_range_m": ("> 0", None),
+    "sim.range_max_m": ("> 0", None),
     "sim.speed_mps": ("> 0", None),
     "sim.width_m": ("> 0", None),
     "sim.height_m": ("> 0", None),
     "sim.dropout_prob": (0, 1),
     "sim.range_noise_std_m": (0, None),
     "mapping.resolution_m": ("> 0", None),
-    "mapping.max_range_m": ("> 0", None),
     "model.num_freqs": (1, None),
     "model.width": (1, None),
     "model.depth": (1, None),
@@ -635,7 +633,9 @@ def settings_warnings(cfg) -> list[str]:
             f"mcl.num_particles={n}: a cloud this small cannot tell its own spread or find a global start "
             f"(below {MIN_MEANINGFUL_PARTICLES} its spread and convergence mean little)"
         )
-    far = cfg.data.far_m
-    if far is not None and far < MIN_MEANINGFUL_FAR_M:
-        out.append(f"data.far_m={far}: every beam longer than {far} m is dropped, which in a building is nearly all")
+    far_m = cfg.data.far_m
+    if far_m is not None and far_m < MIN_MEANINGFUL_FAR_M:
+        out.append(
+            f"data.far_m={far_m}: every beam longer than {far_m} m is dropped, which in a building is nearly all"
+        )
     return out

@@ -34,7 +34,7 @@ class GridSettings(TypedDict):
     occupancy: np.ndarray  # p_occ per cell [H, W], row 0 at origin_xy's y
     origin_xy: tuple  # the grid's lower-left corner (m)
     resolution_m: float
-    max_range_m: float  # the sensor's far bound
+    far_m: float  # the sensor's far bound
     z_hit: float  # mcl.z_hit, mcl.z_rand, mcl.sigma_hit_m: the mixture a model may use
     z_rand: float
     sigma_hit_m: float

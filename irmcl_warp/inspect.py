@@ -16,7 +16,7 @@ from irmcl_warp.config import register
 from irmcl_warp import runs
 from irmcl_warp.io import write_bag
 from irmcl_warp.mapping import build_map, save_map
-from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.outputs import write_json
 from irmcl_warp.types import LaserLog
 from irmcl_warp.kernels import pick_device
@@ -66,7 +66,7 @@ def inspect_log(run: runs.Run) -> Path:
         log,
         poses,
         resolution_m=m.resolution_m,
-        max_range_m=m.max_range_m,
+        far_m=far_bound_m(cfg, log.info.range_max_m),
         l_occ=m.l_occ,
         l_free=m.l_free,
         l_min=m.l_min,

@@ -188,12 +188,12 @@ def pipeline(run: runs.Run) -> Path:
     train_out = run_stage("train", cfg_train, run_train, timing)
     # 4. the NOG over the SLAM map's extent of the scans
     t0 = time.time()
-    far = far_bound_m(cfg, log.info.range_max_m)
+    far_m = far_bound_m(cfg, log.info.range_max_m)
     T_map_laser = compose(poses, log.T_base_laser)
     nog = bake_nog(
         train_out / "nof.pt",
-        laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far),
-        far,
+        laser_bounds(T_map_laser, log.ranges_m[scans], log.info.angles_rad, far_m),
+        far_m,
         cfg.mcl.map_resolution_m,
         cache_dir=runs.cache_dir(cfg, "nog"),
         device="cuda" if device.startswith("cuda") else "cpu",

@@ -33,7 +33,7 @@ def integrate_kernel(
     poses: wp.array(dtype=wp.vec3),
     ranges: wp.array2d(dtype=wp.float32),
     angles: wp.array(dtype=wp.float32),
-    max_range: float,
+    far_m: float,
 ):
     s, b = wp.tid()
     r = ranges[s, b]
@@ -43,7 +43,7 @@ def integrate_kernel(
     a = pose[2] + angles[b]
     d = wp.vec2(wp.cos(a), wp.sin(a))
     g = (wp.vec2(pose[0], pose[1]) - origin) / res
-    length = wp.min(r, max_range) / res
+    length = wp.min(r, far_m) / res
     ix, iy, sx, sy, t_max_x, t_max_y, dx, dy = walk_start(g, d)
     for _ in range(int(2.0 * length) + 4):
         t_exit = wp.min(t_max_x, t_max_y)
@@ -56,7 +56,7 @@ def integrate_kernel(
         else:
             t_max_y = t_max_y + dy
             iy = iy + sy
-    if r <= max_range:
+    if r <= far_m:
         count(counts, 0, ix, iy)
     else:
         count(counts, 1, ix, iy)
@@ -80,8 +80,8 @@ def apply_kernel(
 
 
 class LogOddsIntegrator:
-    def __init__(self, l_occ: float, l_free: float, l_min: float, l_max: float, max_range_m: float):
-        self.l_occ, self.l_free, self.l_min, self.l_max, self.max_range = l_occ, l_free, l_min, l_max, max_range_m
+    def __init__(self, l_occ: float, l_free: float, l_min: float, l_max: float, far_m: float):
+        self.l_occ, self.l_free, self.l_min, self.l_max, self.far_m = l_occ, l_free, l_min, l_max, far_m
         self.counts = None  # [2, H, W] hits and passes of one batch, allocated for the grid it is used on
 
     def integrate(self, logodds, origin_xy, res, poses, ranges, angles) -> None:
@@ -92,7 +92,7 @@ class LogOddsIntegrator:
         wp.launch(
             integrate_kernel,
             ranges.shape,
-            [self.counts, wp.vec2(*map(float, origin_xy)), float(res), poses, ranges, angles, self.max_range],
+            [self.counts, wp.vec2(*map(float, origin_xy)), float(res), poses, ranges, angles, self.far_m],
             device=dev,
         )
         wp.launch(

@@ -26,18 +26,18 @@ def dda_range(
     res: float,
     start: wp.vec2,
     d: wp.vec2,
-    max_range: float,
+    far_m: float,
     occ_threshold: float,
 ) -> float:
     g = (start - origin) / res
     ix, iy, sx, sy, t_max_x, t_max_y, dx, dy = walk_start(g, d)
     t = float(0.0)
-    max_steps = int(2.0 * max_range / res) + 4
+    max_steps = int(2.0 * far_m / res) + 4
     for _ in range(max_steps):
         if not inside(ix, iy, occ.shape[1], occ.shape[0]):
-            return max_range
-        if t * res > max_range:
-            return max_range
+            return far_m
+        if t * res > far_m:
+            return far_m
         if occ[iy, ix] >= occ_threshold:
             return t * res
         if t_max_x < t_max_y:
@@ -48,30 +48,30 @@ def dda_range(
             t = t_max_y
             t_max_y = t_max_y + dy
             iy = iy + sy
-    return max_range
+    return far_m
 
 
 @wp.func
 def field_range(
-    dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2, max_range: float
+    dist: wp.array2d(dtype=wp.float32), origin: wp.vec2, res: float, start: wp.vec2, d: wp.vec2, far_m: float
 ) -> float:
     t = float(0.0)
     min_step = 0.5 * res
     margin = 1.4142135 * res  # point-to-cell-centre plus cell half-diagonal, both at most res/sqrt(2)
-    max_steps = int(max_range / min_step) + 2
+    max_steps = int(far_m / min_step) + 2
     for _ in range(max_steps):
-        if t > max_range:
-            return max_range
+        if t > far_m:
+            return far_m
         p = start + t * d
         ix = int(wp.floor((p[0] - origin[0]) / res))
         iy = int(wp.floor((p[1] - origin[1]) / res))
         if not inside(ix, iy, dist.shape[1], dist.shape[0]):
-            return max_range
+            return far_m
         dd = dist[iy, ix]
         if dd <= 0.0:
             return t
         t = t + wp.max(dd - margin, min_step)
-    return max_range
+    return far_m
 
 
 @wp.kernel
@@ -81,7 +81,7 @@ def dda_kernel(
     res: float,
     poses: wp.array(dtype=wp.vec3),
     angles: wp.array(dtype=wp.float32),
-    max_range: float,
+    far_m: float,
     occ_threshold: float,
     out: wp.array2d(dtype=wp.float32),
 ):
@@ -89,7 +89,7 @@ def dda_kernel(
     pose = poses[p]
     a = pose[2] + angles[b]
     out[p, b] = dda_range(
-        occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), max_range, occ_threshold
+        occ, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), far_m, occ_threshold
     )
 
 
@@ -100,13 +100,13 @@ def field_kernel(
     res: float,
     poses: wp.array(dtype=wp.vec3),
     angles: wp.array(dtype=wp.float32),
-    max_range: float,
+    far_m: float,
     out: wp.array2d(dtype=wp.float32),
 ):
     p, b = wp.tid()
     pose = poses[p]
     a = pose[2] + angles[b]
-    out[p, b] = field_range(dist, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), max_range)
+    out[p, b] = field_range(dist, origin, res, wp.vec2(pose[0], pose[1]), wp.vec2(wp.cos(a), wp.sin(a)), far_m)
 
 
 def distance_to_occupied(occ: np.ndarray, res: float, occ_threshold: float) -> np.ndarray:
@@ -128,7 +128,7 @@ class GridRaycaster:
         occupancy: np.ndarray,
         origin_xy,
         resolution_m: float,
-        max_range_m: float,
+        far_m: float,
         occ_threshold: float = 0.5,
         device: str = "auto",
     ):
@@ -136,7 +136,7 @@ class GridRaycaster:
         if occupancy.ndim != 2 or occupancy.size == 0:
             raise ValueError(f"occupancy grid must be a non-empty 2D array, got shape {occupancy.shape}")
         self.device = pick_device(device)
-        self.method, self.res, self.max_range = method, float(resolution_m), float(max_range_m)
+        self.method, self.res, self.far_m = method, float(resolution_m), float(far_m)
         self.origin = wp.vec2(float(origin_xy[0]), float(origin_xy[1]))
         self.occ_threshold = float(occ_threshold)
         grid = occupancy if method == "dda" else distance_to_occupied(occupancy, self.res, self.occ_threshold)
@@ -148,14 +148,14 @@ class GridRaycaster:
             wp.launch(
                 dda_kernel,
                 dims,
-                [self.grid, self.origin, self.res, poses, angles, self.max_range, self.occ_threshold, out],
+                [self.grid, self.origin, self.res, poses, angles, self.far_m, self.occ_threshold, out],
                 device=self.device,
             )
         else:
             wp.launch(
                 field_kernel,
                 dims,
-                [self.grid, self.origin, self.res, poses, angles, self.max_range, out],
+                [self.grid, self.origin, self.res, poses, angles, self.far_m, out],
                 device=self.device,
             )
 

@@ -47,7 +47,7 @@ def lidar_kernel(
     segments: wp.array(dtype=wp.vec4),
     poses: wp.array(dtype=wp.vec3),
     angles: wp.array(dtype=wp.float32),
-    max_range: float,
+    range_max_m: float,
     noise_std: float,
     dropout: float,
     seed: int,
@@ -64,7 +64,7 @@ def lidar_kernel(
         best = wp.min(best, ray_segment(o, d, wp.vec2(seg[0], seg[1]), wp.vec2(seg[2], seg[3])))
     state = wp.rand_init(seed, s * angles.shape[0] + b)
     r = wp.max(best + noise_std * wp.randn(state), 0.0)
-    if best > max_range or wp.randf(state) < dropout:
+    if best > range_max_m or wp.randf(state) < dropout:
         r = wp.nan  # no return
     out[s, b] = r
 
@@ -94,7 +94,7 @@ class SegmentLidar:
         self,
         segments: np.ndarray,
         angles_rad: np.ndarray,
-        max_range_m: float,
+        range_max_m: float,
         noise_std_m: float = 0.0,
         dropout_prob: float = 0.0,
         device: str = "auto",
@@ -102,7 +102,7 @@ class SegmentLidar:
         self.device = pick_device(device)
         self.segments = wp.array(np.asarray(segments, dtype=np.float32), dtype=wp.vec4, device=self.device)
         self.angles = wp.array(np.asarray(angles_rad, dtype=np.float32), dtype=wp.float32, device=self.device)
-        self.max_range, self.noise_std, self.dropout = float(max_range_m), float(noise_std_m), float(dropout_prob)
+        self.range_max_m, self.noise_std, self.dropout = float(range_max_m), float(noise_std_m), float(dropout_prob)
 
     def scan(self, laser_poses: np.ndarray, seed: int) -> np.ndarray:
         poses = wp.array(np.asarray(laser_poses, dtype=np.float32).reshape(-1, 3), dtype=wp.vec3, device=self.device)
@@ -110,7 +110,7 @@ class SegmentLidar:
         wp.launch(
             lidar_kernel,
             out.shape,
-            [self.segments, poses, self.angles, self.max_range, self.noise_std, self.dropout, int(seed), out],
+            [self.segments, poses, self.angles, self.range_max_m, self.noise_std, self.dropout, int(seed), out],
             device=self.device,
         )
         return out.numpy()

@@ -150,7 +150,7 @@ def make_integrate_kernel(line: str):
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         angles: wp.array(dtype=wp.float32),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         cells: wp.array3d(dtype=wp.vec4),
@@ -159,7 +159,7 @@ def make_integrate_kernel(line: str):
         r = ranges[b]
         if not (r == r) or r <= 0.0:
             return
-        seg = beam_segment(poses[p], T_base_laser, wp.min(r, usable), angles[b])
+        seg = beam_segment(poses[p], T_base_laser, wp.min(r, far_m), angles[b])
         c0 = cell_of(seg[0], seg[1], origin, res)
         c1 = cell_of(seg[2], seg[3], origin, res)
         if wp.static(line == "bresenham"):
@@ -173,7 +173,7 @@ def make_integrate_kernel(line: str):
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         angles: wp.array(dtype=wp.float32),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         cells: wp.array3d(dtype=wp.vec4),
@@ -181,7 +181,7 @@ def make_integrate_kernel(line: str):
         p = wp.tid()
         for b in range(ranges.shape[0]):
             r = ranges[b]
-            if r == r and r > 0.0 and r <= usable:
+            if r == r and r > 0.0 and r <= far_m:
                 seg = beam_segment(poses[p], T_base_laser, r, angles[b])
                 c1 = cell_of(seg[2], seg[3], origin, res)
                 if c1[0] >= 0 and c1[1] >= 0 and c1[0] < cells.shape[2] and c1[1] < cells.shape[1]:
@@ -291,7 +291,7 @@ def make_score_kernel(
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         beam_cs: wp.array(dtype=wp.vec2),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         b0: int,
@@ -307,7 +307,7 @@ def make_score_kernel(
         y_hi = cells.shape[1] - 1 - wp.static(k)
         for b in range(b0, b1):
             r = ranges[b]
-            if (wp.static(beam_stride) == 1 or b % wp.static(beam_stride) == 0) and r == r and r > 0.0 and r <= usable:
+            if (wp.static(beam_stride) == 1 or b % wp.static(beam_stride) == 0) and r == r and r > 0.0 and r <= far_m:
                 cs = beam_cs[b]
                 ca = cl * cs[0] - sl * cs[1]
                 sa = sl * cs[0] + cl * cs[1]
@@ -338,7 +338,7 @@ def make_score_kernel(
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         beam_cs: wp.array(dtype=wp.vec2),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         cells: wp.array3d(dtype=wp.vec4),
@@ -351,7 +351,7 @@ def make_score_kernel(
             return
         b0 = j * wp.static(beams_per_thread)
         b1 = wp.min(b0 + wp.static(beams_per_thread), ranges.shape[0])
-        sl = score_beams(cells, p, poses[p, c], T_base_laser, ranges, beam_cs, usable, origin, res, b0, b1)
+        sl = score_beams(cells, p, poses[p, c], T_base_laser, ranges, beam_cs, far_m, origin, res, b0, b1)
         part_score[p, c, j] = sl[0]
         part_loglik[p, c, j] = sl[1]
 
@@ -361,7 +361,7 @@ def make_score_kernel(
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         beam_cs: wp.array(dtype=wp.vec2),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         cells: wp.array3d(dtype=wp.vec4),
@@ -378,7 +378,7 @@ def make_score_kernel(
         p = wp.tid()
         B = ranges.shape[0]
         pose = start[p]
-        best = score_beams(cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, 0, B)[0]
+        best = score_beams(cells, p, pose, T_base_laser, ranges, beam_cs, far_m, origin, res, 0, B)[0]
         steps = first_steps
         halvings = int(0)
         rounds = int(0)
@@ -399,7 +399,7 @@ def make_score_kernel(
                 if m == back and cand[0] == left[0] and cand[1] == left[1] and cand[2] == left[2]:
                     sc = left_score
                 else:
-                    sc = score_beams(cells, p, cand, T_base_laser, ranges, beam_cs, usable, origin, res, 0, B)[0]
+                    sc = score_beams(cells, p, cand, T_base_laser, ranges, beam_cs, far_m, origin, res, 0, B)[0]
                 if m == 0 or sc > top:
                     top = sc
                     top_pose = cand
@@ -443,7 +443,7 @@ def make_block_climb_kernel(score_beams):
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         beam_cs: wp.array(dtype=wp.vec2),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         lane: int,
@@ -451,7 +451,7 @@ def make_block_climb_kernel(score_beams):
         """The beam ``lane``'s term of the score at ``pose`` (0 for a thread past the last beam)."""
         B = ranges.shape[0]
         return score_beams(
-            cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, wp.min(lane, B), wp.min(lane + 1, B)
+            cells, p, pose, T_base_laser, ranges, beam_cs, far_m, origin, res, wp.min(lane, B), wp.min(lane + 1, B)
         )[0]
 
     @wp.kernel(module="unique")
@@ -460,7 +460,7 @@ def make_block_climb_kernel(score_beams):
         T_base_laser: wp.vec3,
         ranges: wp.array(dtype=wp.float32),
         beam_cs: wp.array(dtype=wp.vec2),
-        usable: float,
+        far_m: float,
         origin: wp.vec2,
         res: float,
         cells: wp.array3d(dtype=wp.vec4),
@@ -474,7 +474,7 @@ def make_block_climb_kernel(score_beams):
         p, lane = wp.tid()
         B = ranges.shape[0]
         pose = start[p]
-        t0 = wp.tile(beam_score(cells, p, pose, T_base_laser, ranges, beam_cs, usable, origin, res, lane))
+        t0 = wp.tile(beam_score(cells, p, pose, T_base_laser, ranges, beam_cs, far_m, origin, res, lane))
         best = float(0.0)
         for j in range(B):
             best += t0[j]
@@ -486,7 +486,7 @@ def make_block_climb_kernel(score_beams):
             mine = vec6()
             for m in range(6):
                 mine[m] = beam_score(
-                    cells, p, pose + wp.cw_mul(move(m), steps), T_base_laser, ranges, beam_cs, usable, origin, res, lane
+                    cells, p, pose + wp.cw_mul(move(m), steps), T_base_laser, ranges, beam_cs, far_m, origin, res, lane
                 )
             t = wp.tile(mine, preserve_type=True)
             sums = vec6()
@@ -732,10 +732,10 @@ class Integrator:
 
     LINES = ("bresenham", "dda")
 
-    def __init__(self, usable_range_m: float, line: str = "bresenham", free_space: bool = True, device: str = "auto"):
+    def __init__(self, far_m: float, line: str = "bresenham", free_space: bool = True, device: str = "auto"):
         if line not in self.LINES:
             raise ValueError(f"slam.line={line!r}: choose one of {list(self.LINES)}")
-        self.usable, self.device, self.free_space = float(usable_range_m), pick_device(device), bool(free_space)
+        self.far_m, self.device, self.free_space = float(far_m), pick_device(device), bool(free_space)
         self.free, self.hits = make_integrate_kernel(line)
 
     def __call__(self, maps: ParticleMaps, poses: wp.array, T_base_laser, ranges: wp.array, angles: wp.array) -> None:
@@ -744,7 +744,7 @@ class Integrator:
             wp.vec3(*map(float, T_base_laser)),
             ranges,
             angles,
-            self.usable,
+            self.far_m,
             maps.origin,
             maps.res,
             maps.cells,
@@ -763,7 +763,7 @@ class Scorer:
 
     def __init__(
         self,
-        usable_range_m: float,
+        far_m: float,
         kernel_size: int = 1,
         fullness: float = 0.1,
         sigma: float = 0.05,
@@ -777,7 +777,7 @@ class Scorer:
     ):
         import os
 
-        self.usable, self.device = float(usable_range_m), pick_device(device)
+        self.far_m, self.device = float(far_m), pick_device(device)
         cuda = wp.get_device(self.device).is_cuda
         self.per_thread = 1 if cuda else 1 << 16
         self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
@@ -829,7 +829,7 @@ class Scorer:
                     T,
                     ranges,
                     beam_cs,
-                    self.usable,
+                    self.far_m,
                     maps.origin,
                     maps.res,
                     part(maps.cells),
@@ -872,7 +872,7 @@ class Scorer:
                     T,
                     ranges,
                     beam_cs,
-                    self.usable,
+                    self.far_m,
                     maps.origin,
                     maps.res,
                     maps.cells[p0:p1],
@@ -918,7 +918,7 @@ class Scorer:
                 wp.vec3(*map(float, T_base_laser)),
                 ranges,
                 self._beam_directions(angles),
-                self.usable,
+                self.far_m,
                 maps.origin,
                 maps.res,
                 maps.cells,

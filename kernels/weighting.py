@@ -112,7 +112,7 @@ def make_likelihood_kernel(sigma: float):
 def make_render_kernel(
     num_samples: int,
     near: float,
-    far: float,
+    far_m: float,
     t_min: float,
     empty_below: float,
     eps: float = 1e-10,
@@ -129,7 +129,7 @@ def make_render_kernel(
       GPU warp march one beam of 32 particles (after resampling, copies of the same few poses: they read
       the same nodes) rather than the 32 beams of one particle (32 directions, 32 cache lines). The
       rendered ranges are the same either way."""
-    step = (far - near) / float(num_samples - 1)
+    step = (far_m - near) / float(num_samples - 1)
     skip = empty_below > 0.0
     batched = batch > 1 and not skip
     batch = max(1, int(batch))
@@ -524,7 +524,7 @@ def make_nog_table(**settings) -> NogTable:
     return NogTable(**settings)
 
 
-def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, max_range: float, max_dist: float):
+def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, far_m: float, max_dist: float):
     """Per cell of the distance map, the likelihood field's log q = log(z_hit exp(-d^2 / 2 sigma^2) + z_rand /
     max_range), d capped at ``max_dist``: the expression the field's kernel once evaluated per beam, evaluated once
     per cell by the same code on the same device, so the same bits (tests/test_weighting.py checks them)."""
@@ -533,7 +533,7 @@ def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, max_range: 
     def log_q(dist: wp.array2d(dtype=wp.float32), out: wp.array2d(dtype=wp.float32)):
         iy, ix = wp.tid()
         d = wp.min(dist[iy, ix], wp.static(max_dist))
-        q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(z_rand / max_range)
+        q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(z_rand / far_m)
         out[iy, ix] = wp.log(q)
 
     return log_q
@@ -623,7 +623,7 @@ class LikelihoodField(_GridModel):
         z_hit: float = 0.95,
         z_rand: float = 0.05,
         sigma_hit_m: float = 0.2,
-        max_range_m: float = 30.0,
+        far_m: float = 30.0,
         max_dist_m: float = 2.0,
         occ_threshold: float = 0.65,
         device: str = "auto",
@@ -635,7 +635,7 @@ class LikelihoodField(_GridModel):
         padded[:-1] = dist
         self.grid = wp.empty(padded.shape, dtype=wp.float32, device=self.device)  # log q per cell
         wp.launch(
-            make_log_q_kernel(z_hit, z_rand, sigma_hit_m, max_range_m, max_dist_m),
+            make_log_q_kernel(z_hit, z_rand, sigma_hit_m, far_m, max_dist_m),
             padded.shape,
             [wp.array(padded, dtype=wp.float32, device=self.device), self.grid],
             device=self.device,
@@ -648,7 +648,7 @@ def make_likelihood_field(**settings) -> LikelihoodField:
     return LikelihoodField(**settings)
 
 
-def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short, max_range, occ_threshold):
+def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_short, far_m, occ_threshold):
     @wp.kernel(module="unique")
     def beam(
         occ: wp.array2d(dtype=wp.float32),
@@ -671,17 +671,17 @@ def make_beam_model_kernel(z_hit, z_short, z_max, z_rand, sigma_hit, lambda_shor
                     res,
                     beam_origin(particles[p], T_base_laser),
                     beam_direction(particles[p], T_base_laser, angles[b]),
-                    wp.static(max_range),
+                    wp.static(far_m),
                     wp.static(occ_threshold),
                 )
                 e = z - expected
                 q = wp.static(z_hit) * wp.exp(-e * e / wp.static(2.0 * sigma_hit * sigma_hit))
                 if z < expected:
                     q += wp.static(z_short) * wp.static(lambda_short) * wp.exp(-wp.static(lambda_short) * z)
-                if z >= wp.static(max_range):
+                if z >= wp.static(far_m):
                     q += wp.static(z_max)
                 else:
-                    q += wp.static(z_rand / max_range)
+                    q += wp.static(z_rand / far_m)
                 s += wp.log(q)
         log_lik[p] = s
 
@@ -706,14 +706,14 @@ class BeamModel(_GridModel):
         z_rand: float = 0.05,
         sigma_hit_m: float = 0.2,
         lambda_short: float = 0.1,
-        max_range_m: float = 30.0,
+        far_m: float = 30.0,
         occ_threshold: float = 0.5,
         device: str = "auto",
     ):
         occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
         self.grid = wp.array(occupancy, dtype=wp.float32, device=self.device)
         self.kernel = make_beam_model_kernel(
-            z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, max_range_m, occ_threshold
+            z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, far_m, occ_threshold
         )
 
 

@@ -127,3 +127,46 @@ def test_the_code_is_formatted():
         timeout=300,
     )
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-1000:]
+
+
+# the far bound's former names; the sensor's largest reading (LaserInfo.range_max_m, sim.range_max_m, a
+# CARMEN header's range_max) is another quantity and keeps its own name
+FAR_BOUND_ALIASES = {"far", "usable", "usable_range_m", "max_range", "max_range_m"}
+
+
+def far_bound_aliases(source: str) -> list[tuple[int, str]]:
+    """(line, name) of every identifier or f-string field in ``source`` spelled as a former name of the far
+    bound; prose in comments and strings is not code and is left alone."""
+    import io
+    import tokenize
+
+    found = []
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.NAME and tok.string in FAR_BOUND_ALIASES:
+            found.append((tok.start[0], tok.string))
+        elif tok.type == tokenize.STRING and tok.string.lstrip("rRbB").lower().startswith(("f", "rf")):
+            for name in re.findall(r"\{([A-Za-z_]\w*)", tok.string):
+                if name in FAR_BOUND_ALIASES:
+                    found.append((tok.start[0], name))
+    return found
+
+
+def test_the_far_bound_has_one_name():
+    """Issue 34: the sensor's far bound is ``far_m`` in every file of the package, the kernels, eval and the
+    configs (it had five names and two fallbacks); the checker itself sees a planted alias."""
+    assert far_bound_aliases("def f(usable_range_m):\n    return f'{far}'  # far is prose\n") == [
+        (1, "usable_range_m"),
+        (2, "far"),
+    ]
+    bad = []
+    for folder in ("irmcl_warp", "kernels", "eval", "tests"):
+        for path in sorted((REPO / folder).rglob("*.py")):
+            if "kernels" in path.parts[len(REPO.parts) :] and folder == "irmcl_warp":
+                continue  # irmcl_warp/kernels is a link to kernels/
+            bad += [f"{path.relative_to(REPO)}:{line}: {name}" for line, name in far_bound_aliases(path.read_text())]
+    for path in sorted((REPO / "conf").rglob("*.yaml")):
+        text = path.read_text()
+        bad += [
+            f"{path.relative_to(REPO)}: {m}" for m in re.findall(r"^\s*(\w+):", text, re.M) if m in FAR_BOUND_ALIASES
+        ]
+    assert not bad, "the far bound is far_m everywhere:\n" + "\n".join(bad)

@@ -26,7 +26,7 @@ def test_evo_scores_an_own_map_run_as_its_metrics_say(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     log, _ = simulate(OmegaConf.structured(SimConfig(**SMALL)), "cpu")
-    grid = build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu")
+    grid = build_map(log, log.ground_truth, resolution_m=0.05, far_m=20.0, device="cpu")
     grid.origin_xy = (grid.origin_xy[0] - 3.0, grid.origin_xy[1] + 2.0)  # a map frame that is not the truth's
     files = save_map(grid, tmp_path / "office")
     register()

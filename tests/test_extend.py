@@ -54,9 +54,7 @@ def _tum(path: Path) -> np.ndarray:
 def test_an_observation_model_from_a_file_of_its_own_localizes(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     log, _ = simulate(OmegaConf.structured(SimConfig(width_m=12.0, height_m=9.0, duration_s=20.0)), DEVICE)
-    files = save_map(
-        build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device=DEVICE), tmp_path / "m"
-    )
+    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, far_m=20.0, device=DEVICE), tmp_path / "m")
     bag = write_bag(log, tmp_path / "drive.bag")
     x, y, yaw = (float(v) for v in log.ground_truth[0])
     cfg = _compose(

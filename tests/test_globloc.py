@@ -147,7 +147,7 @@ def test_scan2map_prefers_the_true_pose(rng):
     angles = np.linspace(-np.pi, np.pi, 180, endpoint=False)
     truth = np.array([6.0, 5.0, rng.uniform(-np.pi, np.pi)])
     ranges = SIM.build(
-        "segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=20.0, device="cpu"
+        "segment_lidar", segments=world.segments, angles_rad=angles, range_max_m=20.0, device="cpu"
     ).scan(truth[None], seed=1)[0]
     off = truth + [0.4, -0.3, 0.2]
     for kind in ("paper", "likelihood_field"):
@@ -180,7 +180,7 @@ def test_the_trigger_fires_on_a_kidnap_and_not_on_normal_motion(confirm):
     odom = np.concatenate([a, compose(a[-1], relative(b[:1], b))])  # exact odometry that does not see the jump
 
     lidar = SIM.build(
-        "segment_lidar", segments=world.segments, angles_rad=laser_angles(cfg), max_range_m=20.0, device="cpu"
+        "segment_lidar", segments=world.segments, angles_rad=laser_angles(cfg), range_max_m=20.0, device="cpu"
     )
     ranges = lidar.scan(compose(truth, np.array([cfg.sim.laser_x_m, 0, 0])), seed=3)
     cam_idx = np.arange(0, len(truth), 5)

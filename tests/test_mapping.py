@@ -7,7 +7,7 @@ from irmcl_warp.reference.mapping import integrate
 from irmcl_warp.kernels import MAPPING
 from tests.devices import DEVICE
 
-SETTINGS = dict(l_occ=0.85, l_free=-0.4, l_min=-4.0, l_max=4.0, max_range_m=3.0)
+SETTINGS = dict(l_occ=0.85, l_free=-0.4, l_min=-4.0, l_max=4.0, far_m=3.0)
 
 
 def test_logodds_kernel_matches_numpy_twin(rng):

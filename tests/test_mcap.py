@@ -45,7 +45,7 @@ def _yaw(q) -> float:
 def test_a_localization_run_reads_back_from_its_mcap_with_every_topic(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     log, _ = simulate(OmegaConf.structured(SimConfig(**SMALL)), "cpu")
-    grid = build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu")
+    grid = build_map(log, log.ground_truth, resolution_m=0.05, far_m=20.0, device="cpu")
     files = save_map(grid, tmp_path / "office")
     register()
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):

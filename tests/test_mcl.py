@@ -58,7 +58,7 @@ def test_pose_tracking_stays_within_a_bound(weighting):
             occupancy=nog.walls,
             origin_xy=corner,
             resolution_m=nog.resolution_m,
-            max_range_m=20.0,
+            far_m=20.0,
             device=DEVICE,
         )
     table = dict(weighting="nog_table", table_angles=120) if weighting == "nog_table" else {}
@@ -116,7 +116,7 @@ def test_without_data_far_m_the_far_bound_is_the_sensors_range_max(tmp_path, mon
 
     monkeypatch.chdir(tmp_path)
     out = sim_tracking_run(
-        duration_s=20, starts=1, run_s=10, particles=300, extra=("data.far_m=null", "sim.max_range_m=12.5")
+        duration_s=20, starts=1, run_s=10, particles=300, extra=("data.far_m=null", "sim.range_max_m=12.5")
     )
     assert json.loads((out / "metrics.json").read_text())["settings"]["far_m"] == 12.0
 
@@ -190,8 +190,10 @@ def test_kidnapped_robot_is_recovered_only_with_recovery_on(recovery):
     cfg = MCLConfig(num_particles=2000, num_samples=128, seed=5, **rates)
     t = log.stamps - log.stamps[0]
     first = np.flatnonzero(t < 15.0)
-    far = np.flatnonzero((t >= 19.0) & (np.hypot(*(log.ground_truth[:, :2] - log.ground_truth[first[-1], :2]).T) > 3.0))
-    idx = np.concatenate([first, np.arange(far[0], len(log))])
+    away = np.flatnonzero(
+        (t >= 19.0) & (np.hypot(*(log.ground_truth[:, :2] - log.ground_truth[first[-1], :2]).T) > 3.0)
+    )
+    idx = np.concatenate([first, np.arange(away[0], len(log))])
     pf = _filter(nog, cfg, log)
     pf.init_gaussian(log.ground_truth[0], (0.2, 0.2, 0.1))
     est = follow(pf, log, idx, cfg)

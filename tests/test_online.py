@@ -27,7 +27,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 def world(tmp_path_factory):
     d = tmp_path_factory.mktemp("online")
     log, _ = simulate(OmegaConf.structured(SimConfig(width_m=14.0, height_m=10.0, duration_s=30.0)), DEVICE)
-    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device=DEVICE), d / "office")
+    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, far_m=20.0, device=DEVICE), d / "office")
     return files["yaml"], write_bag(log, d / "drive.bag"), log.ground_truth
 
 
@@ -230,16 +230,16 @@ def test_a_nof_trained_for_another_far_bound_is_refused_naming_both(world, tmp_p
     map_yaml, bag, _ = world
     monkeypatch.chdir(tmp_path)
     cfg = _cfg(bag, map_yaml)
-    far = far_bound_m(cfg, load_stream(cfg).info.range_max_m)
+    far_m = far_bound_m(cfg, load_stream(cfg).info.range_max_m)
     model = NOF(ModelConfig(width=16, depth=2, skip_after=1, num_freqs=2)).eval()
     ckpt = tmp_path / "nof.pt"
-    trained = far + 10.0
+    trained = far_m + 10.0
     atomic_torch_save({"model": model.state_dict(), "model_config": model.config_dict(), "far_m": trained}, ckpt)
     common = (f"mcl.weighting={weighting}", f"localize.nof_path={ckpt}", "mcl.num_particles=200", "localize.run_s=3")
     with pytest.raises(
         ValueError,
         match=rf"nof.pt: this NOF was trained with the far bound {trained:g} m, and this "
-        rf"run localizes with {far:g} m .*data.far_m={trained:g}",
+        rf"run localizes with {far_m:g} m .*data.far_m={trained:g}",
     ):
         run_localize(_cfg(bag, map_yaml, *common))
     assert not list(Path("outputs").rglob("trajectory.tum"))

@@ -29,7 +29,7 @@ def world(tmp_path_factory):
     """A map_server map of a small office (from known poses) and a bag of a drive through it, no ground truth."""
     d = tmp_path_factory.mktemp("own")
     log, _ = simulate(OmegaConf.structured(SimConfig(**SMALL)), "cpu")
-    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu"), d / "office")
+    files = save_map(build_map(log, log.ground_truth, resolution_m=0.05, far_m=20.0, device="cpu"), d / "office")
     bag = write_bag(dataclasses.replace(log, ground_truth=None), d / "drive.bag")  # a bag without the truth
     return d, files["yaml"], bag, log.ground_truth, log.stamps
 

@@ -65,9 +65,9 @@ def test_neff_and_mean_match_the_twin(rng):
     assert spread == pytest.approx(weighted_spread(particles, log_w), rel=1e-3)
     # far from the origin the centred sums keep the spread of a tight cluster
     tight = np.column_stack([rng.normal(0, 0.05, (500, 2)) + [300.0, -250.0], np.zeros(500)]).astype(np.float32)
-    far = ParticleWeights(500, device=DEVICE, centre=(299.0, -251.0))
-    far.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), wp.array(tight, dtype=wp.vec3, device=DEVICE))
-    assert far.summary()[2] == pytest.approx(weighted_spread(tight, log_w), rel=1e-2)
+    off_centre = ParticleWeights(500, device=DEVICE, centre=(299.0, -251.0))
+    off_centre.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), wp.array(tight, dtype=wp.vec3, device=DEVICE))
+    assert off_centre.summary()[2] == pytest.approx(weighted_spread(tight, log_w), rel=1e-2)
 
 
 def test_low_variance_keeps_each_particle_floor_or_ceil_of_its_share(rng):

@@ -89,7 +89,7 @@ def test_pipeline_on_bags_without_a_far_bound(tmp_path, monkeypatch):
     from irmcl_warp.pipeline import run_pipeline
 
     monkeypatch.chdir(tmp_path)
-    sim = dict(duration_s=40.0, width_m=14.0, height_m=10.0, max_range_m=12.5)
+    sim = dict(duration_s=40.0, width_m=14.0, height_m=10.0, range_max_m=12.5)
     bags = [
         write_bag(simulate(OmegaConf.structured(SimConfig(**sim, path_seed=s)), "cpu")[0], tmp_path / f"d{s}.bag")
         for s in (0, 1)

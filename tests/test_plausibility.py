@@ -35,7 +35,7 @@ def _warned(fn, *args) -> list[str]:
 
 
 def test_an_inverted_map_is_said_to_be_one(drive, tmp_path):
-    grid = build_map(drive, drive.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu")
+    grid = build_map(drive, drive.ground_truth, resolution_m=0.05, far_m=20.0, device="cpu")
     files = save_map(grid, tmp_path / "office")
     assert _warned(load_map, files["yaml"]) == []
     inverted = tmp_path / "inverted.yaml"
@@ -47,7 +47,7 @@ def test_an_inverted_map_is_said_to_be_one(drive, tmp_path):
 def test_a_map_whose_free_space_is_mostly_beside_walls_is_said_to_be(drive):
     from irmcl_warp.io.plausibility import check_map, free_on_walls_share
 
-    grid = build_map(drive, drive.ground_truth, resolution_m=0.05, max_range_m=20.0, device="cpu")
+    grid = build_map(drive, drive.ground_truth, resolution_m=0.05, far_m=20.0, device="cpu")
     assert (
         free_on_walls_share(grid.probability, grid.known) < 0.25
         and _warned(check_map, "office.yaml", grid.probability, grid.known) == []

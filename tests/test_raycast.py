@@ -25,7 +25,7 @@ def test_kernel_matches_numpy_twin(method, rng):
         rng.uniform(-np.pi, np.pi, 25),
     ]
     angles = np.linspace(-np.pi, np.pi, 33, endpoint=False)
-    caster = RAYCAST.build(method, occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=5.0, device=DEVICE)
+    caster = RAYCAST.build(method, occupancy=occ, origin_xy=origin, resolution_m=res, far_m=5.0, device=DEVICE)
     got = caster.cast_numpy(poses, angles)
     grid = occ if method == "dda" else distance_to_occupied(occ, res, 0.5)
     want = cast(method, grid, origin, res, poses, angles, 5.0)
@@ -40,9 +40,7 @@ def test_two_metres_in_front_of_a_wall(method):
     res = 0.05
     occ = np.zeros((100, 100), np.float32)
     occ[:, 60] = 1  # wall cells cover x in [3.0, 3.05)
-    caster = RAYCAST.build(
-        method, occupancy=occ, origin_xy=(0.0, 0.0), resolution_m=res, max_range_m=10.0, device=DEVICE
-    )
+    caster = RAYCAST.build(method, occupancy=occ, origin_xy=(0.0, 0.0), resolution_m=res, far_m=10.0, device=DEVICE)
     r = caster.cast_numpy(np.array([[1.0, 2.5, 0.0]]), np.array([0.0, np.pi]))
     assert abs(r[0, 0] - 2.0) <= res / 2
     assert r[0, 1] == pytest.approx(10.0)  # nothing behind: max range
@@ -66,10 +64,8 @@ def test_methods_agree_within_a_cell(rng):
     occ, res = wall_grid(rng), 0.1
     poses = np.c_[rng.uniform(0.5, 5.5, 40), rng.uniform(0.5, 5.5, 40), rng.uniform(-np.pi, np.pi, 40)]
     angles = np.linspace(-np.pi, np.pi, 64, endpoint=False)
-    a = RAYCAST.build("dda", occupancy=occ, origin_xy=(0, 0), resolution_m=res, max_range_m=8.0, device=DEVICE)
-    b = RAYCAST.build(
-        "distance_field", occupancy=occ, origin_xy=(0, 0), resolution_m=res, max_range_m=8.0, device=DEVICE
-    )
+    a = RAYCAST.build("dda", occupancy=occ, origin_xy=(0, 0), resolution_m=res, far_m=8.0, device=DEVICE)
+    b = RAYCAST.build("distance_field", occupancy=occ, origin_xy=(0, 0), resolution_m=res, far_m=8.0, device=DEVICE)
     diff = np.abs(a.cast_numpy(poses, angles) - b.cast_numpy(poses, angles))
     assert np.mean(diff <= 1.5 * res) > 0.97, f"seed {rng.seed}"
 
@@ -78,4 +74,4 @@ def test_unknown_kernel_and_bad_grid_are_clear_errors():
     with pytest.raises(KeyError, match="choose one of"):
         RAYCAST.build("nope")
     with pytest.raises(ValueError, match="non-empty 2D"):
-        RAYCAST.build("dda", occupancy=np.zeros((0, 3)), origin_xy=(0, 0), resolution_m=0.1, max_range_m=1.0)
+        RAYCAST.build("dda", occupancy=np.zeros((0, 3)), origin_xy=(0, 0), resolution_m=0.1, far_m=1.0)

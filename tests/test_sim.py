@@ -22,7 +22,7 @@ def test_lidar_kernel_matches_twin_without_noise(rng):
     world = office(int(rng.integers(1000)), 16.0, 10.0)
     poses = np.c_[rng.uniform(1, 15, 10), rng.uniform(4.5, 5.5, 10), rng.uniform(-np.pi, np.pi, 10)]
     angles = np.linspace(-2.0, 2.0, 31)
-    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=angles, max_range_m=12.0, device=DEVICE)
+    lidar = SIM.build("segment_lidar", segments=world.segments, angles_rad=angles, range_max_m=12.0, device=DEVICE)
     got, want = lidar.scan(poses, seed=0), lidar_ranges(world.segments, poses, angles, 12.0)
     assert np.array_equal(np.isnan(got), np.isnan(want)), f"seed {rng.seed}"
     np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], atol=1e-4)
@@ -34,7 +34,7 @@ def test_lidar_noise_and_dropout_statistics():
         "segment_lidar",
         segments=seg,
         angles_rad=np.zeros(2000),
-        max_range_m=20.0,
+        range_max_m=20.0,
         noise_std_m=0.05,
         dropout_prob=0.1,
         device=DEVICE,

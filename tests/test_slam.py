@@ -58,7 +58,7 @@ def _integrate_both(
 ):
     maps = ParticleMaps(P, shape, origin, res, device=DEVICE)
     ref = [{f: np.zeros(shape) for f in ParticleMaps.FIELDS} for _ in range(P)]
-    integ = SLAM.build("integrate", usable_range_m=8.0, line=line, free_space=free_space, device=DEVICE)
+    integ = SLAM.build("integrate", far_m=8.0, line=line, free_space=free_space, device=DEVICE)
     angles = wp.array(log.info.angles_rad, dtype=wp.float32, device=DEVICE)
     for k in scans:
         poses = np.tile(log.ground_truth[k], (P, 1))
@@ -91,7 +91,7 @@ def _score_against_twin(maps, log, k, cands, origin, free_check, rng, res=0.1):
     """Scan k scored at ``cands`` on map 0 by the kernel and by the twin; asserts they agree and returns the
     kernel's scores."""
     scorer = SLAM.build(
-        "score", usable_range_m=8.0, kernel_size=1, free_delta_m=res * np.sqrt(2), free_check=free_check, device=DEVICE
+        "score", far_m=8.0, kernel_size=1, free_delta_m=res * np.sqrt(2), free_check=free_check, device=DEVICE
     )
     cw = wp.array(cands[None].astype(np.float32), dtype=wp.vec3, device=DEVICE)
     score = wp.zeros((1, len(cands)), dtype=wp.float32, device=DEVICE)
@@ -155,8 +155,8 @@ def test_score_matches_twin_and_peaks_at_the_true_pose(rng, free_check):
     maps, ref = _integrate_both(log, [0, 5, 10], P=1)
     k = 12
     true = log.ground_truth[k]
-    far = np.array([[0.25, 0.0, 0.0], [0.0, -0.25, 0.0], [0.0, 0.0, 0.2]])
-    cands = true + np.concatenate([np.zeros((1, 3)), far, rng.normal(0, [0.1, 0.1, 0.05], (5, 3))])
+    far_m = np.array([[0.25, 0.0, 0.0], [0.0, -0.25, 0.0], [0.0, 0.0, 0.2]])
+    cands = true + np.concatenate([np.zeros((1, 3)), far_m, rng.normal(0, [0.1, 0.1, 0.05], (5, 3))])
     got = _score_against_twin(maps, log, k, cands, (-1.0, -1.0), free_check, rng)
     assert got[0] > got[1:4].max() and got[0] > 0.8 * got.max()  # the true pose beats poses 0.25 m / 0.2 rad off
 
@@ -423,7 +423,7 @@ def test_hits_far_from_the_origin_keep_their_mean_to_a_millimetre():
     drift by centimetres there)."""
     res, P = 0.1, 1
     maps = ParticleMaps(P, (40, 40), (598.0, -402.0), res, device=DEVICE)
-    integ = SLAM.build("integrate", usable_range_m=8.0, free_space=False, device=DEVICE)
+    integ = SLAM.build("integrate", far_m=8.0, free_space=False, device=DEVICE)
     angles = wp.array(np.zeros(1), dtype=wp.float32, device=DEVICE)
     ranges = wp.array(np.array([1.2345], np.float32), dtype=wp.float32, device=DEVICE)
     pose = np.array([[599.0126, -400.0128, 0.0]], np.float32)

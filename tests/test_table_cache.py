@@ -39,8 +39,8 @@ def builds(monkeypatch, tmp_path):
     return made
 
 
-def _table(mcl, nog, far=6.0):
-    return make_weighting(mcl, far, DEVICE, WeightingMaps(nog=nog), 50, 8).table.numpy()
+def _table(mcl, nog, far_m=6.0):
+    return make_weighting(mcl, far_m, DEVICE, WeightingMaps(nog=nog), 50, 8).table.numpy()
 
 
 def test_a_table_is_built_once_and_read_back_bit_for_bit(rng, builds, tmp_path):
@@ -60,7 +60,7 @@ def test_another_map_or_setting_never_reads_a_stale_table(rng, builds, tmp_path)
     changed.occupancy[5, 7] = 1.0 - changed.occupancy[5, 7]  # one node
     _table(_mcl(), changed)
     _table(_mcl("mcl.num_samples=32"), nog)
-    _table(_mcl(), nog, far=5.0)
+    _table(_mcl(), nog, far_m=5.0)
     _table(_mcl(), NOG(nog.occupancy, (nog.origin_xy[0] + 0.05, nog.origin_xy[1]), nog.resolution_m))
     assert len(builds) == 5 and len(list((tmp_path / "cache" / "tables").glob("*.npy"))) == 5
     _table(_mcl("mcl.num_samples=32"), nog)

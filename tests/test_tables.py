@@ -259,6 +259,9 @@ def test_records_kept_before_a_setting_existed_read_at_its_default():
     assert full["mcl"]["motion"] == "odometry" and full["mcl"]["num_particles"] == 10000 and "slam" not in full
     assert "motion" not in config["mcl"]  # the kept record is left alone
     assert complete(full) == full
+    old = complete({"sim": {"max_range_m": 8.0}, "mapping": {"max_range_m": 30.0, "l_occ": 0.9}})
+    assert old["sim"]["range_max_m"] == 8.0 and "max_range_m" not in old["sim"]  # renamed, value kept
+    assert "max_range_m" not in old["mapping"] and old["mapping"]["l_occ"] == 0.9  # removed; others kept
 
 
 # --- the claims registry ----------------------------------------------------------------------------------------

@@ -174,7 +174,7 @@ def test_likelihood_field_matches_twin_and_prefers_the_true_pose(rng):
     angles = np.linspace(-np.pi, np.pi, 24, endpoint=False).astype(np.float32)
     from irmcl_warp.kernels import RAYCAST
 
-    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=20.0, device=DEVICE)
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, far_m=20.0, device=DEVICE)
     # +half a cell: end points inside the wall cell, not on its border (where float32 and float64 floor differ)
     measured = (caster.cast_numpy(true[None], angles)[0] + 0.05).astype(np.float32)
     measured[5] = np.nan
@@ -228,7 +228,7 @@ def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
     origin, res = (0.0, 0.0), 0.1
     true = np.array([2.0, 2.0, 0.3])
     angles = np.linspace(-np.pi, np.pi, 12, endpoint=False).astype(np.float32)
-    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE)
+    caster = RAYCAST.build("dda", occupancy=occ, origin_xy=origin, resolution_m=res, far_m=8.0, device=DEVICE)
     measured = (caster.cast_numpy(true[None], angles)[0] + rng.normal(0, 0.02, len(angles))).astype(np.float32)
     measured[4] = np.nan
     particles = np.vstack(
@@ -239,9 +239,7 @@ def test_beam_model_matches_twin_and_prefers_the_true_pose(rng):
             np.column_stack([rng.uniform(1, 4, 6), rng.uniform(1, 3, 6), rng.uniform(-3, 3, 6)]),
         ]
     ).astype(np.float32)
-    bm = WEIGHTING.build(
-        "beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, max_range_m=8.0, device=DEVICE
-    )
+    bm = WEIGHTING.build("beam_model", occupancy=occ, origin_xy=origin, resolution_m=res, far_m=8.0, device=DEVICE)
     out = wp.zeros(len(particles), dtype=wp.float32, device=DEVICE)
     bm(
         wp.array(particles, dtype=wp.vec3, device=DEVICE),
@@ -381,7 +379,7 @@ def test_range_table_matches_numpy_twin(rng, kind, t_min, empty_below):
     occ = _random_nog_grid(rng, kind)[:30, :45]
     occ[[0, -1], :] = occ[:, [0, -1]] = 1.0  # a room around it all: most rays from inside meet a wall
     nog = NOG(occ, (rng.uniform(-2, 2), rng.uniform(-2, 2)), 0.1)
-    P, B, A, far = 70, 12, int(rng.integers(16, 40)), 8.0
+    P, B, A, far_m = 70, 12, int(rng.integers(16, 40)), 8.0
     w = WEIGHTING.build(
         "nog_table",
         nog=nog,
@@ -390,13 +388,13 @@ def test_range_table_matches_numpy_twin(rng, kind, t_min, empty_below):
         num_angles=A,
         num_samples=64,
         near_m=0.02,
-        far_m=far,
+        far_m=far_m,
         t_min=t_min,
         empty_below=empty_below,
         device=DEVICE,
     )
     table = w.table.numpy()
-    twin = nog_table_build(occ, nog.origin_xy, nog.resolution_m, A, 64, 0.02, far, t_min, empty_below)
+    twin = nog_table_build(occ, nog.origin_xy, nog.resolution_m, A, 64, 0.02, far_m, t_min, empty_below)
     off = np.abs(table.astype(int) - twin.astype(int))
     assert (off <= 1).mean() > 0.99, f"seed {rng.seed}: {(off <= 1).mean():.4f} of entries within a quantum"
     assert (twin > 0).mean() > 0.5  # walls to hit
@@ -410,7 +408,7 @@ def test_range_table_matches_numpy_twin(rng, kind, t_min, empty_below):
     pw, aw = wp.array(particles, dtype=wp.vec3, device=DEVICE), wp.array(angles, dtype=wp.float32, device=DEVICE)
     w(pw, T_bl, aw, wp.array(measured, dtype=wp.float32, device=DEVICE), logw)  # ranges and likelihood in one kernel
     ours = w.render(pw, T_bl, aw).numpy()  # the ranges alone
-    twin_r = nog_table_ranges(table, occ.shape, nog.origin_xy, nog.resolution_m, far, particles, T_bl, angles)
+    twin_r = nog_table_ranges(table, occ.shape, nog.origin_xy, nog.resolution_m, far_m, particles, T_bl, angles)
     assert np.allclose(ours, twin_r, atol=2e-4), f"seed {rng.seed}: {np.abs(ours - twin_r).max()}"
     assert np.allclose(logw.numpy(), nog_log_weights(twin_r, measured.astype(np.float64), 0.5), rtol=1e-4, atol=1e-4)
 
@@ -421,7 +419,7 @@ def test_range_table_reads_what_the_march_renders():
     the range of a straight wall stays close to the march's."""
     from irmcl_warp.kernels.weighting import TABLE_LEVELS, table_headings
 
-    nog, far = _wall_nog(x_wall=2.0), 10.0
+    nog, far_m = _wall_nog(x_wall=2.0), 10.0
     A = 72
     table = WEIGHTING.build(
         "nog_table",
@@ -431,11 +429,11 @@ def test_range_table_reads_what_the_march_renders():
         num_angles=A,
         num_samples=256,
         near_m=0.0,
-        far_m=far,
+        far_m=far_m,
         device=DEVICE,
     )
     march = WEIGHTING.build(
-        "nog_raymarch", nog=nog, num_particles=64, num_beams=1, num_samples=256, near_m=0.0, far_m=far, device=DEVICE
+        "nog_raymarch", nog=nog, num_particles=64, num_beams=1, num_samples=256, near_m=0.0, far_m=far_m, device=DEVICE
     )
     beam = wp.array(np.zeros(1, np.float32), dtype=wp.float32, device=DEVICE)
     at_nodes = np.array(
@@ -444,7 +442,7 @@ def test_range_table_reads_what_the_march_renders():
     )
     pw = wp.array(at_nodes, dtype=wp.vec3, device=DEVICE)
     got, want = table.render(pw, (0, 0, 0), beam).numpy()[:9, 0], march.render(pw, (0, 0, 0), beam).numpy()[:9, 0]
-    assert np.all(np.abs(got - want) <= far / TABLE_LEVELS), (got, want)
+    assert np.all(np.abs(got - want) <= far_m / TABLE_LEVELS), (got, want)
     xs = np.linspace(0.0, 0.5, 41)  # along the beam (heading 0) through nodes and between them
     along = wp.array(
         np.stack([xs, np.full_like(xs, 0.01), np.zeros_like(xs)], -1).astype(np.float32), dtype=wp.vec3, device=DEVICE
@@ -469,7 +467,7 @@ def test_range_table_too_large_or_too_coarse_is_a_clear_error(monkeypatch):
         WEIGHTING.build("nog_table", nog=nog, num_particles=1, num_beams=1, num_angles=2, device=DEVICE)
 
 
-def _per_beam_field_kernel(z_hit, z_rand, sigma_hit, max_range, max_dist):
+def _per_beam_field_kernel(z_hit, z_rand, sigma_hit, far_m, max_dist):
     """The likelihood field as it was computed before the per-cell table (commit 3319b3a): log q per beam."""
     from irmcl_warp.kernels.weighting import beam_direction, beam_origin
 
@@ -498,7 +496,7 @@ def _per_beam_field_kernel(z_hit, z_rand, sigma_hit, max_range, max_dist):
                 if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
                     d = wp.min(dist[iy, ix], wp.static(max_dist))
                 q = wp.static(z_hit) * wp.exp(-d * d / wp.static(2.0 * sigma_hit * sigma_hit)) + wp.static(
-                    z_rand / max_range
+                    z_rand / far_m
                 )
                 s += wp.log(q)
         log_lik[p] = s
@@ -515,7 +513,7 @@ def test_the_likelihood_field_s_table_of_log_q_gives_the_per_beam_bits(rng):
     occ = (rng.random((H, W)) < 0.05).astype(np.float32)
     occ[0, 0] = 1.0
     origin = (float(rng.uniform(-2, 2)), float(rng.uniform(-2, 2)))
-    z_hit, sigma, max_range, max_dist = float(rng.uniform(0.3, 0.95)), float(rng.uniform(0.05, 0.5)), 20.0, 2.0
+    z_hit, sigma, far_m, max_dist = float(rng.uniform(0.3, 0.95)), float(rng.uniform(0.05, 0.5)), 20.0, 2.0
     P, B = 300, 40
     lo, hi = np.array(origin) - 1.0, np.array(origin) + [W * res + 1.0, H * res + 1.0]
     particles = np.column_stack([rng.uniform(lo[0], hi[0], P), rng.uniform(lo[1], hi[1], P), rng.uniform(-4, 4, P)])
@@ -537,7 +535,7 @@ def test_the_likelihood_field_s_table_of_log_q_gives_the_per_beam_bits(rng):
         z_hit=z_hit,
         z_rand=1.0 - z_hit,
         sigma_hit_m=sigma,
-        max_range_m=max_range,
+        far_m=far_m,
         max_dist_m=max_dist,
         device=DEVICE,
     )
@@ -546,7 +544,7 @@ def test_the_likelihood_field_s_table_of_log_q_gives_the_per_beam_bits(rng):
     before = wp.zeros(P, dtype=wp.float32, device=DEVICE)
     dist = wp.array(distance_to_occupied(occ, res, 0.65).astype(np.float32), dtype=wp.float32, device=DEVICE)
     wp.launch(
-        _per_beam_field_kernel(z_hit, 1.0 - z_hit, sigma, max_range, max_dist),
+        _per_beam_field_kernel(z_hit, 1.0 - z_hit, sigma, far_m, max_dist),
         P,
         [dist, wp.vec2(*origin), res, *args, before],
         device=DEVICE,

@@ -447,7 +447,7 @@ def test_the_search_finds_a_twin_floors_look_alike_place():
         mapping.ranges_m,
         mapping.info.angles_rad,
         resolution_m=0.05,
-        max_range_m=20.0,
+        far_m=20.0,
         device=DEVICE,
     )
     agree = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)

@@ -94,9 +94,9 @@ def yaw_profile(run: Path, every: int = 10, max_deg: float = 5.0, steps: int = 4
         else None
     )  # the field the run read (a NOF weighting)
     view, maps, _ = build_maps(cfg, device, run.parents[2] / up["run"] / "nof.pt" if up else None)
-    far = far_bound_m(cfg)
+    far_m = far_bound_m(cfg)
     m = OmegaConf.merge(cfg.mcl, {"num_particles": steps, "step_graph": "off"})
-    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
+    pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_m, device, maps)
     offsets = np.radians(np.linspace(-max_deg, max_deg, steps))
     scans = np.flatnonzero(np.all(np.isfinite(log.ground_truth), axis=1))[::every]
     curves, peaks = [], []

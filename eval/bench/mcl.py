@@ -142,7 +142,7 @@ def bench_filter(
     n,
     device,
     steps,
-    far,
+    far_m,
     angles,
     measured,
     seed=0,
@@ -163,10 +163,10 @@ def bench_filter(
     )
     cached = None
     if cfg.weighting == "nog_table":  # was its table on disk already (irmcl_warp/services/table_cache.py)?
-        kept = table_cache.table_path(nog, nog_table_settings(cfg, far), pick_device(device))
+        kept = table_cache.table_path(nog, nog_table_settings(cfg, far_m), pick_device(device))
         cached = kept is not None and kept.is_file()
     started = time.perf_counter()
-    pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far, device, maps)
+    pf = build_filter(cfg, free, (0.0, 0.0, 0.0), angles, far_m, device, maps)
     _sync(device)
     build_s = time.perf_counter() - started
     if around is None:
@@ -208,11 +208,11 @@ def bench_filter(
     if trace is not None:
         row["device_profile"] = trace
     if cfg.weighting == "nog_table":
-        row["table_vs_march_m"] = table_error(pf, nog, cfg, far, device)
+        row["table_vs_march_m"] = table_error(pf, nog, cfg, far_m, device)
     return row
 
 
-def table_error(pf, nog, cfg, far, device) -> dict:
+def table_error(pf, nog, cfg, far_m, device) -> dict:
     """|table range - march range| over the filter's particles and beams where both see a wall: median, 90th
     percentile, maximum (m)."""
     march = WEIGHTING.build(
@@ -222,7 +222,7 @@ def table_error(pf, nog, cfg, far, device) -> dict:
         num_beams=len(pf.beam_index),
         num_samples=cfg.num_samples,
         near_m=cfg.near_m,
-        far_m=far,
+        far_m=far_m,
         t_min=cfg.t_min,
         device=device,
     )
@@ -238,7 +238,7 @@ def table_error(pf, nog, cfg, far, device) -> dict:
     }
 
 
-def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
+def bench_torch(nog, n, device, steps, far_m, angles, measured, seed=0) -> dict:
     dev = torch.device("cuda" if device.startswith("cuda") else "cpu")
     rng = np.random.default_rng(seed)
     free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
@@ -251,7 +251,7 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
 
     def once():
         return nog_log_weights_torch(
-            grid, nog.origin_xy, nog.resolution_m, particles, (0.0, 0.0, 0.0), a, m, 256, 0.02, far, 0.5, chunk=500
+            grid, nog.origin_xy, nog.resolution_m, particles, (0.0, 0.0, 0.0), a, m, 256, 0.02, far_m, 0.5, chunk=500
         )
 
     with torch.no_grad():
@@ -259,28 +259,28 @@ def bench_torch(nog, n, device, steps, far, angles, measured, seed=0) -> dict:
     return {"method": "torch (authors' formulation)", "particles": n, "step_ms": None, "weighting_ms": 1e3 * s}
 
 
-def measured_scan(nog, far, device, seed=0, with_pose=False):
+def measured_scan(nog, far_m, device, seed=0, with_pose=False):
     """360 beams rendered from a free pose on the NOG, plus 2 cm noise."""
     rng = np.random.default_rng(seed)
     free = np.argwhere(nog.occupancy < 0.1)[:, ::-1] * nog.resolution_m + np.asarray(nog.origin_xy)
     pose = np.append(free[rng.integers(len(free))], rng.uniform(-np.pi, np.pi)).astype(np.float32)
     angles = np.linspace(-np.pi / 2, np.pi / 2, 360).astype(np.float32)
-    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=360, far_m=far, device=device)
+    w = WEIGHTING.build("nog_raymarch", nog=nog, num_particles=1, num_beams=360, far_m=far_m, device=device)
     r = w.render(
         wp.array(pose[None], dtype=wp.vec3, device=w.device),
         (0, 0, 0),
         wp.array(angles, dtype=wp.float32, device=w.device),
     ).numpy()[0]
     r = r + rng.normal(0, 0.02, r.shape)
-    scan = np.where((r > 0.05) & (r < far - 0.5), r, np.nan).astype(np.float32)
+    scan = np.where((r > 0.05) & (r < far_m - 0.5), r, np.nan).astype(np.float32)
     return (angles, scan, pose) if with_pose else (angles, scan)
 
 
 def run_mcl_bench(a) -> list[dict]:
     device = pick_device(a.device or "auto")
     nog = NOG.load(Path(a.nog)) if a.nog else simulator_nog(device=device)
-    far = a.far
-    angles, measured, pose = measured_scan(nog, far, device, with_pose=True)
+    far_m = a.far_m
+    angles, measured, pose = measured_scan(nog, far_m, device, with_pose=True)
     around = (pose, tuple(a.around)) if a.around else None
     rows = []
     for n in a.particles:
@@ -293,7 +293,7 @@ def run_mcl_bench(a) -> list[dict]:
                         n,
                         device,
                         a.steps,
-                        far,
+                        far_m,
                         angles,
                         measured,
                         repeats=a.repeats,
@@ -305,7 +305,7 @@ def run_mcl_bench(a) -> list[dict]:
                 )
                 print(rows[-1], flush=True)
         if n <= a.torch_max:
-            rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far, angles, measured))
+            rows.append(bench_torch(nog, n, device, max(1, a.steps // 4), far_m, angles, measured))
             print(rows[-1], flush=True)
             ref = rows[-1]["weighting_ms"]
             for r in rows:
@@ -313,7 +313,7 @@ def run_mcl_bench(a) -> list[dict]:
                     r["speedup_vs_torch"] = ref / r["step_ms"]
     name = torch.cuda.get_device_name() if device.startswith("cuda") else platform.processor() or "cpu"
     src = a.nog or "simulator walls (5 cm)"
-    print(f"\nMCL step on {name} ({device}), NOG {src} {nog.shape}, 32 beams x 256 samples, far {far} m")
+    print(f"\nMCL step on {name} ({device}), NOG {src} {nog.shape}, 32 beams x 256 samples, far {far_m} m")
     print(
         "| method | particles | full step (ms): median of repeats [min-max] | weighting (ms) | x faster than torch "
         "(full step vs its weighting) |"
@@ -350,7 +350,7 @@ def run_mcl_bench(a) -> list[dict]:
             "device_name": name,
             "nog": src,
             "nog_shape": list(nog.shape),
-            "far_m": far,
+            "far_m": far_m,
             "particles_start": "uniform over the free cells"
             if around is None
             else f"Gaussian around the scan's pose, std {list(a.around)}",
@@ -381,7 +381,7 @@ def add_parser(sub) -> None:
         help="also list the CUDA kernels of a step with their device times (torch.profiler / CUPTI)",
     )
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
-    p.add_argument("--far", type=float, default=40.0)
+    p.add_argument("--far", dest="far_m", type=float, default=40.0, help="the far bound (m)")
     p.add_argument(
         "--around",
         type=float,

@@ -140,7 +140,7 @@ def our_checkpoint(their_ckpt: Path, near_m: float, far_m: float) -> dict:
     }
 
 
-def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
+def export_start(log, idx: np.ndarray, far_m: float, folder: Path) -> int:
     """Their sequence file of the scans ``idx`` into ``folder``; returns their start index (the first scan
     with ground truth: they start the particles around it)."""
     gt_known = np.all(np.isfinite(log.ground_truth[idx]), axis=1)
@@ -148,8 +148,8 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
         raise ValueError(f"{log.source}: no ground truth in the window of scans {idx[0]}..{idx[-1]}")
     t0 = log.stamps[idx[0]]
     angles = log.info.angles_rad
-    ranges = np.where(np.isfinite(log.ranges_m[idx]), log.ranges_m[idx], far)
-    ranges = np.minimum(ranges, far)  # their loader sets every reading >= max_range to 0 (ignored)
+    ranges = np.where(np.isfinite(log.ranges_m[idx]), log.ranges_m[idx], far_m)
+    ranges = np.minimum(ranges, far_m)  # their loader sets every reading >= max_range to 0 (ignored)
     scans = [
         {
             "timestamp": float(log.stamps[i] - t0),
@@ -164,7 +164,7 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
         "angle_min": float(angles[0]),
         "angle_max": float(angles[-1]),
         "angle_res": float(np.median(np.diff(angles))),
-        "max_range": float(far),
+        "max_range": float(far_m),
         "scans": scans,
     }
     atomic_write_bytes(folder / "seq.json", json.dumps(doc).encode())
@@ -176,14 +176,14 @@ def export_start(log, idx: np.ndarray, far: float, folder: Path) -> int:
     return int(np.flatnonzero(gt_known)[0])
 
 
-def export_split(test, far: float, path: Path) -> None:
+def export_split(test, far_m: float, path: Path) -> None:
     """One of our splits (a BeamSet) as their dataset's <split>.json: per scan the laser's 3x3 pose
     (``transform_matrix``) and the ranges, every beam ours does not score (no return, beyond far) at
     ``max_range`` = far, which their loader marks invalid (>= max_range). ``angle_max`` lies half a step
     below the end, so that their ``arange(angle_min, angle_max, angle_res)`` has one direction per beam."""
     a = test.angles_rad
     res = float(np.median(np.diff(a)))
-    ranges = np.where(test.valid & np.isfinite(test.ranges_m), test.ranges_m, far)
+    ranges = np.where(test.valid & np.isfinite(test.ranges_m), test.ranges_m, far_m)
     scans = []
     for pose, r in zip(test.T_map_laser, ranges):
         scans.append(
@@ -198,7 +198,7 @@ def export_split(test, far: float, path: Path) -> None:
         "angle_min": float(a[0]),
         "angle_max": float(a[0] + res * (len(a) - 0.5)),
         "angle_res": res,
-        "max_range": float(far),
+        "max_range": float(far_m),
         "scans": scans,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -257,12 +257,12 @@ def prepare(cfg, repeat: int = 0) -> Path:
     loc, m = cfg.localize, cfg.mcl
     if loc.kidnap_at_s > 0:
         raise ValueError("localize.kidnap_at_s: their script has no kidnapping; run without it")
-    far, out, src = far_bound_m(cfg), out_folder(cfg, repeat), BUILD / "src"
+    far_m, out, src = far_bound_m(cfg), out_folder(cfg, repeat), BUILD / "src"
     nof_pt = their_field(cfg, out)
     # their NOG is a box of cells around the training path, the far bound and 2 m more on every side, so that
     # no sample of a ray from a particle near the path falls outside it (their lookup does not clip)
     origins = prepare_beams(cfg)["train"].T_map_laser[:, :2]
-    lo, hi = origins.min(0) - far - 2, origins.max(0) + far + 2
+    lo, hi = origins.min(0) - far_m - 2, origins.max(0) + far_m + 2
     nog_size = [float(np.floor(lo[0])), float(np.ceil(hi[0])), float(np.floor(lo[1])), float(np.ceil(hi[1]))]
     log = load_stream(cfg)
     if log.ground_truth is None:
@@ -273,7 +273,7 @@ def prepare(cfg, repeat: int = 0) -> Path:
     for k in range(len(starts)):
         folder = out / f"start{k}"
         folder.mkdir(exist_ok=True)
-        first = export_start(log, start_indices(t, starts, k, loc), far, folder)
+        first = export_start(log, start_indices(t, starts, k, loc), far_m, folder)
         np.save(folder / "occmap.npy", np.zeros((2, 2), np.float32))  # read by their script for plots only
         conf = {
             **THEIR_TRACKING,
@@ -304,7 +304,7 @@ def prepare(cfg, repeat: int = 0) -> Path:
         **THEIR_TRACKING,
         "num_particles": int(m.num_particles),
         "nog_size": nog_size,
-        "far_m": far,
+        "far_m": far_m,
         "run_s": loc.run_s,
         "num_starts": loc.num_starts,
         "mode": loc.mode,
@@ -474,11 +474,11 @@ def nof_folder(cfg) -> Path:
 def nof_data(cfg) -> Path:
     """Our split as their training data (data/train.json, val.json: our trainer's evenly spread validation
     scans, test.json) for eval/reference/train_irmcl.sh."""
-    out, far, sets = nof_folder(cfg), far_bound_m(cfg), prepare_beams(cfg)
+    out, far_m, sets = nof_folder(cfg), far_bound_m(cfg), prepare_beams(cfg)
     val = sets["val"]
     val = val.subset(np.linspace(0, len(val) - 1, min(len(val), cfg.train.val_scans)).round().astype(int))
     for name, beams in (("train", sets["train"]), ("val", val), ("test", sets["test"])):
-        export_split(beams, far, out / "data" / f"{name}.json")
+        export_split(beams, far_m, out / "data" / f"{name}.json")
     print(
         f"{cfg.data.name}: their training data ({len(sets['train'])} / {len(val)} / {len(sets['test'])} scans) in {out / 'data'}"
     )
@@ -514,9 +514,9 @@ def nof_score(cfg) -> Path:
         )
     ckpt = ckpts[-1]
     theirs = their_evaluation(cfg, ckpt, out)
-    test, far = prepare_beams(cfg)["test"], far_bound_m(cfg)
+    test, far_m = prepare_beams(cfg)["test"], far_bound_m(cfg)
     ours_pt = out / "nof.pt"
-    torch.save(our_checkpoint(ckpt, 0.02, far), ours_pt)
+    torch.save(our_checkpoint(ckpt, 0.02, far_m), ours_pt)
     pred, _ = nof_ranges(ours_pt, test, cfg)
     ours = scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad)
     meta = torch.load(ckpt, map_location="cpu", weights_only=False)

@@ -8,7 +8,8 @@ experiment and id. Two places hold them:
 * ``results/<group>/<exp>.json``: the runs kept in the repository (``python -m eval.keep RUN_DIR...``),
   compactly: per record its stage, id, label, settings and metrics, continued in ``<exp>.2.json``, ... past
   ``MAX_FILE_BYTES``. Records kept before a setting existed hold it at its schema default, the value every
-  new setting was introduced with (so the runs that predate it ran that way).
+  new setting was introduced with (so the runs that predate it ran that way); a setting renamed since is read
+  under its new name (``RENAMED``), one removed since is dropped (``REMOVED``).
 
 ``load`` merges both (a run of yours replaces a kept one of the same settings); ``find`` picks records by
 settings (``find("localize", "fr079", among=recs, mcl__weighting="nog_raymarch")``); ``off_defaults`` says
@@ -57,10 +58,25 @@ def _schema_defaults() -> dict:
 DEFAULTS = _schema_defaults()
 
 
+# settings renamed since runs were kept: old dotted name -> new one (same meaning, same value)
+RENAMED = {"sim.max_range_m": "sim.range_max_m"}  # the simulated lidar's largest reading, not a far bound
+# settings removed since: mapping.max_range_m was a second far bound (inspect now uses data.far_m)
+REMOVED = ("mapping.max_range_m",)
+
+
 def complete(config: dict) -> dict:
-    """``config`` with every schema setting its sections lack at the schema's default (see the module's
-    docstring); sections it does not hold stay absent."""
+    """``config`` with settings renamed since under their new names, settings removed since dropped, and every
+    schema setting its sections lack at the schema's default (see the module's docstring); sections it does not
+    hold stay absent."""
     out = json.loads(json.dumps(config))
+    for old, new in RENAMED.items():
+        (s_old, k_old), (s_new, k_new) = old.split(".", 1), new.split(".", 1)
+        if isinstance(out.get(s_old), dict) and k_old in out[s_old]:
+            out.setdefault(s_new, {})[k_new] = out[s_old].pop(k_old)
+    for gone in REMOVED:
+        section, key = gone.split(".", 1)
+        if isinstance(out.get(section), dict):
+            out[section].pop(key, None)
     for section, values in out.items():
         if isinstance(values, dict) and section in DEFAULTS:
             for key, default in DEFAULTS[section].items():

@@ -45,7 +45,7 @@ def make_filter(cfg, grid, origin, device):
         free_space_view(grid, origin, res),
         (cfg.sim.laser_x_m, 0.0, 0.0),
         laser_angles(cfg),
-        cfg.sim.max_range_m,
+        cfg.sim.range_max_m,  # the far bound: the simulated lidar's range (these stages read no log)
         device,
         maps,
     )
@@ -161,8 +161,8 @@ class PaperPipeline(Method):
         g = self.cfg.globloc
         reach = g.max_speed_mps * since_s + g.trigger_slack_m
         here = pf_scan2map(self.cfg, self.pose, ranges, self.scorer)
-        far = np.hypot(*(win[0][:2] - self.pose[:2])) > reach
-        if not (far and win[2] > here + g.trigger_margin * max(here, 1e-6)):
+        out_of_reach = np.hypot(*(win[0][:2] - self.pose[:2])) > reach
+        if not (out_of_reach and win[2] > here + g.trigger_margin * max(here, 1e-6)):
             self.pending = None
             return
         if self.pending is not None and np.hypot(*(win[0][:2] - self.pending[:2])) < g.trigger_slack_m:

@@ -113,7 +113,7 @@ def make_stream(cfg, world, look, rng, k: int, device: str) -> Stream:
         "segment_lidar",
         segments=query_world.segments,
         angles_rad=laser_angles(cfg),
-        max_range_m=s.max_range_m,
+        range_max_m=s.range_max_m,
         noise_std_m=s.range_noise_std_m,
         dropout_prob=s.dropout_prob,
         device=device,

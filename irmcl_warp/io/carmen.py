@@ -38,7 +38,7 @@ class _Scan:
     laser_pose: tuple
     start_angle: float | None = None
     fov: float | None = None
-    max_range: float | None = None
+    range_max: float | None = None
 
 
 @dataclass
@@ -103,7 +103,7 @@ def _parse_robotlaser(path, n_line, tok):
         tuple(tail[0:3]),
         start_angle=head[1],
         fov=head[2],
-        max_range=head[4],
+        range_max=head[4],
     )
 
 
@@ -226,7 +226,7 @@ def read_carmen(
     )
     scans = [c.scans[i] for i in kept]
     first = scans[0]
-    ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.max_range, report)
+    ranges, no_return = mask_ranges(path, ranges, no_return_m if no_return_m is not None else first.range_max, report)
     info = LaserInfo(
         common.num_beams, common.angle_min_rad, common.angle_increment_rad, 0.0, float(no_return), float(no_return)
     )
@@ -264,8 +264,8 @@ def _geometry(path, scan: _Scan, fov_rad):
         fov = np.pi if fov_rad is None else float(fov_rad)
         start = -fov / 2 if scan.start_angle is None else scan.start_angle
         return check_geometry(path, where, n, start, fov / max(n - 1, 1))
-    max_range = 1.0 if scan.max_range == 0 else scan.max_range  # 0: "not recorded" in some converters
-    return check_geometry(path, where, n, scan.start_angle, scan.fov / max(n - 1, 1), 0.0, max_range)
+    range_max = 1.0 if scan.range_max == 0 else scan.range_max  # 0: "not recorded" in some converters
+    return check_geometry(path, where, n, scan.start_angle, scan.fov / max(n - 1, 1), 0.0, range_max)
 
 
 def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:

@@ -68,8 +68,8 @@ def estimate_clock_offset(log_stamps, log_odom, gt_stamps, gt_poses, min_overlap
     lags = np.concatenate([np.arange(0, na), np.arange(-nb + 1, 0)])
     values = np.concatenate([corr[:na], corr[n - nb + 1 :]])
     overlap = np.minimum(na, lags + nb) - np.maximum(0, lags)
-    usable = overlap >= min_overlap * min(na, nb)
-    score = np.where(usable, values / np.maximum(overlap, 1), -np.inf)
+    enough_overlap = overlap >= min_overlap * min(na, nb)
+    score = np.where(enough_overlap, values / np.maximum(overlap, 1), -np.inf)
     k = int(lags[np.argmax(score)])
     coarse = lt[0] + k * dt - gt[0]
     # refine: the offset whose shifted ground-truth steps turn like the odometry, to a millisecond; a dense

@@ -262,7 +262,7 @@ class G2oGraph:
     edges: np.ndarray  # [E, 5]: id_from, id_to, x, y, yaw
     laser_stamps: np.ndarray  # [V] true stamps of the ROBOTLASER1 attached to each vertex, in file order
     laser_ranges: list = None  # [V] range arrays of those ROBOTLASER1 lines
-    laser_max_range_m: float = float("nan")
+    laser_range_max_m: float = float("nan")
 
 
 def read_g2o(path, member: str | None = None) -> G2oGraph:
@@ -284,7 +284,7 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
             raise LogFormatError(path, None, f"cannot read the zip (truncated or corrupt?): {e}") from e
     else:
         numbered = None
-    vid, vline, vpose, edges, eline, stamps, ranges, max_range = [], [], [], [], [], [], [], float("nan")
+    vid, vline, vpose, edges, eline, stamps, ranges, range_max = [], [], [], [], [], [], [], float("nan")
     unknown: dict[str, int] = {}
     for n_line, line in _content_lines(path, numbered):
         tok = line.split()
@@ -316,7 +316,7 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
             scan = _parse_robotlaser(path, n_line, tok)
             stamps.append(scan.stamp)
             ranges.append(np.asarray(scan.ranges, np.float64))
-            max_range = scan.max_range
+            range_max = scan.range_max
         elif not G2O_RECORD.fullmatch(tok[0]):
             raise LogFormatError(
                 path,
@@ -343,18 +343,18 @@ def read_g2o(path, member: str | None = None) -> G2oGraph:
     repeated = len(edges) - len(np.unique(edges, axis=0))
     if repeated:
         warnings.warn(f"{path}: {repeated} EDGE_SE2 lines repeat another exactly", LogDefectWarning, stacklevel=2)
-    return G2oGraph(np.array(vid), np.array(vpose), edges, np.array(stamps), ranges, max_range)
+    return G2oGraph(np.array(vid), np.array(vpose), edges, np.array(stamps), ranges, range_max)
 
 
 def g2o_scan_stamps(graph: G2oGraph, ranges_m: np.ndarray, decimals: int = 2) -> np.ndarray:
     """True stamps for a log whose own stamps are not (MIT Killian's bag): the stamp of the g2o laser with
     the same range array, NaN for scans that are no g2o keyframe. Ranges are compared at the g2o file's
     printed precision, with every reading at or beyond its maximum range (or missing) as "no echo"."""
-    far = graph.laser_max_range_m - 0.5 * 10.0**-decimals
+    cutoff = graph.laser_range_max_m - 0.5 * 10.0**-decimals
 
     def key(r) -> bytes:
         r = np.asarray(r, np.float64)
-        q = np.where(np.isfinite(r) & (r < far), np.round(r * 10**decimals), -1).astype(np.int64)
+        q = np.where(np.isfinite(r) & (r < cutoff), np.round(r * 10**decimals), -1).astype(np.int64)
         return q.tobytes()
 
     index = {}

@@ -37,15 +37,15 @@ class OccupancyGrid:
         return np.floor((np.asarray(xy) - np.asarray(self.origin_xy)) / self.resolution_m).astype(int)
 
 
-def grid_bounds(log: LaserLog, T_map_base: np.ndarray, max_range_m: float, margin_m: float = 1.0):
+def grid_bounds(log: LaserLog, T_map_base: np.ndarray, far_m: float, margin_m: float = 1.0):
     """Axis-aligned bounds (xmin, ymin, xmax, ymax) covering the beam end points used for mapping."""
-    return laser_bounds(compose(T_map_base, log.T_base_laser), log.ranges_m, log.info.angles_rad, max_range_m, margin_m)
+    return laser_bounds(compose(T_map_base, log.T_base_laser), log.ranges_m, log.info.angles_rad, far_m, margin_m)
 
 
 def laser_bounds(
-    T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: np.ndarray, max_range_m: float, margin_m: float = 1.0
+    T_map_laser: np.ndarray, ranges_m: np.ndarray, angles_rad: np.ndarray, far_m: float, margin_m: float = 1.0
 ):
-    r = np.minimum(np.nan_to_num(ranges_m, nan=0.0), max_range_m)
+    r = np.minimum(np.nan_to_num(ranges_m, nan=0.0), far_m)
     pts = np.stack([r * np.cos(angles_rad), r * np.sin(angles_rad)], -1)
     ends = np.concatenate([transform_points(T_map_laser, pts).reshape(-1, 2), np.asarray(T_map_laser)[:, :2]])
     lo, hi = ends.min(0) - margin_m, ends.max(0) + margin_m
@@ -67,7 +67,7 @@ def integrate_scans(
     angles_rad: np.ndarray,
     *,
     resolution_m: float = 0.05,
-    max_range_m: float = 30.0,
+    far_m: float = 30.0,
     l_occ: float = 0.85,
     l_free: float = -0.4,
     l_min: float = -4.0,
@@ -78,12 +78,12 @@ def integrate_scans(
     device: str = "auto",
 ) -> OccupancyGrid:
     """Log-odds grid from laser poses [S, 3] and ranges [S, B] (NaN = no return). Returns it on the host."""
-    xmin, ymin, xmax, ymax = bounds or laser_bounds(T_map_laser, ranges_m, angles_rad, max_range_m)
+    xmin, ymin, xmax, ymax = bounds or laser_bounds(T_map_laser, ranges_m, angles_rad, far_m)
     W, H = int(np.ceil((xmax - xmin) / resolution_m)), int(np.ceil((ymax - ymin) / resolution_m))
     if W * H > 400_000_000:
         raise ValueError(f"map of {W}x{H} cells is too large: check poses and max_range_m")
     dev = pick_device(device)
-    integrator = MAPPING.build(kernel, l_occ=l_occ, l_free=l_free, l_min=l_min, l_max=l_max, max_range_m=max_range_m)
+    integrator = MAPPING.build(kernel, l_occ=l_occ, l_free=l_free, l_min=l_min, l_max=l_max, far_m=far_m)
     logodds = wp.zeros((H, W), dtype=wp.float32, device=dev)
     angles = wp.array(np.asarray(angles_rad, np.float32), dtype=wp.float32, device=dev)
     T_map_laser = np.asarray(T_map_laser, np.float32)

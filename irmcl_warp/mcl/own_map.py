@@ -93,9 +93,9 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     device = pick_device(cfg.device)
     m, loc = cfg.mcl, cfg.localize
     log = load_stream(cfg)
-    far = far_bound_m(cfg, log.info.range_max_m)
+    far_m = far_bound_m(cfg, log.info.range_max_m)
     pf, grid = filter_in_map(
-        map_file, m, log.T_base_laser, log.info.angles_rad, far, device, loc.nof_path, runs.cache_dir(cfg, "nog")
+        map_file, m, log.T_base_laser, log.info.angles_rad, far_m, device, loc.nof_path, runs.cache_dir(cfg, "nog")
     )  # the online localizer's filter (mcl/online.py)
     if loc.initial_pose is not None:
         pose = np.asarray(list(loc.initial_pose), np.float64)

@@ -45,9 +45,9 @@ def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.nd
     """(free-space view for initialisation as a NOG, what the weighting reads, occupancy image for plots:
     p_occ, 0.5 where unknown) from the training split; ``nof``: the trained field (nof.pt) a NOF weighting reads."""
     train = prepare_beams(cfg)["train"]
-    m, res, far = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)
+    m, res, far_m = cfg.mcl, cfg.mcl.map_resolution_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)
     grid = integrate_scans(
-        train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, max_range_m=far, device=device
+        train.T_map_laser, train.ranges_m, train.angles_rad, resolution_m=res, far_m=far_m, device=device
     )
     free_view = free_space_view(grid.probability, grid.origin_xy, res, grid.known)
     image = np.where(grid.known, grid.probability, 0.5).astype(np.float32)
@@ -56,13 +56,13 @@ def build_maps(cfg, device, nof: Path | None) -> tuple[NOG, WeightingMaps, np.nd
     if m.weighting == "nof_direct":
         return (
             free_view,
-            WeightingMaps(model=load_nof_for(nof, far, "cuda" if device.startswith("cuda") else "cpu")[0]),
+            WeightingMaps(model=load_nof_for(nof, far_m, "cuda" if device.startswith("cuda") else "cpu")[0]),
             image,
         )
     nog = bake_nog(
         nof,
-        laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far),
-        far,
+        laser_bounds(train.T_map_laser, train.ranges_m, train.angles_rad, far_m),
+        far_m,
         res,
         cache_dir=runs.cache_dir(cfg, "nog"),
         device="cuda" if device.startswith("cuda") else "cpu",
@@ -106,7 +106,7 @@ def localize_starts(run: runs.Run) -> Path:
     device = pick_device(cfg.device)
     m, loc = cfg.mcl, cfg.localize
     log = load_stream(cfg)
-    far = far_bound_m(cfg, log.info.range_max_m)
+    far_m = far_bound_m(cfg, log.info.range_max_m)
     if log.ground_truth is None:
         raise ValueError(f"{log.source}: localization is scored against ground truth, and this log has none")
     check_odometry(log.source, log.odom)
@@ -120,7 +120,7 @@ def localize_starts(run: runs.Run) -> Path:
             f"and the robot needs another start time to be teleported to (localize.num_starts={loc.num_starts})"
         )
     for k, t0 in enumerate(times):
-        pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far, device, maps)
+        pf = build_filter(m, view, log.T_base_laser, log.info.angles_rad, far_m, device, maps)
         pf.rng = np.random.default_rng(m.seed * 1000 + k)
         idx = start_indices(t, times, k, loc)
         if loc.mode == "global":
@@ -191,7 +191,7 @@ def localize_starts(run: runs.Run) -> Path:
                 metrics["time_to_converge_s"],
                 stamps[cut] - stamps[0] if kidnapped else None,
             )
-    settings = {**OmegaConf.to_container(m), **OmegaConf.to_container(loc), "far_m": far}
+    settings = {**OmegaConf.to_container(m), **OmegaConf.to_container(loc), "far_m": far_m}
     summary = summarise(starts, settings, device)
     # every filter step of every start: the figure to set beside the micro-benchmark (eval.bench mcl), free
     # of what a start costs once (building the filter, loading the kernels, capturing the step's graph)

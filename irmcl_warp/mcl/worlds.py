@@ -86,7 +86,7 @@ def world_map(world, cfg, device):
         log.ranges_m,
         log.info.angles_rad,
         resolution_m=cfg.mcl.map_resolution_m,
-        max_range_m=cfg.sim.max_range_m,
+        far_m=cfg.sim.range_max_m,  # simulated floors: the far bound is the simulated lidar's range
         device=device,
     )
 
@@ -143,7 +143,15 @@ def localize_worlds(run: runs.Run) -> Path:
         results = []
         for k in range(1, cfg.worlds.runs + 1):
             log, cut = query_log(world, cfg, k, device)
-            pf = build_filter(cfg.mcl, view, log.T_base_laser, log.info.angles_rad, cfg.sim.max_range_m, device, maps)
+            pf = build_filter(
+                cfg.mcl,
+                view,
+                log.T_base_laser,
+                log.info.angles_rad,
+                cfg.sim.range_max_m,  # the far bound: the simulated lidar's range (these stages read no log)
+                device,
+                maps,
+            )
             pf.rng = np.random.default_rng(cfg.mcl.seed * 1000 + k)
             pf.init_uniform()
             trace = follow_with_confidence(

@@ -31,13 +31,13 @@ def torch_device(cfg) -> torch.device:
     return torch.device(pick_device(cfg.device))
 
 
-def run_settings(cfg, train_split: str, far: float) -> dict:
+def run_settings(cfg, train_split: str, far_m: float) -> dict:
     """What nof.pt stores beside the weights: the model config, the rendering bounds, the data and preset."""
     model_cfg = ModelConfig(**OmegaConf.to_container(cfg.model))
     return {
         "model_config": asdict(model_cfg),
         "near_m": cfg.render.near_m,
-        "far_m": far,
+        "far_m": far_m,
         "render": OmegaConf.to_container(cfg.render),
         "data": cfg.data.name,
         "split": cfg.data.split,
@@ -72,8 +72,8 @@ def train(run: runs.Run) -> Path:
         torch.backends.cuda.matmul.allow_tf32 = torch.backends.cudnn.allow_tf32 = True
     torch.manual_seed(cfg.train.seed)
     sets = prepare_beams(cfg)
-    near, far = cfg.render.near_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)  # (data.far_m, else the log's)
-    meta = run_settings(cfg, sets["train"].name, far)
+    near, far_m = cfg.render.near_m, far_bound_m(cfg, load_stream(cfg).info.range_max_m)  # (data.far_m, else the log's)
+    meta = run_settings(cfg, sets["train"].name, far_m)
     model_cfg = ModelConfig(**meta["model_config"])
     trainer = Trainer(
         NOF(model_cfg),
@@ -81,11 +81,11 @@ def train(run: runs.Run) -> Path:
         cfg.train,
         cfg.render,
         near,
-        far,
+        far_m,
         device,
         out,
         run.ident.id,
-        make_validator(sets["val"], cfg, near, far, device),
+        make_validator(sets["val"], cfg, near, far_m, device),
         meta,
     )
     trainer.try_resume()

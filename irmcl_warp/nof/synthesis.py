@@ -29,14 +29,14 @@ from irmcl_warp.kernels import RAYCAST, pick_device
 GRID_RESOLUTIONS_M = (0.05, 0.10)  # IR-MCL compares with occupancy grids at 5 and 10 cm
 
 
-def grid_ranges(train: BeamSet, test: BeamSet, resolution_m: float, far: float, cfg, device) -> np.ndarray:
+def grid_ranges(train: BeamSet, test: BeamSet, resolution_m: float, far_m: float, cfg, device) -> np.ndarray:
     m = cfg.mapping
     grid = integrate_scans(
         train.T_map_laser,
         train.ranges_m,
         train.angles_rad,
         resolution_m=resolution_m,
-        max_range_m=far,
+        far_m=far_m,
         l_occ=m.l_occ,
         l_free=m.l_free,
         l_min=m.l_min,
@@ -50,7 +50,7 @@ def grid_ranges(train: BeamSet, test: BeamSet, resolution_m: float, far: float, 
         occupancy=occupancy,
         origin_xy=grid.origin_xy,
         resolution_m=resolution_m,
-        max_range_m=far,
+        far_m=far_m,
         occ_threshold=cfg.raycast.occ_threshold,
         device=device,
     )
@@ -96,7 +96,7 @@ def score_scans(run: runs.Run) -> Path:
     cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
     sets = prepare_beams(cfg)
-    train, test, far = sets["train"], sets["test"], far_bound_m(cfg, load_stream(cfg).info.range_max_m)
+    train, test, far_m = sets["train"], sets["test"], far_bound_m(cfg, load_stream(cfg).info.range_max_m)
     preds, methods = {}, {}
     nof_path = run.upstream["train"] / "nof.pt"
     t0 = time.time()
@@ -112,7 +112,7 @@ def score_scans(run: runs.Run) -> Path:
     for res in GRID_RESOLUTIONS_M:
         name = f"OGM {res * 100:.0f} cm"
         t0 = time.time()
-        preds[name] = grid_ranges(train, test, res, far, cfg, device)
+        preds[name] = grid_ranges(train, test, res, far_m, cfg, device)
         methods[name] = {"kind": "grid", "resolution_m": res, "render_s": time.time() - t0}
     for name, pred in preds.items():
         methods[name].update(scan_synthesis_metrics(pred, test.ranges_m, test.valid, test.angles_rad))
@@ -121,7 +121,7 @@ def score_scans(run: runs.Run) -> Path:
         "split": test.name,
         "train_split": train.name,
         "test_scans": len(test),
-        "far_m": far,
+        "far_m": far_m,
         "device": device,
         "methods": methods,
     }

@@ -7,7 +7,7 @@ import numpy as np
 from irmcl_warp.reference.raycast import BIG, _boundary, f32
 
 
-def integrate(logodds, origin, res, poses, ranges, angles, max_range_m, l_occ, l_free, l_min, l_max):
+def integrate(logodds, origin, res, poses, ranges, angles, far_m, l_occ, l_free, l_min, l_max):
     """Add a batch of scans to ``logodds`` (modified in place) and clamp it to [l_min, l_max]."""
     H, W = logodds.shape
     res, origin = f32(res), np.asarray(origin, dtype=f32)
@@ -22,7 +22,7 @@ def integrate(logodds, origin, res, poses, ranges, angles, max_range_m, l_occ, l
                 continue
             d = np.array([np.cos(pose[2] + a), np.sin(pose[2] + a)], dtype=f32)
             g = (pose[:2] - origin) / res
-            length = min(r, f32(max_range_m)) / res
+            length = min(r, f32(far_m)) / res
             ix, iy = int(np.floor(g[0])), int(np.floor(g[1]))
             t_max = [_boundary(g[0], d[0], ix), _boundary(g[1], d[1], iy)]
             delta = [BIG if d[k] == 0 else f32(1) / abs(d[k]) for k in (0, 1)]
@@ -34,6 +34,6 @@ def integrate(logodds, origin, res, poses, ranges, angles, max_range_m, l_occ, l
                     t_max[0], ix = t_max[0] + delta[0], ix + (1 if d[0] > 0 else -1)
                 else:
                     t_max[1], iy = t_max[1] + delta[1], iy + (1 if d[1] > 0 else -1)
-            add(ix, iy, l_occ if r <= max_range_m else l_free)
+            add(ix, iy, l_occ if r <= far_m else l_free)
     np.clip(logodds, l_min, l_max, out=logodds)
     return logodds

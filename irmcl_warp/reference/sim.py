@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def lidar_ranges(segments, laser_poses, angles, max_range):
+def lidar_ranges(segments, laser_poses, angles, range_max_m):
     """Exact ranges [S, B] (NaN beyond max_range), vectorised over segments."""
     seg = np.asarray(segments, dtype=np.float64)
     a, e = seg[:, :2], seg[:, 2:] - seg[:, :2]
@@ -20,7 +20,7 @@ def lidar_ranges(segments, laser_poses, angles, max_range):
                 u = (ao[:, 0] * d[1] - ao[:, 1] * d[0]) / denom
             ok = (np.abs(denom) >= 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
             best = t[ok].min() if ok.any() else np.inf
-            out[s, b] = best if best <= max_range else np.nan
+            out[s, b] = best if best <= range_max_m else np.nan
     return out
 
 

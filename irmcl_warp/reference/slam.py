@@ -58,7 +58,7 @@ def bresenham_cells(x0, y0, x1, y1, origin, res):
     return out + [(X, Y)]
 
 
-def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, line="bresenham", free_space=True):
+def integrate(maps, pose, T_base_laser, ranges, angles, far_m, origin, res, line="bresenham", free_space=True):
     """maps: dict of [H, W] arrays (visits, hits, sx, sy: the sums of the end points' offsets from their cell's corner) of one particle, updated in place; ``line``:
     bresenham (the released code) or dda (every crossed cell); ``free_space=False``: only the end cells
     (the released code with generateMap off, as its ROS wrapper runs it)."""
@@ -68,7 +68,7 @@ def integrate(maps, pose, T_base_laser, ranges, angles, usable, origin, res, lin
     for r, a in zip(ranges, angles):
         if not np.isfinite(r) or r <= 0:
             continue
-        hit, r = r <= usable, min(r, usable)
+        hit, r = r <= far_m, min(r, far_m)
         ex, ey = lp[0] + r * np.cos(lp[2] + a), lp[1] + r * np.sin(lp[2] + a)
         cells = walk(lp[0], lp[1], ex, ey, origin, res)
         if not hit:
@@ -97,7 +97,7 @@ def score(
     T_base_laser,
     ranges,
     angles,
-    usable,
+    far_m,
     origin,
     res,
     kernel_size=1,
@@ -114,7 +114,7 @@ def score(
     lp = laser_pose(pose, T_base_laser)
     s = loglik = 0.0
     for b, (r, a) in enumerate(zip(ranges, angles)):
-        if b % (lskip + 1) or not np.isfinite(r) or r <= 0 or r > usable:
+        if b % (lskip + 1) or not np.isfinite(r) or r <= 0 or r > far_m:
             continue
         ca, sa = np.cos(lp[2] + a), np.sin(lp[2] + a)
         ex, ey = lp[0] + r * ca, lp[1] + r * sa

@@ -20,13 +20,13 @@ def laser_poses(particles, T_base_laser):
 
 
 def nog_render(
-    grid, origin, res, particles, T_base_laser, angles, num_samples, near, far, t_min=0.0, empty_below=0.0, eps=1e-10
+    grid, origin, res, particles, T_base_laser, angles, num_samples, near, far_m, t_min=0.0, empty_below=0.0, eps=1e-10
 ):
     """Rendered ranges [P, B] from nearest-node lookups along num_samples fixed depths, every sample evaluated
     (the kernel's jumps over empty space must not change this); nodes below ``empty_below`` read as 0."""
     pose = laser_poses(particles, T_base_laser)
     a = pose[:, 2:3] + np.asarray(angles)[None, :]  # [P, B]
-    z = near + (far - near) / (num_samples - 1) * np.arange(num_samples)  # [N]
+    z = near + (far_m - near) / (num_samples - 1) * np.arange(num_samples)  # [N]
     x = pose[:, 0, None, None] + z * np.cos(a)[..., None]
     y = pose[:, 1, None, None] + z * np.sin(a)[..., None]
     ix = np.rint((x - origin[0]) / res).astype(int)
@@ -40,18 +40,18 @@ def nog_render(
     return (w * z).sum(-1) / (w.sum(-1) + eps)
 
 
-def nog_table_build(grid, origin, res, num_angles, num_samples, near, far, t_min=0.0, empty_below=0.0):
+def nog_table_build(grid, origin, res, num_angles, num_samples, near, far_m, t_min=0.0, empty_below=0.0):
     """``nog_table``'s table [nodes, headings] (uint16, range / (far / 65535)): ``nog_render`` from every node
     (row-major, x fastest) at headings 2 pi k / num_angles."""
     H, W = grid.shape
     iy, ix = np.divmod(np.arange(H * W), W)
     nodes = np.stack([origin[0] + ix * res, origin[1] + iy * res, np.zeros(H * W)], -1)
     headings = (2.0 * np.pi * np.arange(num_angles) / num_angles).astype(np.float32)
-    r = nog_render(grid, origin, res, nodes, (0.0, 0.0, 0.0), headings, num_samples, near, far, t_min, empty_below)
-    return np.clip(np.rint(r * (65535 / far)), 0, 65535).astype(np.uint16)
+    r = nog_render(grid, origin, res, nodes, (0.0, 0.0, 0.0), headings, num_samples, near, far_m, t_min, empty_below)
+    return np.clip(np.rint(r * (65535 / far_m)), 0, 65535).astype(np.uint16)
 
 
-def nog_table_ranges(table, shape, origin, res, far, particles, T_base_laser, angles):
+def nog_table_ranges(table, shape, origin, res, far_m, particles, T_base_laser, angles):
     """Ranges [P, B] read from the table: the laser's nearest node (clamped to the grid), linear between the two
     nearest headings, moved by the laser's offset from the node along the beam (0 stays 0: no wall)."""
     H, W = shape
@@ -66,7 +66,7 @@ def nog_table_ranges(table, shape, origin, res, far, particles, T_base_laser, an
     ix = np.clip(np.rint((pose[:, 0] - origin[0]) / res).astype(int), 0, W - 1)[:, None]
     iy = np.clip(np.rint((pose[:, 1] - origin[1]) / res).astype(int), 0, H - 1)[:, None]
     node = iy * W + ix
-    r = ((1.0 - f) * table[node, k0] + f * table[node, k1]) * (far / 65535)
+    r = ((1.0 - f) * table[node, k0] + f * table[node, k1]) * (far_m / 65535)
     along = (pose[:, :1] - origin[0] - ix * res) * np.cos(a) + (pose[:, 1:2] - origin[1] - iy * res) * np.sin(a)
     return np.where(r > 0, np.maximum(r - along, 0.0), r)
 
@@ -79,7 +79,7 @@ def nog_log_weights(rendered, measured, sigma):
 
 
 def likelihood_field_log_weights(
-    dist, origin, res, particles, T_base_laser, angles, measured, z_hit, z_rand, sigma_hit, max_range, max_dist
+    dist, origin, res, particles, T_base_laser, angles, measured, z_hit, z_rand, sigma_hit, far_m, max_dist
 ):
     """Thrun et al. Table 6.3 in logs: sum over valid beams of log(z_hit exp(-d^2 / 2 s^2) + z_rand / max_range)."""
     pose = laser_poses(particles, T_base_laser)
@@ -91,7 +91,7 @@ def likelihood_field_log_weights(
     H, W = dist.shape
     inside = (ix >= 0) & (iy >= 0) & (ix < W) & (iy < H)
     d = np.where(inside, np.minimum(dist[np.clip(iy, 0, H - 1), np.clip(ix, 0, W - 1)], max_dist), max_dist)
-    return np.log(z_hit * np.exp(-(d**2) / (2 * sigma_hit**2)) + z_rand / max_range).sum(1)
+    return np.log(z_hit * np.exp(-(d**2) / (2 * sigma_hit**2)) + z_rand / far_m).sum(1)
 
 
 def beam_model_log_weights(
@@ -108,7 +108,7 @@ def beam_model_log_weights(
     z_rand,
     sigma_hit,
     lambda_short,
-    max_range,
+    far_m,
     occ_threshold,
 ):
     """Thrun et al. Table 6.1 in logs, expected ranges from the DDA twin (one Python loop per ray)."""
@@ -120,11 +120,11 @@ def beam_model_log_weights(
                 continue
             d = np.array([np.cos(yaw + a), np.sin(yaw + a)], np.float32)
             exp_r = dda_range(
-                occ, np.asarray(origin, np.float32), res, np.array([x, y], np.float32), d, max_range, occ_threshold
+                occ, np.asarray(origin, np.float32), res, np.array([x, y], np.float32), d, far_m, occ_threshold
             )
             q = z_hit * np.exp(-((z - exp_r) ** 2) / (2 * sigma_hit**2))
             q += z_short * lambda_short * np.exp(-lambda_short * z) if z < exp_r else 0.0
-            q += z_max if z >= max_range else z_rand / max_range
+            q += z_max if z >= far_m else z_rand / far_m
             out[p] += np.log(q)
     return out
 
@@ -139,7 +139,7 @@ def nog_log_weights_torch(
     measured,
     num_samples: int,
     near: float,
-    far: float,
+    far_m: float,
     sigma: float,
     chunk: int = 500,
     eps: float = 1e-10,
@@ -151,7 +151,7 @@ def nog_log_weights_torch(
     import torch
 
     dev = grid.device
-    z = torch.linspace(near, far, num_samples, device=dev)
+    z = torch.linspace(near, far_m, num_samples, device=dev)
     valid = torch.isfinite(measured)
     H, W = grid.shape
     c, s = torch.cos(particles[:, 2]), torch.sin(particles[:, 2])

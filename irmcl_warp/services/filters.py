@@ -108,7 +108,7 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
         occupancy=_need(maps.occupancy, w, "an occupancy grid"),
         origin_xy=maps.origin_xy,
         resolution_m=maps.resolution_m,
-        max_range_m=far_m,
+        far_m=far_m,
         z_hit=mcl.z_hit,
         z_rand=mcl.z_rand,
         sigma_hit_m=mcl.sigma_hit_m,

@@ -31,14 +31,14 @@ def drive_log(
     rng = np.random.default_rng(path_seed) if rng is None else rng
     T_world_base = follow(np.asarray(waypoints_xy, float), cfg.speed_mps, cfg.turn_rate_rps, cfg.rate_hz, duration_s)
     info = LaserInfo(
-        cfg.num_beams, -cfg.fov_rad / 2, cfg.fov_rad / max(cfg.num_beams - 1, 1), 0.0, cfg.max_range_m, cfg.max_range_m
+        cfg.num_beams, -cfg.fov_rad / 2, cfg.fov_rad / max(cfg.num_beams - 1, 1), 0.0, cfg.range_max_m, cfg.range_max_m
     )
     T_base_laser = np.array([cfg.laser_x_m, 0.0, 0.0])
     lidar = SIM.build(
         "segment_lidar",
         segments=world.segments,
         angles_rad=info.angles_rad,
-        max_range_m=cfg.max_range_m,
+        range_max_m=cfg.range_max_m,
         noise_std_m=cfg.range_noise_std_m,
         dropout_prob=cfg.dropout_prob,
         device=device,

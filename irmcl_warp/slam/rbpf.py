@@ -72,7 +72,7 @@ PROPOSALS = Registry("slam proposal")  # name -> factory(rbpf) -> Proposal (irmc
 class RBPF:
     FIRST_LOOK = 24  # hill-climbing rounds launched before the host first reads the active flags (GPU way)
 
-    def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, usable_range_m: float, device: str = "auto"):
+    def __init__(self, cfg, shape_hw, origin_xy, T_base_laser, angles_rad, far_m: float, device: str = "auto"):
         if cfg.proposal not in PROPOSALS.names():
             raise ValueError(f"slam.proposal={cfg.proposal!r}: choose one of {PROPOSALS.names()}")
         # (sampled poses, odometry since the last processed scan) -> (new, gain, rounds)
@@ -86,11 +86,11 @@ class RBPF:
         self.P, self.T_base_laser = P, tuple(map(float, T_base_laser))
         self.maps = ParticleMaps(P, shape_hw, origin_xy, cfg.resolution_m, device=d)
         self.integrator = SLAM.build(
-            "integrate", usable_range_m=usable_range_m, line=cfg.line, free_space=bool(cfg.generate_map), device=d
+            "integrate", far_m=far_m, line=cfg.line, free_space=bool(cfg.generate_map), device=d
         )
         self.scorer = SLAM.build(
             "score",
-            usable_range_m=usable_range_m,
+            far_m=far_m,
             kernel_size=cfg.kernel_size,
             fullness=cfg.fullness,
             sigma=cfg.sigma,
@@ -196,12 +196,12 @@ class RBPF:
         """Grow the maps (ParticleMaps.cover) to hold the current scan's end points and the laser at
         ``poses`` [P, 3] before the scan is added: the released code's maps grow alike, so no end point is
         dropped at a border drawn in advance."""
-        r, usable = self._ranges_np, self.integrator.usable
+        r, far_m = self._ranges_np, self.integrator.far_m
         keep = np.isfinite(r) & (r > 0)
         if not self.integrator.free_space:
-            keep &= r <= usable
+            keep &= r <= far_m
         lp = compose(poses, np.asarray(self.T_base_laser)[None])
-        rr = np.minimum(r[keep], usable)
+        rr = np.minimum(r[keep], far_m)
         reach = float(rr.max()) if rr.size else 0.0
         # most scans lie well inside: a box around every laser position, the scan's longest beam wide, holds all
         # end points (in floating point too), so where the frame holds it the end points need not be computed

@@ -113,12 +113,12 @@ def start_filter(cfg, log, device: str) -> tuple[RBPF, np.ndarray]:
     """The RBPF of ``cfg.slam`` for ``log``, started on its first scan (the maps grow as the scans need), and
     the odometry its steps take (``filter_frame``)."""
     s = cfg.slam
-    usable = far_bound_m(cfg, log.info.range_max_m)
+    far_m = far_bound_m(cfg, log.info.range_max_m)
     odom, T = filter_frame(cfg, log)
-    check_maps_fit(cfg, log, log.odom, usable, device)
+    check_maps_fit(cfg, log, log.odom, far_m, device)
     shape, origin = initial_frame(odom[0], s.map_margin_m, s.resolution_m)
     angles = gfs_flaser_angles(log.ranges_m.shape[1]) if s.get("beam_angles", "log") == "gfs" else log.info.angles_rad
-    rbpf = RBPF(s, shape, origin, T, angles, usable, device)
+    rbpf = RBPF(s, shape, origin, T, angles, far_m, device)
     rbpf.start(odom[0], log.ranges_m[0], float(log.stamps[0]))
     return rbpf, odom
 
@@ -136,7 +136,7 @@ def best_map(rbpf: RBPF, particle: int, log=None, occ_thresh: float = 0.25, marg
         full = ParticleMaps(
             1, (H, W), (float(rbpf.maps.origin[0]), float(rbpf.maps.origin[1])), rbpf.maps.res, device=rbpf.device
         )
-        cast = SLAM.build("integrate", usable_range_m=rbpf.integrator.usable, line=rbpf.cfg.line, device=rbpf.device)
+        cast = SLAM.build("integrate", far_m=rbpf.integrator.far_m, line=rbpf.cfg.line, device=rbpf.device)
         scans, poses = rbpf.trajectory(particle)
         pose = wp.zeros(1, dtype=wp.vec3, device=rbpf.device)
         ranges = wp.zeros(log.ranges_m.shape[1], dtype=wp.float32, device=rbpf.device)
