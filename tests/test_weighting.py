@@ -457,7 +457,7 @@ def test_range_table_reads_what_the_march_renders():
 
 
 def test_range_table_too_large_or_too_coarse_is_a_clear_error(monkeypatch):
-    import irmcl_warp.kernels.weighting as kw
+    import irmcl_warp.kernels.weighting.nog_table as kw
 
     nog = _wall_nog()
     monkeypatch.setattr(kw, "TABLE_MAX_BYTES", 1 << 20)

@@ -323,7 +323,7 @@ def matcher_check(
     iterations=5,
     lsigma=0.075,
 ) -> dict:
-    """Our matcher model (the numpy twins of kernels/slam.py: end-point maps, score, likelihood, hill climbing)
+    """Our matcher model (the numpy twins of kernels/slam/: end-point maps, score, likelihood, hill climbing)
     against the released ScanMatcher on the same scans: ``registered`` scans of the log at their ground-truth
     poses make one map on each side (end points only, as the wrapper runs it); ``queries`` later scans are
     scored at their true pose and at perturbed ones, and climbed from a perturbed pose. The cells are aligned:

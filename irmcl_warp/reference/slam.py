@@ -1,4 +1,4 @@
-"""Numpy twins of kernels/slam.py (per-particle point-accumulator maps, GMapping's matcher model and motion
+"""Numpy twins of kernels/slam/ (per-particle point-accumulator maps, GMapping's matcher model and motion
 model), one Python loop per beam: for small cases in tests."""
 
 from __future__ import annotations
