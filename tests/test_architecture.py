@@ -170,3 +170,59 @@ def test_the_far_bound_has_one_name():
             f"{path.relative_to(REPO)}: {m}" for m in re.findall(r"^\s*(\w+):", text, re.M) if m in FAR_BOUND_ALIASES
         ]
     assert not bad, "the far bound is far_m everywhere:\n" + "\n".join(bad)
+
+
+def step_shape(path: Path, cls: str, method: str) -> tuple[int, list[str], list[int]]:
+    """(statements in ``cls.method`` without its docstring, the names it calls, the lines of its top-level calls
+    that carry no comment)."""
+    import ast
+
+    source = path.read_text()
+    tree = ast.parse(source)
+    node = next(
+        f
+        for c in ast.walk(tree)
+        if isinstance(c, ast.ClassDef) and c.name == cls
+        for f in c.body
+        if isinstance(f, ast.FunctionDef) and f.name == method
+    )
+    body = node.body[1:] if ast.get_docstring(node) else node.body
+    statements = sum(isinstance(n, ast.stmt) for s in body for n in ast.walk(s))
+    called = sorted(
+        {
+            n.func.attr if isinstance(n.func, ast.Attribute) else getattr(n.func, "id", "")
+            for s in body
+            for n in ast.walk(s)
+            if isinstance(n, ast.Call)
+        }
+    )
+    lines = source.splitlines()
+    uncommented = []
+    for s in body:
+        for n in ast.walk(s):  # the calls of the step's own parts: self._part(...)
+            if (
+                isinstance(n, ast.Call)
+                and isinstance(n.func, ast.Attribute)
+                and isinstance(n.func.value, ast.Name)
+                and n.func.value.id == "self"
+                and n.func.attr.startswith("_")
+                and "#" not in lines[n.lineno - 1]
+            ):
+                uncommented.append(n.lineno)
+    return statements, called, uncommented
+
+
+@pytest.mark.parametrize(
+    "path, cls, method",
+    [("irmcl_warp/mcl/filter.py", "ParticleFilter", "step"), ("irmcl_warp/slam/rbpf.py", "RBPF", "step")],
+)
+def test_the_filter_steps_read_like_the_papers(path, cls, method):
+    """Issue 34: ParticleFilter.step (motion -> weighting -> resampling -> estimate) and RBPF.step (GMapping's
+    odometry -> decide -> propose -> weigh -> resample -> integrate) are short sequences of commented calls of
+    their parts, with no timing inside (RBPF's parts are timed by a decorator around them)."""
+    statements, called, uncommented = step_shape(REPO / path, cls, method)
+    assert statements <= 25, f"{cls}.{method}: {statements} statements"
+    timing = {"perf_counter", "time", "monotonic", "_tick", "_synced_clock", "synchronize"}
+    assert not timing & set(called), f"{cls}.{method} times itself: {sorted(timing & set(called))}"
+    assert not uncommented, f"{cls}.{method}: the parts called on lines {uncommented} carry no comment"
+    assert len([c for c in called if c.startswith("_")]) >= 4  # the paper's steps are calls, not inline code

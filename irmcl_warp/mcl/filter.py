@@ -246,13 +246,56 @@ class ParticleFilter:
     def recovery_on(self) -> bool:
         return self.cfg.recovery_alpha_slow > 0 and self.cfg.recovery_alpha_fast > 0
 
-    def _launch_update(self) -> None:
-        """The step's inputs to the device, motion, weighting, the accumulated weights and the estimate:
-        launches only."""
-        inp = self.inputs
-        inp.send()
-        self.motion.launch(self.particles, inp.odom, inp.motion_seed)
-        self.weighting(self.particles, self.T_base_laser, self.angles, inp.measured, self.log_lik)
+    def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
+        """One MCL step (Thrun et al., Probabilistic Robotics, Table 8.2; with recovery on, Augmented_MCL,
+        Table 8.3). odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no
+        return). Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling).
+
+        ``_move``, ``_weigh`` and ``_resample`` only launch; on a GPU with ``mcl.step_graph`` (recovery off)
+        they are one graph, captured once and replayed from the second step on (the same launches, the same
+        bits). The host waits once per step, before the estimate is read back."""
+        limit = self._upload(odom_step, ranges_m)  # u_t, z_t and the step's seeds; resample when N_eff < limit
+        p_inject = 0.0
+        if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
+            self._replay(limit)  # the four calls below, captured once as one CUDA graph
+        else:
+            self._move()  # x_t ~ p(x_t | u_t, x_t-1): sample_motion_model_odometry (Table 5.6)
+            self._weigh()  # w_t = w_t-1 p(z_t | x_t, m) (IR-MCL eq. 6), N_eff and the estimate of the weighted set
+            p_inject = self.recovery_probability()  # max(0, 1 - w_fast / w_slow) (Table 8.3)
+            self._resample(np.inf if p_inject > 0 else limit)  # low-variance resampling (Table 4.4) if N_eff < limit
+        wp.synchronize_device(self.device)
+        self.particles, self.scratch = self.scratch, self.particles  # the resampled set is the new one
+        self._inject(p_inject)  # each particle a random free pose with probability p_inject (Table 8.3)
+        return self._read_estimate(limit, p_inject)  # the estimate (mcl.estimate) and N_eff, read back once
+
+    def _upload(self, odom_step, ranges_m) -> float:
+        """The step's inputs into the host buffers (``StepInputs``); returns the resampling threshold on N_eff."""
+        ranges_m = np.asarray(ranges_m, np.float32)
+        if ranges_m.shape != (self.num_sensor_beams,):
+            raise ValueError(
+                f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
+                f"for a sensor of {self.num_sensor_beams}"
+            )
+        self.steps += 1
+        draw = float(self.rng.uniform())
+        self.inputs.upload(
+            odom_step,
+            draw,
+            self.chosen_ranges(ranges_m),
+            self.cfg.seed * 1_000_003 + self.steps,
+            Resampler.seed_of(draw),
+        )
+        return self.cfg.resample_threshold * self.num_particles
+
+    def _move(self) -> None:
+        """The inputs to the device (two copies on a GPU) and the motion model's launch."""
+        self.inputs.send()
+        self.motion.launch(self.particles, self.inputs.odom, self.inputs.motion_seed)
+
+    def _weigh(self) -> None:
+        """The observation model's log-likelihoods, accumulated into the log-weights (tempered by
+        ``mcl.temper``), their normalisation and N_eff (``ParticleWeights``) and the estimator's sums."""
+        self.weighting(self.particles, self.T_base_laser, self.angles, self.inputs.measured, self.log_lik)
         wp.launch(
             accumulate_kernel,
             self.log_w.shape[0],
@@ -263,8 +306,9 @@ class ParticleFilter:
         if self.estimator is not None:
             self.estimator.launch(self.particles, self.log_w)
 
-    def _launch_resampling(self, limit: float) -> None:
-        """Resampling into the scratch buffer (decided on the device) and the copies to read back."""
+    def _resample(self, limit: float) -> None:
+        """Resampling into the scratch buffer (decided on the device: only when N_eff < ``limit``) and the
+        copies of the weights' and the estimator's sums to read back."""
         inp = self.inputs
         self.resampler.launch(
             self.weights.cdf,
@@ -281,50 +325,19 @@ class ParticleFilter:
             wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
 
     def _replay(self, limit: float) -> None:
-        """The captured step from the current particle buffer (captured on first use)."""
+        """``_move``, ``_weigh`` and ``_resample`` as one CUDA graph from the current particle buffer,
+        captured on first use (recovery is off whenever a graph is used: see ``_graph_choice``)."""
         key = self.particles.ptr
         if key not in self.graphs:
             with wp.ScopedCapture(device=self.device) as capture:
-                self._launch_update()
-                self._launch_resampling(limit)
+                self._move()
+                self._weigh()
+                self._resample(limit)
             self.graphs[key] = capture.graph
         wp.capture_launch(self.graphs[key])
 
-    def chosen_ranges(self, ranges_m: np.ndarray) -> np.ndarray:
-        """The weighted beams' ranges of a whole scan, NaN (not weighted) at or below near and at or beyond far."""
-        chosen = np.asarray(ranges_m, np.float32)[self.beam_index]
-        return np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
-
-    def step(self, odom_step, ranges_m) -> tuple[np.ndarray, float]:
-        """odom_step = (rot1, trans, rot2) since the last scan; ranges_m: the whole scan (NaN = no return).
-        Returns (estimate [x, y, yaw] by ``mcl.estimate``, N_eff before resampling)."""
-        ranges_m = np.asarray(ranges_m, np.float32)
-        if ranges_m.shape != (self.num_sensor_beams,):
-            raise ValueError(
-                f"MCL: scan of {ranges_m.shape[0] if ranges_m.ndim else 0} beams, the filter was built "
-                f"for a sensor of {self.num_sensor_beams}"
-            )
-        self.steps += 1
-        draw = float(self.rng.uniform())
-        self.inputs.upload(
-            odom_step,
-            draw,
-            self.chosen_ranges(ranges_m),
-            self.cfg.seed * 1_000_003 + self.steps,
-            Resampler.seed_of(draw),
-        )
-        limit = self.cfg.resample_threshold * self.num_particles
-        p_inject = 0.0
-        if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
-            self._replay(limit)
-        else:
-            self._launch_update()
-            p_inject = self.recovery_probability()  # reads back (only when recovery is on)
-            if p_inject > 0:
-                limit = np.inf
-            self._launch_resampling(limit)
-        wp.synchronize_device(self.device)
-        self.particles, self.scratch = self.scratch, self.particles
+    def _inject(self, p_inject: float) -> None:
+        """Augmented MCL's random particles (uniform over the free space's cells), after resampling."""
         if p_inject > 0 and self.free_xy is not None:
             wp.launch(
                 inject_kernel,
@@ -339,6 +352,10 @@ class ParticleFilter:
                 ],
                 device=self.device,
             )
+
+    def _read_estimate(self, limit: float, p_inject: float) -> tuple[np.ndarray, float]:
+        """(the estimate, N_eff before resampling) from the sums read back; the weighted mean's spread is kept
+        in ``self.spread``."""
         sums = self._readback
         pose, neff, self.spread = self.weights.summary(sums[:8])
         if self.estimator is not None:
@@ -346,6 +363,11 @@ class ParticleFilter:
         if self.recovery_on and p_inject <= 0 and neff < limit:
             self.injected.zero_()  # resampled without injection: every particle comes from the posterior
         return pose, neff
+
+    def chosen_ranges(self, ranges_m: np.ndarray) -> np.ndarray:
+        """The weighted beams' ranges of a whole scan, NaN (not weighted) at or below near and at or beyond far."""
+        chosen = np.asarray(ranges_m, np.float32)[self.beam_index]
+        return np.where((chosen > self.cfg.near_m) & (chosen < self.far_m), chosen, np.nan).astype(np.float32)
 
     def recovery_probability(self) -> float:
         """AMCL's augmented MCL (Thrun et al. Table 8.3): inject random particles with probability

@@ -7,7 +7,7 @@ to ``angular_update`` (the released code's accumulated distances), the scan is p
 
 1. scan matching: hill climbing over (x, y, theta) from each particle's pose on its own map, steps
    lstep / astep halved ``iterations`` times; each round scores all particles x 6 moves x beams in one
-   launch (kernels/slam.py ``score``);
+   launch (kernels/slam/score.py ``score``);
 2. the proposal (``proposal``):
    * ``paper``: the scan likelihood (times the motion prior) at (2g + 1)^3 poses around the match defines
      a Gaussian (mean, covariance); the new pose is drawn from it and the weight multiplied by
@@ -18,7 +18,7 @@ to ``angular_update`` (the released code's accumulated distances), the scan is p
 3. weights smoothed as exp((log w - max) / (ogain * N)) (the released code); N_eff = 1 / sum w^2;
    low-variance resampling (maps copied on the device) when N_eff < threshold * N (``selective``) or
    every time (``always``);
-4. each particle integrates the scan into its map (kernels/slam.py ``integrate``), the maps first grown to
+4. each particle integrates the scan into its map (kernels/slam/maps.py ``integrate``), the maps first grown to
    hold the scan's end points (``ParticleMaps.cover``), as the released code's maps grow.
 
 The host keeps only P-sized arrays (weights, hill-climbing state) and each processed scan's poses and
@@ -27,6 +27,8 @@ resampling parents, from which the best particle's trajectory is traced back at 
 
 from __future__ import annotations
 
+import functools
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,6 +66,23 @@ class History:
     scans: list = field(default_factory=list)
     poses: list = field(default_factory=list)
     parents: list = field(default_factory=list)
+
+
+def timed(part: str):
+    """Decorator of an RBPF step's part: its wall time, with the device synchronised before and after, is added
+    to ``self.timing[part]``, so the step itself holds no timing call."""
+
+    def wrap(method):
+        @functools.wraps(method)
+        def run(self, *args, **kwargs):
+            start = self._synced_clock()
+            out = method(self, *args, **kwargs)
+            self.timing[part] += self._synced_clock() - start
+            return out
+
+        return run
+
+    return wrap
 
 
 PROPOSALS = Registry("slam proposal")  # name -> factory(rbpf) -> Proposal (irmcl_warp/extend.py); built-in below
@@ -252,8 +271,23 @@ class RBPF:
 
     def step(self, k: int, odom_pose, ranges_m, stamp: float | None = None) -> StepStats:
         """Scan k with its odometry pose (and its stamp, which ``temporal_update`` needs); returns what
-        happened. A scan that is not processed costs a few scalar operations on the host: its odometry step
-        is queued for the next processed scan."""
+        happened. The four steps of the paper's SIR filter (Grisetti et al. 2007: sampling, importance
+        weighting, resampling, map estimation), each part timed as a whole by ``timed``. A scan that is not
+        processed costs a few scalar operations on the host: its odometry step is queued for the next one."""
+        self._take_odometry(odom_pose)  # u_t-1: queued for the next processed scan, its path and turn counted
+        if not self._should_process(stamp):  # linear_update / angular_update / temporal_update reached?
+            return StepStats(processed=False)
+        moved = self._drift()  # x'_t ~ p(x_t | x_t-1, u_t-1): the queued steps through the motion model
+        new, gain, rounds = self._propose(ranges_m, moved)  # 1. sampling: scan match + the proposal around it
+        neff, resampled = self._weigh(new, gain)  # 2. importance weighting: w_t = w_t-1 * gain; N_eff = 1 / sum w^2
+        parents = self._resample_if_needed(new, resampled)  # 3. selective resampling: only when N_eff < threshold
+        self._integrate(new[parents])  # 4. map estimation: each particle's map gets z_t at its pose x_t
+        self._record(k, parents, new[parents])  # poses and parents: the best path is traced back at the end
+        return StepStats(processed=True, neff=neff, resampled=resampled, match_rounds=rounds)
+
+    def _take_odometry(self, odom_pose) -> None:
+        """Queue the odometry step from the previous scan; count the path and the turn since the last
+        processed scan."""
         x, y, a = odom_pose
         pose = (float(x), float(y), float(a))
         prev, self.prev_odom = self.prev_odom, pose
@@ -263,39 +297,59 @@ class RBPF:
         self.turn_rad += abs(wrap_angle_one(pose[2] - prev[2]))
         if delta != (0.0, 0.0, 0.0):
             self.pending.append(delta)
+
+    def _should_process(self, stamp: float | None) -> bool:
+        """GMapping's decision: the path since the last processed scan is ``linear_update`` long, its turns add
+        up to ``angular_update``, or ``temporal_update`` seconds went by."""
         c = self.cfg
         if self.path_m < c.linear_update and self.turn_rad < c.angular_update and not self._time_is_up(stamp):
-            return StepStats(processed=False)
-        odom_pose = np.array(pose)
+            return False
         self.last_stamp = stamp
-        t = self._tick()
+        return True
+
+    @timed("motion")
+    def _drift(self) -> np.ndarray:
+        """The queued odometry steps applied to the particles (one launch); returns the odometry step from the
+        last processed scan to this one (the paper's proposal centres its motion prior on it)."""
         if self.pending:
             self.motion(self.poses, np.array(self.pending), seed=self.cfg.seed * 1_000_003 + self.steps)
         self.pending, self.path_m, self.turn_rad = [], 0.0, 0.0
+        odom_pose = np.array(self.prev_odom)
         moved = relative(self.last_odom[None], odom_pose[None])[0]
-        t = self._tick("motion", t)
+        self.last_odom = odom_pose
+        return moved
+
+    @timed("matching")
+    def _propose(self, ranges_m, moved):
+        """The scan to the device and the proposal (``slam.proposal``) from each particle's moved pose."""
         self._set_ranges(ranges_m)
-        sampled = self._read(self.poses).astype(np.float64)
-        new, gain, rounds = self.propose(sampled, moved)
-        t = self._tick("matching", t)
+        return self.propose(self._read(self.poses).astype(np.float64), moved)
+
+    @timed("weights_resampling")
+    def _weigh(self, new: np.ndarray, gain: np.ndarray) -> tuple[float, bool]:
+        """The log-weights' gain, the new poses to the device, N_eff = 1 / sum w^2 of the smoothed weights and
+        whether to resample (``slam.resample``: selective or always)."""
         self.log_w += gain
         self.log_w_total += gain
         self._write(self.poses, new.astype(np.float32))
-        w = self.smoothed_weights()
-        neff = 1.0 / np.sum(w**2)
-        parents = np.arange(self.P)
-        resampled = self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P
-        if resampled:
-            parents = self.maps.resample(low_variance_parents(w, self.rng.uniform()))
-            self._write(self.poses, new[parents].astype(np.float32))
-            self.log_w = np.zeros(self.P)
-            self.log_w_total = self.log_w_total[parents]
-        t = self._tick("weights_resampling", t)
-        self._add_scan(new[parents])
-        self._tick("integration", t)
-        self.last_odom = odom_pose
-        self._record(k, parents, new[parents])
-        return StepStats(processed=True, neff=float(neff), resampled=bool(resampled), match_rounds=rounds)
+        neff = float(1.0 / np.sum(self.smoothed_weights() ** 2))
+        return neff, bool(self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P)
+
+    @timed("weights_resampling")
+    def _resample_if_needed(self, new: np.ndarray, resampled: bool) -> np.ndarray:
+        """Low-variance resampling of poses and maps (the maps copied on the device); returns each particle's
+        parent (itself when not resampled)."""
+        if not resampled:
+            return np.arange(self.P)
+        parents = self.maps.resample(low_variance_parents(self.smoothed_weights(), self.rng.uniform()))
+        self._write(self.poses, new[parents].astype(np.float32))
+        self.log_w = np.zeros(self.P)
+        self.log_w_total = self.log_w_total[parents]
+        return parents
+
+    @timed("integration")
+    def _integrate(self, poses: np.ndarray) -> None:
+        self._add_scan(poses)
 
     def _time_is_up(self, stamp: float | None) -> bool:
         """temporal_update: more than that many seconds since the last processed scan (the released code's
@@ -455,16 +509,11 @@ class RBPF:
         w = np.exp(g * (self.log_w - self.log_w.max()))
         return w / w.sum()
 
-    def _tick(self, part: str | None = None, since: float = 0.0) -> float:
-        """Time stamp after the device finished; adds the time since ``since`` to ``part``."""
-        import time
-
+    def _synced_clock(self) -> float:
+        """A time stamp once the device has finished (the pinned copies in flight are then done too)."""
         wp.synchronize_device(self.device)
         self._in_flight.clear()
-        now = time.perf_counter()
-        if part is not None:
-            self.timing[part] += now - since
-        return now
+        return time.perf_counter()
 
     def _record(self, k: int, parents: np.ndarray, poses: np.ndarray) -> None:
         """History of scan k: ``poses`` [P, 3] are those just put on the device, recorded as the device holds
