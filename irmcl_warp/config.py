@@ -224,6 +224,8 @@ class MCLConfig:
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
     step_graph: str = "auto"  # a step's launches replayed as one graph: auto (on a GPU, when capturable) | on | off
+    cpu_threads: Optional[int] = None  # CPU only: motion and the grid models launched as a block of particles per core
+    #   (None = the process's cores; 1 = one launch, which a CPU graph may capture); the same bits either way
     seed: int = 0
 
 
@@ -505,6 +507,7 @@ RANGES = {
     "mcl.cluster_cell_m": ("> 0", None),
     "mcl.cluster_yaw_bins": (1, None),
     "mcl.reduce_to": (0, None),
+    "mcl.cpu_threads": (1, None),
     "mcl.update_min_trans_m": (0, None),
     "mcl.update_min_rot_rad": (0, None),
     "mcl.resample_threshold": (0, 1),

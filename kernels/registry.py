@@ -7,6 +7,7 @@ import os
 import sys
 import tempfile
 
+import numpy as np
 import warp as wp
 
 
@@ -87,6 +88,49 @@ def pick_device(requested: str = "auto") -> str:
             "use device=cpu (or device=auto)"
         )
     return requested
+
+
+def host_cores() -> int:
+    """The cores this process may run on (its CPU affinity: in a container ``os.cpu_count()`` counts the host's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+class ParticleBlocks:
+    """A per-particle launch split into blocks of particles, one per CPU core, launched from as many host threads.
+
+    Warp runs a CPU launch's threads one after another on the calling thread, and ctypes drops the GIL while a
+    launch runs, so blocks launched from host threads run on separate cores. ``run(launch, n)`` calls
+    ``launch(p0, p1)`` for consecutive blocks covering 0..n-1 (at least ``min_block`` particles each) and waits
+    for all of them. Each particle's result comes from the same code and inputs whatever block it is in, so the
+    bits do not depend on the split. On a GPU, with ``threads`` = 1, and while a graph is being captured (a CPU
+    graph records the launches of the capturing thread only), it is one call of ``launch(0, n)``."""
+
+    def __init__(self, device: str, threads: int | None = None, min_block: int = 1):
+        self.device = device
+        cuda = wp.get_device(device).is_cuda
+        self.threads = 1 if cuda else max(1, int(threads or host_cores()))
+        self.min_block = max(1, int(min_block))
+        self._pool = None
+
+    def blocks_for(self, n: int) -> int:
+        """How many blocks ``run`` splits ``n`` particles into."""
+        return min(self.threads, max(1, n // self.min_block))
+
+    def run(self, launch, n: int) -> None:
+        blocks = self.blocks_for(n)
+        if blocks == 1 or wp.get_device(self.device).is_capturing:  # a graph captures one thread's launches
+            launch(0, n)
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="particle-blocks")
+        cuts = np.linspace(0, n, blocks + 1).astype(int)
+        for f in [self._pool.submit(launch, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
+            f.result()
 
 
 REDUCE_THREADS = 4096  # threads of a reduction launch (see launch_reduction)

@@ -190,3 +190,49 @@ def test_irmcl_motion_kernel_statistics_match_the_twin(rng):
     )
     with pytest.raises(ValueError, match="9 non-negative noise coefficients"):
         MOTION.build("irmcl", noise=(0.1, 0.1), device=DEVICE)
+
+
+@pytest.mark.parametrize("model", ["odometry", "irmcl"])
+def test_motion_split_over_cpu_cores_draws_the_same_numbers(rng, model):
+    """mcl.cpu_threads: the motion launched as a block of particles per core seeds each particle's generator
+    with its index in the whole set, so the particles move exactly as in one launch."""
+    P = int(rng.integers(3 * 16384 + 1, 60000))  # at least 3 of the motion's blocks
+    start = np.column_stack([rng.uniform(-5, 5, P), rng.uniform(-5, 5, P), rng.uniform(-3, 3, P)]).astype(np.float32)
+    step, seed = (float(rng.uniform(-0.3, 0.3)), float(rng.uniform(0, 0.5)), float(rng.uniform(-0.3, 0.3))), 1234
+    moved = []
+    for threads in (1, 3):
+        p = wp.array(start, dtype=wp.vec3, device=DEVICE)
+        MOTION.build(model, device=DEVICE, cpu_threads=threads)(p, step, seed=seed)
+        moved.append(p.numpy())
+    assert not np.array_equal(moved[0], start)
+    assert np.array_equal(moved[0], moved[1]), f"seed {rng.seed}"
+
+
+@pytest.mark.cpu_only
+def test_particle_blocks_cover_the_particles_once_and_stay_whole_in_a_captured_graph():
+    """ParticleBlocks: consecutive blocks of at least min_block particles, one per thread, covering 0..n-1 once;
+    one launch below two blocks' worth, and one launch while a CPU graph is captured (it records one thread)."""
+    import threading
+
+    from irmcl_warp.kernels.registry import ParticleBlocks
+
+    calls, lock = [], threading.Lock()
+
+    def launch(p0, p1):
+        with lock:
+            calls.append((p0, p1))
+
+    blocks = ParticleBlocks("cpu", threads=3, min_block=10)
+    blocks.run(launch, 100)
+    assert sorted(calls) == [(0, 33), (33, 66), (66, 100)]
+    calls.clear()
+    blocks.run(launch, 25)  # two blocks of 12-13
+    assert sorted(calls) == [(0, 12), (12, 25)]
+    calls.clear()
+    blocks.run(launch, 15)
+    assert calls == [(0, 15)]
+    calls.clear()
+    with wp.ScopedCapture(device="cpu"):
+        blocks.run(launch, 100)
+    assert calls == [(0, 100)]
+    assert ParticleBlocks("cpu", threads=None).threads >= 1

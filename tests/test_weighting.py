@@ -468,8 +468,10 @@ def test_range_table_too_large_or_too_coarse_is_a_clear_error(monkeypatch):
 
 
 def _per_beam_field_kernel(z_hit, z_rand, sigma_hit, far_m, max_dist):
-    """The likelihood field as it was computed before the per-cell table (commit 3319b3a): log q per beam."""
-    from irmcl_warp.kernels.weighting import beam_direction, beam_origin
+    """The likelihood field as it was computed before the per-cell table (commit 3319b3a): log q per beam, with
+    the beam's direction turned from its (cos, sin) as the kernel does since (one cosine and sine per
+    particle); what differs is only where log q comes from."""
+    from irmcl_warp.kernels.weighting import beam_origin
 
     @wp.kernel(module="unique")
     def field(
@@ -478,20 +480,24 @@ def _per_beam_field_kernel(z_hit, z_rand, sigma_hit, far_m, max_dist):
         res: float,
         particles: wp.array(dtype=wp.vec3),
         T_base_laser: wp.vec3,
-        angles: wp.array(dtype=wp.float32),
+        beam_cs: wp.array(dtype=wp.vec2),
         measured: wp.array(dtype=wp.float32),
         log_lik: wp.array(dtype=wp.float32),
     ):
         p = wp.tid()
         s = float(0.0)
-        for b in range(angles.shape[0]):
+        heading = particles[p][2] + T_base_laser[2]
+        c = wp.cos(heading)
+        sn = wp.sin(heading)
+        for b in range(beam_cs.shape[0]):
             m = measured[b]
             if m == m:
-                end = beam_origin(particles[p], T_base_laser) + m * beam_direction(
-                    particles[p], T_base_laser, angles[b]
-                )
-                ix = int(wp.floor((end[0] - origin[0]) / res))
-                iy = int(wp.floor((end[1] - origin[1]) / res))
+                o = beam_origin(particles[p], T_base_laser)
+                cs = beam_cs[b]
+                ex = o[0] + m * (c * cs[0] - sn * cs[1])
+                ey = o[1] + m * (sn * cs[0] + c * cs[1])
+                ix = int(wp.floor((ex - origin[0]) / res))
+                iy = int(wp.floor((ey - origin[1]) / res))
                 d = wp.static(max_dist)
                 if ix >= 0 and iy >= 0 and ix < dist.shape[1] and iy < dist.shape[0]:
                     d = wp.min(dist[iy, ix], wp.static(max_dist))
@@ -546,9 +552,36 @@ def test_the_likelihood_field_s_table_of_log_q_gives_the_per_beam_bits(rng):
     wp.launch(
         _per_beam_field_kernel(z_hit, 1.0 - z_hit, sigma, far_m, max_dist),
         P,
-        [dist, wp.vec2(*origin), res, *args, before],
+        [dist, wp.vec2(*origin), res, args[0], args[1], lf.beams(args[2]), args[3], before],
         device=DEVICE,
     )
     assert np.array_equal(ours.numpy(), before.numpy()), (
         f"seed {rng.seed}: {np.abs(ours.numpy() - before.numpy()).max()}"
     )
+
+
+@pytest.mark.parametrize("model", ["likelihood_field", "beam_model"])
+def test_grid_models_split_over_cpu_cores_give_the_same_bits(rng, model):
+    """mcl.cpu_threads: a grid model's launch split into a block of particles per core (ParticleBlocks) gives
+    every particle the bits one launch gives (on a GPU both are one launch)."""
+    occ = (rng.random((50, 70)) < 0.04).astype(np.float32)
+    occ[0, :] = 1.0
+    P = int(rng.integers(3 * 16384 + 1, 55000))  # at least 3 blocks of 16k particles
+    particles = np.column_stack([rng.uniform(0, 7, P), rng.uniform(0, 5, P), rng.uniform(-3, 3, P)])
+    angles = np.sort(rng.uniform(-np.pi, np.pi, 20)).astype(np.float32)
+    measured = rng.uniform(0.2, 6.0, 20).astype(np.float32)
+    inputs = (
+        wp.array(particles.astype(np.float32), dtype=wp.vec3, device=DEVICE),
+        (0.1, 0.0, 0.02),
+        wp.array(angles, dtype=wp.float32, device=DEVICE),
+        wp.array(measured, dtype=wp.float32, device=DEVICE),
+    )
+    outs = []
+    for threads in (1, 3):
+        m = WEIGHTING.build(
+            model, occupancy=occ, origin_xy=(0.0, 0.0), resolution_m=0.1, cpu_threads=threads, device=DEVICE
+        )
+        outs.append(wp.zeros(P, dtype=wp.float32, device=DEVICE))
+        m(*inputs, outs[-1])
+    assert np.isfinite(outs[0].numpy()).all()
+    assert np.array_equal(outs[0].numpy(), outs[1].numpy()), f"seed {rng.seed}"

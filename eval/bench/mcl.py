@@ -181,6 +181,8 @@ def bench_filter(
     trace = None
     if cuda_trace and device.startswith("cuda"):
         trace = device_profile(lambda: pf.step(u, measured), steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
+    blocks = getattr(pf.weighting, "blocks", pf.motion.blocks)
+    split = 1 if pf.use_graph else blocks.blocks_for(n)  # a captured step is one launch per part
     parts = {  # each part alone, on the same particles (the sum differs from the step by launch overlap)
         "motion": lambda: pf.motion(pf.particles, u, seed=1),
         "weighting": lambda: pf.weighting(pf.particles, pf.T_base_laser, pf.angles, pf.measured, pf.log_lik),
@@ -191,7 +193,8 @@ def bench_filter(
     }
     part_ms = {name: 1e3 * time_per_call(fn, sync, steps, warmup=0) for name, fn in parts.items()}
     row = {
-        "method": f"{variant} {'graph' if pf.use_graph else 'eager'}",
+        "method": f"{variant} {'graph' if pf.use_graph else 'eager'}" + (f" {split} blocks" if split > 1 else ""),
+        "cpu_blocks": split,  # the weighting's (else the motion's) particles split over this many CPU cores
         "variant": variant,
         "graph": pf.use_graph,
         "particles": n,

@@ -42,8 +42,9 @@ GROUPS = {
 }  # a stage's records are kept in results/<group>/<exp>.json
 MAX_FILE_BYTES = 800_000  # one results file at most (the repository keeps no file over 1 MB)
 # settings that decide how fast a run goes, never what it gives (the same bits: tests/test_weighting.py
-# for the batched march, tests/test_mcl.py for the step's graph and the march order): tables ignore them
-PERF_ONLY = ("mcl.march_batch", "mcl.march_order", "mcl.step_graph")
+# for the batched march, tests/test_mcl.py for the step's graph, the march order and the CPU threads): tables
+# ignore them
+PERF_ONLY = ("mcl.march_batch", "mcl.march_order", "mcl.step_graph", "mcl.cpu_threads")
 
 
 def _schema_defaults() -> dict:

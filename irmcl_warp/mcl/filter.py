@@ -114,9 +114,9 @@ class ParticleFilter:
         if cfg.motion not in ("odometry", "irmcl"):
             raise ValueError(f"MCL: mcl.motion={cfg.motion!r}; choose odometry or irmcl")
         self.motion = (
-            MOTION.build("odometry", alphas=cfg.alphas, device=d)
+            MOTION.build("odometry", alphas=cfg.alphas, device=d, cpu_threads=cfg.cpu_threads)
             if cfg.motion == "odometry"
-            else MOTION.build("irmcl", noise=cfg.motion_noise, device=d)
+            else MOTION.build("irmcl", noise=cfg.motion_noise, device=d, cpu_threads=cfg.cpu_threads)
         )
         self.make_weighting = make_weighting
         self.resampler = RESAMPLE.build(cfg.resample, device=d)

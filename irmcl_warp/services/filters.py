@@ -115,7 +115,13 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
         device=device,
     )
     if w == "likelihood_field":
-        return WEIGHTING.build(w, max_dist_m=mcl.field_max_dist_m, occ_threshold=mcl.field_occ_threshold, **grid)
+        return WEIGHTING.build(
+            w,
+            max_dist_m=mcl.field_max_dist_m,
+            occ_threshold=mcl.field_occ_threshold,
+            cpu_threads=mcl.cpu_threads,
+            **grid,
+        )
     if w == "beam_model":
         return WEIGHTING.build(
             w,
@@ -123,6 +129,7 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
             z_max=mcl.z_max,
             lambda_short=mcl.lambda_short,
             occ_threshold=mcl.beam_occ_threshold,
+            cpu_threads=mcl.cpu_threads,
             **grid,
         )
     return WEIGHTING.build(w, **grid)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import SLAM, pick_device
+from irmcl_warp.kernels.registry import SLAM, ParticleBlocks, pick_device
 from irmcl_warp.kernels.weighting.common import laser_pose
 from irmcl_warp.kernels.slam.climb import block_dim_for, make_block_climb_kernel, make_thread_climb_kernel
 from irmcl_warp.kernels.slam.maps import ParticleMaps, cell_at, cell_of
@@ -206,13 +206,10 @@ class Scorer:
         cpu_threads: int | None = None,
         device: str = "auto",
     ):
-        import os
-
         self.far_m, self.device = float(far_m), pick_device(device)
         cuda = wp.get_device(self.device).is_cuda
         self.per_thread = 1 if cuda else 1 << 16
-        self.threads = 1 if cuda else max(1, int(cpu_threads or os.cpu_count() or 1))
-        self._pool = None
+        self.blocks = ParticleBlocks(self.device, cpu_threads)  # on the CPU: a block of particles per core
         self._partials, self._beam_cs = {}, None
         self.kernel, self.climb_kernel, self.block_climb_kernel = make_score_kernel(
             int(kernel_size),
@@ -384,18 +381,9 @@ class Scorer:
 
     def _run_blocks(self, run, P: int) -> None:
         """``run(p0, p1)`` launches particles p0..p1-1: once for all of them with one host thread (and on a GPU),
-        else as blocks of particles from ``threads`` host threads (blocks of candidates, each holding every
+        else as blocks of particles from the cores' host threads (blocks of candidates, each holding every
         particle, measured 1.6x slower on 2 cores: each core then reads all maps)."""
-        if self.threads == 1:
-            run(0, P)
-            return
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="slam-score")
-        cuts = np.linspace(0, P, min(self.threads, P) + 1).astype(int)
-        for f in [self._pool.submit(run, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
-            f.result()
+        self.blocks.run(run, P)
 
 
 SLAM.register("score")(lambda **kw: Scorer(**kw))

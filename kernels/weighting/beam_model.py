@@ -71,9 +71,10 @@ class BeamModel(GridModel):
         lambda_short: float = 0.1,
         far_m: float = 30.0,
         occ_threshold: float = 0.5,
+        cpu_threads: int | None = None,
         device: str = "auto",
     ):
-        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
+        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device, cpu_threads)
         self.grid = wp.array(occupancy, dtype=wp.float32, device=self.device)
         self.kernel = make_beam_model_kernel(
             z_hit, z_short, z_max, z_rand, sigma_hit_m, lambda_short, far_m, occ_threshold

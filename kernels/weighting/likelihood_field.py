@@ -9,7 +9,7 @@ import warp as wp
 
 from irmcl_warp.kernels.raycast import distance_to_occupied
 from irmcl_warp.kernels.registry import WEIGHTING
-from irmcl_warp.kernels.weighting.common import GridModel, beam_direction, beam_origin
+from irmcl_warp.kernels.weighting.common import GridModel, beam_origin
 
 
 def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, far_m: float, max_dist: float):
@@ -34,24 +34,31 @@ def likelihood_field_kernel(
     res: float,
     particles: wp.array(dtype=wp.vec3),
     T_base_laser: wp.vec3,
-    angles: wp.array(dtype=wp.float32),
+    beam_cs: wp.array(dtype=wp.vec2),
     measured: wp.array(dtype=wp.float32),
     log_lik: wp.array(dtype=wp.float32),
 ):
     """log w = sum over valid beams of log q at the end point's cell (``log_q``: the map's cells, then one more
-    row whose first entry is log q at the capped distance, for end points off the map)."""
+    row whose first entry is log q at the capped distance, for end points off the map). A beam's direction is
+    its precomputed (cos, sin) in the laser frame (``beam_cs``) turned by the laser's heading: one cosine and
+    one sine per particle instead of per beam."""
     p = wp.tid()
     pose = particles[p]
     o = beam_origin(pose, T_base_laser)  # once per particle, not per beam
+    heading = pose[2] + T_base_laser[2]
+    c = wp.cos(heading)
+    s_ = wp.sin(heading)
     H = log_q.shape[0] - 1
     off_map = log_q[H, 0]
     s = float(0.0)
-    for b in range(angles.shape[0]):
+    for b in range(beam_cs.shape[0]):
         m = measured[b]
         if m == m:  # NaN: invalid beam
-            end = o + m * beam_direction(pose, T_base_laser, angles[b])
-            ix = int(wp.floor((end[0] - origin[0]) / res))
-            iy = int(wp.floor((end[1] - origin[1]) / res))
+            cs = beam_cs[b]
+            ex = o[0] + m * (c * cs[0] - s_ * cs[1])
+            ey = o[1] + m * (s_ * cs[0] + c * cs[1])
+            ix = int(wp.floor((ex - origin[0]) / res))
+            iy = int(wp.floor((ey - origin[1]) / res))
             if ix >= 0 and iy >= 0 and ix < log_q.shape[1] and iy < H:
                 s += log_q[iy, ix]
             else:
@@ -80,9 +87,10 @@ class LikelihoodField(GridModel):
         far_m: float = 30.0,
         max_dist_m: float = 2.0,
         occ_threshold: float = 0.65,
+        cpu_threads: int | None = None,
         device: str = "auto",
     ):
-        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device)
+        occupancy = self._setup(occupancy, origin_xy, resolution_m, occ_threshold, device, cpu_threads)
         dist = distance_to_occupied(occupancy, resolution_m, occ_threshold).astype(np.float32)
         self.distance = dist  # to the nearest occupied cell, per cell (m; for inspection, the kernel reads log q)
         padded = np.full((dist.shape[0] + 1, dist.shape[1]), max_dist_m, np.float32)  # + the off-map row
@@ -95,6 +103,15 @@ class LikelihoodField(GridModel):
             device=self.device,
         )
         self.kernel = likelihood_field_kernel
+        self._beam_cs = (None, None)  # (the angles' array, their (cos, sin) on the device)
+
+    def beams(self, angles: wp.array) -> wp.array:
+        """The beams' (cos, sin) in the laser frame, computed once per angles array (in float64, then rounded)."""
+        if self._beam_cs[0] is not angles:
+            a = angles.numpy().astype(np.float64)
+            cs = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
+            self._beam_cs = (angles, wp.array(cs, dtype=wp.vec2, device=self.device))
+        return self._beam_cs[1]
 
 
 @WEIGHTING.register("likelihood_field")
