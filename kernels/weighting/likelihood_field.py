@@ -4,6 +4,8 @@ Table 6.3; AMCL's default), the grid baseline IR-MCL is compared with.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import warp as wp
 
@@ -103,15 +105,30 @@ class LikelihoodField(GridModel):
             device=self.device,
         )
         self.kernel = likelihood_field_kernel
-        self._beam_cs = (None, None)  # (the angles' array, their (cos, sin) on the device)
 
     def beams(self, angles: wp.array) -> wp.array:
-        """The beams' (cos, sin) in the laser frame, computed once per angles array (in float64, then rounded)."""
-        if self._beam_cs[0] is not angles:
-            a = angles.numpy().astype(np.float64)
-            cs = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
-            self._beam_cs = (angles, wp.array(cs, dtype=wp.vec2, device=self.device))
-        return self._beam_cs[1]
+        """The beams' (cos, sin) in the laser frame, computed on the device once per angles array and shared by
+        every field built later (a filter rebuilds its weighting when it reduces its particles, and may then be
+        capturing a graph, where neither a copy to the host nor an allocation may happen)."""
+        kept = _BEAM_CS.get(id(angles))
+        if kept is None or kept[0]() is not angles:
+            cs = wp.empty(angles.shape[0], dtype=wp.vec2, device=angles.device)
+            wp.launch(beam_cos_sin, angles.shape[0], [angles, cs], device=angles.device)
+            for key in [k for k, (ref, _) in _BEAM_CS.items() if ref() is None]:
+                del _BEAM_CS[key]  # (arrays gone since)
+            kept = _BEAM_CS[id(angles)] = (weakref.ref(angles), cs)
+        return kept[1]
+
+
+_BEAM_CS: dict = {}  # id(angles array) -> (a weak reference to it, its beams' (cos, sin))
+
+
+@wp.kernel
+def beam_cos_sin(angles: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.vec2)):
+    """(cos a, sin a) of each beam angle, in float64 and then rounded."""
+    b = wp.tid()
+    a = wp.float64(angles[b])
+    out[b] = wp.vec2(wp.float32(wp.cos(a)), wp.float32(wp.sin(a)))
 
 
 @WEIGHTING.register("likelihood_field")
