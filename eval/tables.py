@@ -43,6 +43,9 @@ def evidence(outputs=OUTPUTS) -> tuple[Evidence, list, list]:
         s: [r for r in recs if r.stage == s]
         for s in ("train", "synthesis", "localize", "slam", "globloc", "pipeline", "worlds")
     }
+    # a log localized in its own map (localize.map_path) is not a run of the benchmark protocol: its table is made
+    # from results/own_slam_map by eval.analyses.own_slam_map
+    by["localize"] = [r for r in by["localize"] if not (r.config.get("localize") or {}).get("map_path")]
     return (
         Evidence(
             synthesis_pairs(by["train"] + by["synthesis"]),
