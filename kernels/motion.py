@@ -97,13 +97,7 @@ class Motion:
 
     def launch(self, particles: wp.array, step: wp.array, seed: wp.array) -> None:
         """The same with (rot1, trans, rot2) in ``step`` [3] and the seed in ``seed`` [1], both on the device."""
-        n = particles.shape[0]
-
-        def launch(p0: int, p1: int) -> None:
-            block = particles if p1 - p0 == n else particles[p0:p1]
-            wp.launch(self.kernel, p1 - p0, [block, step, seed, p0], device=self.device)
-
-        self.blocks.run(launch, n)
+        self.blocks.launch(self.kernel, particles.shape[0], [particles, step, seed, 0], per_particle=(0,), first=3)
 
 
 class OdometryMotion(Motion):

@@ -132,6 +132,22 @@ class ParticleBlocks:
         for f in [self._pool.submit(launch, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]:
             f.result()
 
+    def launch(self, kernel, n: int, inputs: list, per_particle: tuple[int, ...], first: int | None = None) -> None:
+        """``wp.launch(kernel, n, inputs)`` run in blocks: the inputs at the positions ``per_particle`` (arrays
+        indexed by particle) are sliced to each block, and the input at ``first``, if given, is set to the
+        block's first particle index."""
+
+        def block(p0: int, p1: int) -> None:
+            args = list(inputs)
+            if p1 - p0 != n:
+                for i in per_particle:
+                    args[i] = inputs[i][p0:p1]
+            if first is not None:
+                args[first] = p0
+            wp.launch(kernel, p1 - p0, args, device=self.device)
+
+        self.run(block, n)
+
 
 REDUCE_THREADS = 4096  # threads of a reduction launch (see launch_reduction)
 REDUCE_GROUP = 64  # a GPU adds the threads' partial sums in REDUCE_GROUP groups of REDUCE_GROUP (PartialSums)

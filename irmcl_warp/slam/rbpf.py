@@ -279,8 +279,8 @@ class RBPF:
             return StepStats(processed=False)
         moved = self._drift()  # x'_t ~ p(x_t | x_t-1, u_t-1): the queued steps through the motion model
         new, gain, rounds = self._propose(ranges_m, moved)  # 1. sampling: scan match + the proposal around it
-        neff, resampled = self._weigh(new, gain)  # 2. importance weighting: w_t = w_t-1 * gain; N_eff = 1 / sum w^2
-        parents = self._resample_if_needed(new, resampled)  # 3. selective resampling: only when N_eff < threshold
+        w, neff, resampled = self._weigh(new, gain)  # 2. importance weighting: w_t = w_t-1 * gain; N_eff = 1 / sum w^2
+        parents = self._resample_if_needed(new, w, resampled)  # 3. selective resampling: only when N_eff < threshold
         self._integrate(new[parents])  # 4. map estimation: each particle's map gets z_t at its pose x_t
         self._record(k, parents, new[parents])  # poses and parents: the best path is traced back at the end
         return StepStats(processed=True, neff=neff, resampled=resampled, match_rounds=rounds)
@@ -326,22 +326,23 @@ class RBPF:
         return self.propose(self._read(self.poses).astype(np.float64), moved)
 
     @timed("weights_resampling")
-    def _weigh(self, new: np.ndarray, gain: np.ndarray) -> tuple[float, bool]:
-        """The log-weights' gain, the new poses to the device, N_eff = 1 / sum w^2 of the smoothed weights and
-        whether to resample (``slam.resample``: selective or always)."""
+    def _weigh(self, new: np.ndarray, gain: np.ndarray) -> tuple[np.ndarray, float, bool]:
+        """The log-weights' gain, the new poses to the device; returns the smoothed weights w, N_eff = 1 / sum w^2
+        and whether to resample (``slam.resample``: selective or always)."""
         self.log_w += gain
         self.log_w_total += gain
         self._write(self.poses, new.astype(np.float32))
-        neff = float(1.0 / np.sum(self.smoothed_weights() ** 2))
-        return neff, bool(self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P)
+        w = self.smoothed_weights()
+        neff = float(1.0 / np.sum(w**2))
+        return w, neff, bool(self.cfg.resample == "always" or neff < self.cfg.resample_threshold * self.P)
 
     @timed("weights_resampling")
-    def _resample_if_needed(self, new: np.ndarray, resampled: bool) -> np.ndarray:
+    def _resample_if_needed(self, new: np.ndarray, w: np.ndarray, resampled: bool) -> np.ndarray:
         """Low-variance resampling of poses and maps (the maps copied on the device); returns each particle's
         parent (itself when not resampled)."""
         if not resampled:
             return np.arange(self.P)
-        parents = self.maps.resample(low_variance_parents(self.smoothed_weights(), self.rng.uniform()))
+        parents = self.maps.resample(low_variance_parents(w, self.rng.uniform()))
         self._write(self.poses, new[parents].astype(np.float32))
         self.log_w = np.zeros(self.P)
         self.log_w_total = self.log_w_total[parents]

@@ -209,7 +209,9 @@ class Scorer:
         self.far_m, self.device = float(far_m), pick_device(device)
         cuda = wp.get_device(self.device).is_cuda
         self.per_thread = 1 if cuda else 1 << 16
-        self.blocks = ParticleBlocks(self.device, cpu_threads)  # on the CPU: a block of particles per core
+        # on the CPU a block of particles per core (blocks of candidates, each holding every particle, were measured
+        # 1.6x slower on 2 cores: each core then reads all maps)
+        self.blocks = ParticleBlocks(self.device, cpu_threads)
         self._partials, self._beam_cs = {}, None
         self.kernel, self.climb_kernel, self.block_climb_kernel = make_score_kernel(
             int(kernel_size),
@@ -268,7 +270,7 @@ class Scorer:
                 device=self.device,
             )
 
-        self._run_blocks(run, P)
+        self.blocks.run(run, P)
         wp.launch(reduce_partials_kernel, (P, C), [part_s, part_l, active, score, loglik], device=self.device)
 
     def climb(
@@ -314,7 +316,7 @@ class Scorer:
                 device=self.device,
             )
 
-        self._run_blocks(run, start.shape[0])
+        self.blocks.run(run, start.shape[0])
 
     def climb_blocks(
         self,
@@ -378,12 +380,6 @@ class Scorer:
             cs = np.stack([np.cos(a), np.sin(a)], 1).astype(np.float32)
             self._beam_cs = (angles, wp.array(cs, dtype=wp.vec2, device=self.device))
         return self._beam_cs[1]
-
-    def _run_blocks(self, run, P: int) -> None:
-        """``run(p0, p1)`` launches particles p0..p1-1: once for all of them with one host thread (and on a GPU),
-        else as blocks of particles from the cores' host threads (blocks of candidates, each holding every
-        particle, measured 1.6x slower on 2 cores: each core then reads all maps)."""
-        self.blocks.run(run, P)
 
 
 SLAM.register("score")(lambda **kw: Scorer(**kw))

@@ -114,24 +114,6 @@ class GridModel:
         return angles
 
     def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
-        T, beams = wp.vec3(*map(float, T_base_laser)), self.beams(angles)
-
-        def launch(p0: int, p1: int) -> None:
-            whole = p0 == 0 and p1 == particles.shape[0]
-            wp.launch(
-                self.kernel,
-                p1 - p0,
-                [
-                    self.grid,
-                    self.origin,
-                    self.res,
-                    particles if whole else particles[p0:p1],
-                    T,
-                    beams,
-                    measured,
-                    log_lik if whole else log_lik[p0:p1],
-                ],
-                device=self.device,
-            )
-
-        self.blocks.run(launch, particles.shape[0])
+        T = wp.vec3(*map(float, T_base_laser))
+        inputs = [self.grid, self.origin, self.res, particles, T, self.beams(angles), measured, log_lik]
+        self.blocks.launch(self.kernel, particles.shape[0], inputs, per_particle=(3, 7))
