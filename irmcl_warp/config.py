@@ -223,7 +223,7 @@ class MCLConfig:
     map_resolution_m: float = 0.05  # NOG / grid resolution
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
-    step_graph: str = "auto"  # a step's launches replayed as one graph: auto (on a GPU, when capturable) | on | off
+    step_graph: str = "auto"  # a step's launches replayed as one graph: auto (when capturable) | on | off
     cpu_threads: Optional[int] = None  # CPU only: motion and the grid models launched as a block of particles per core
     #   (None = the process's cores; 1 = one launch, which a CPU graph may capture); the same bits either way
     seed: int = 0

@@ -71,6 +71,29 @@ def top_sums_kernel(
     leave_moments(partials, wp.tid(), acc)
 
 
+@wp.kernel
+def top_sums_from_weights_kernel(
+    order: wp.array(dtype=wp.int32),
+    w: wp.array(dtype=wp.float32),
+    cos_sin: wp.array(dtype=wp.vec2),
+    particles: wp.array(dtype=wp.vec3),
+    partials: wp.array2d(dtype=wp.float32),
+    k: int,
+    stride: int,
+):
+    """``top_sums_kernel`` with each particle's exp(log w - max) and (cos, sin) of its yaw read from
+    ParticleWeights, which computed them from the same values with the same functions: the same bits for
+    a third of the work (exp(log_w + sorted_keys[0]) is exp(log_w - max) exactly, -max being exact)."""
+    acc = vec5()
+    for r in range(wp.tid(), k, stride):
+        j = order[r]
+        v = w[j]
+        p = particles[j]
+        cs = cos_sin[j]
+        acc += vec5(v, v * p[0], v * p[1], v * cs[0], v * cs[1])
+    leave_moments(partials, wp.tid(), acc)
+
+
 class TopShareMean:
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -81,6 +104,14 @@ class TopShareMean:
         self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
         self.partial = PartialSums(5, self.device)
+        self.weights = None
+
+    def share_weights(self, weights) -> None:
+        """Read each particle's weight and (cos, sin) of its yaw from ``weights`` (a ParticleWeights updated
+        from the same log-weights and particles before every ``launch``) instead of computing them again."""
+        if weights is not None and weights.w.shape[0] != self.n:
+            raise ValueError(f"top_share: weights of {weights.w.shape[0]} particles, built for {self.n}")
+        self.weights = weights
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
         """[x, y, yaw] from the top ``share`` of the particles by weight."""
@@ -91,12 +122,14 @@ class TopShareMean:
         """Rank and sum on the device, nothing read back (the filter reads once per step)."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
-        threads = launch_reduction(
-            top_sums_kernel,
-            self.k,
-            [self.values, self.keys, log_w, particles, self.partial.partials, self.k],
-            self.device,
-        )
+        if self.weights is None:
+            kernel, inputs = top_sums_kernel, [self.values, self.keys, log_w, particles]
+        else:
+            kernel, inputs = (
+                top_sums_from_weights_kernel,
+                [self.values, self.weights.w, self.weights.cos_sin, particles],
+            )
+        threads = launch_reduction(kernel, self.k, [*inputs, self.partial.partials, self.k], self.device)
         self.partial.finish(threads, self.sums)
 
     def result(self, sums: np.ndarray | None = None) -> np.ndarray:

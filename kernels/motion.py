@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import MOTION, ParticleBlocks, pick_device
+from irmcl_warp.kernels.registry import CPU_MIN_BLOCK, MOTION, ParticleBlocks, pick_device
 
 
 def _wrap(a) -> float:
@@ -83,9 +83,8 @@ class Motion:
     def __init__(self, kernel, device: str = "auto", cpu_threads: int | None = None):
         self.device = pick_device(device)
         self.kernel = kernel
-        # on the CPU a block per core, from 2 x 16k particles: below that, measured on the 2-core machine, the split costs
-        # more than it saves (a 10k-particle motion took 2.2 ms split against 1.7 ms in one launch)
-        self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=16384)
+        # on the CPU a block per core, from 2 x CPU_MIN_BLOCK particles (kernels/registry.py says why)
+        self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=CPU_MIN_BLOCK)
         self._step = wp.zeros(3, dtype=wp.float32, device=self.device)
         self._seed = wp.zeros(1, dtype=wp.int32, device=self.device)
 
@@ -97,7 +96,13 @@ class Motion:
 
     def launch(self, particles: wp.array, step: wp.array, seed: wp.array) -> None:
         """The same with (rot1, trans, rot2) in ``step`` [3] and the seed in ``seed`` [1], both on the device."""
-        self.blocks.launch(self.kernel, particles.shape[0], [particles, step, seed, 0], per_particle=(0,), first=3)
+        self.blocks.run(self.block(particles, step, seed), particles.shape[0])
+
+    def block(self, particles: wp.array, step: wp.array, seed: wp.array):
+        """``launch`` for one block of particles: a function (p0, p1) -> None (``ParticleBlocks.block``)."""
+        return self.blocks.block(
+            self.kernel, particles.shape[0], [particles, step, seed, 0], per_particle=(0,), first=3
+        )
 
 
 class OdometryMotion(Motion):

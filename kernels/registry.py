@@ -98,6 +98,14 @@ def host_cores() -> int:
         return os.cpu_count() or 1
 
 
+# The fewest particles a CPU block of the motion or a grid model gets. On the 2-core development machine (2026-11-26,
+# twentieth session) a 10k-particle motion took 1.27 ms in 2 blocks against 1.56 ms in one, the likelihood field
+# 2.18 against 3.04 ms, measured inside filter steps whose other launches replay as a CPU graph. (The nineteenth
+# session had measured the motion alone, 2.2 ms split against 1.7 ms, and set 16k; split launches then left the step's
+# graph altogether, which now keeps the rest of the step: irmcl_warp/mcl/filter.py ``_replay``.)
+CPU_MIN_BLOCK = 2048
+
+
 class ParticleBlocks:
     """A per-particle launch split into blocks of particles, one per CPU core, launched from as many host threads.
 
@@ -136,6 +144,12 @@ class ParticleBlocks:
         """``wp.launch(kernel, n, inputs)`` run in blocks: the inputs at the positions ``per_particle`` (arrays
         indexed by particle) are sliced to each block, and the input at ``first``, if given, is set to the
         block's first particle index."""
+        self.run(self.block(kernel, n, inputs, per_particle, first), n)
+
+    def block(self, kernel, n: int, inputs: list, per_particle: tuple[int, ...], first: int | None = None):
+        """The launch of ``launch`` for one block: a function (p0, p1) -> None, for ``run`` to call with others
+        of the same particles (a filter runs the motion and the weighting of a block one after the other, on one
+        core, in one pass: irmcl_warp/mcl/filter.py ``_move_and_observe``)."""
 
         def block(p0: int, p1: int) -> None:
             args = list(inputs)
@@ -146,7 +160,7 @@ class ParticleBlocks:
                 args[first] = p0
             wp.launch(kernel, p1 - p0, args, device=self.device)
 
-        self.run(block, n)
+        return block
 
 
 REDUCE_THREADS = 4096  # threads of a reduction launch (see launch_reduction)

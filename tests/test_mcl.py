@@ -326,6 +326,29 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
         assert np.array_equal(graph, eager), f"seed {seed} on {DEVICE}"
 
 
+@pytest.mark.cpu_only
+def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bit(rng):
+    """On a CPU with two cores' blocks (mcl.cpu_threads=2, more than 2 x CPU_MIN_BLOCK particles) the motion and the
+    likelihood field run split before the graph, which holds the rest of the step (``_replay``): the same estimates,
+    N_eff and particles as launching everything one by one in one block."""
+    from irmcl_warp.kernels.registry import CPU_MIN_BLOCK
+
+    log, nog = _world_and_map(duration_s=3.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed, n = int(rng.integers(1 << 16)), 2 * CPU_MIN_BLOCK + int(rng.integers(1, 500))
+    runs = {}
+    for graph, threads in (("on", 2), ("off", 1)):
+        cfg = MCLConfig(num_particles=n, weighting="likelihood_field", seed=seed, step_graph=graph, cpu_threads=threads)
+        pf = build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, maps)
+        pf.init_gaussian(log.ground_truth[0], (0.5, 0.5, 0.2))
+        out = [pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k]) for k in range(1, len(log))]
+        assert pf._splits_on_cpu() == (threads == 2) and len(pf.graphs) == (2 if graph == "on" else 0)
+        runs[graph] = ([o[0] for o in out], [o[1] for o in out], pf.particles.numpy())
+    for split, whole in zip(runs["on"], runs["off"]):
+        assert np.array_equal(np.asarray(split), np.asarray(whole)), f"seed {seed}, {n} particles"
+
+
 def test_step_graph_refuses_what_it_cannot_capture():
     log, nog = _world_and_map(duration_s=2.0)
     for extra, why in [

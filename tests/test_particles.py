@@ -144,6 +144,49 @@ def test_best_cluster_picks_the_heavier_of_two_places_and_matches_twin(rng):
         ESTIMATE.build("best_cluster", num_particles=n, bounds=(0, 0, -1, 1), device=DEVICE)
 
 
+def test_the_cpu_walk_draws_the_particles_the_search_draws(rng):
+    """Low-variance resampling: the one-thread walk over the cdf (a CPU's ``systematic_merge_kernel``) and the
+    binary search per pointer (``systematic_kernel``) give the same particles and log-weights bit for bit, on fresh
+    weights with runs of zero weight (a cdf with flat stretches) and a few dominant particles."""
+    from irmcl_warp.kernels.resample import systematic_kernel, systematic_merge_kernel
+
+    n = int(rng.integers(500, 3000))
+    log_w = rng.normal(0, 3, n).astype(np.float32)
+    log_w[rng.random(n) < 0.3] = -200.0  # exp underflows to 0: the cdf stays flat there
+    log_w[rng.integers(0, n, 3)] = 8.0
+    particles = rng.normal(0, 5, (n, 3)).astype(np.float32)
+    pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
+    weights = ParticleWeights(n, device=DEVICE)
+    weights.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), pw)
+    offset = wp.array([rng.uniform()], dtype=wp.float32, device=DEVICE)
+    out = {}
+    for kernel, dim in ((systematic_kernel, n), (systematic_merge_kernel, 1)):
+        dst = wp.zeros(n, dtype=wp.vec3, device=DEVICE)
+        lw = wp.array(log_w, dtype=wp.float32, device=DEVICE)
+        wp.launch(kernel, dim, [weights.cdf, offset, pw, dst, weights.sums, 3.0e38, lw], device=DEVICE)
+        out[dim] = (dst.numpy(), lw.numpy())
+    assert np.array_equal(out[n][0], out[1][0]) and np.array_equal(out[n][1], out[1][1]), f"seed {rng.seed}"
+    assert np.all(out[1][1] == 0.0) and len(np.unique(out[1][0], axis=0)) < n  # resampled: heavy ones repeat
+
+
+def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
+    """The top-share estimate with ParticleWeights' w and (cos, sin) shared (as the filter builds it) against the
+    estimate computing exp and the yaw's cos and sin itself: the same five sums to the bit."""
+    from irmcl_warp.kernels import ESTIMATE
+
+    n = int(rng.integers(300, 5000))
+    log_w, particles, pw, weights = _weights(rng, n)
+    lw = wp.array(log_w, dtype=wp.float32, device=DEVICE)
+    alone = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
+    shared = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
+    shared.share_weights(weights)
+    alone.launch(pw, lw)
+    shared.launch(pw, lw)
+    assert np.array_equal(alone.sums.numpy(), shared.sums.numpy()), f"seed {rng.seed}"
+    with pytest.raises(ValueError, match="built for"):
+        ESTIMATE.build("top_share", num_particles=n + 1, device=DEVICE).share_weights(weights)
+
+
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     n = 300
     log_w, particles, pw, weights = _weights(rng, n)

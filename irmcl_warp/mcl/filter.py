@@ -154,6 +154,8 @@ class ParticleFilter:
         centre = ((self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2)
         self.weights = ParticleWeights(n, device=d, centre=centre)
         self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d)
+        if hasattr(self.estimator, "share_weights"):  # it reads w and (cos, sin) of the yaws from self.weights
+            self.estimator.share_weights(self.weights)
         self.weighting = None  # the old set's scratch is released before the new one is allocated
         self.weighting = self.make_weighting(n, len(self.beam_index))
         self.graphs = {}  # captured on the old arrays: capture again
@@ -216,7 +218,8 @@ class ParticleFilter:
 
     # --- one filter step --------------------------------------------------------------------------
     def _graph_choice(self) -> bool:
-        """``mcl.step_graph``: auto = on a GPU when the step can be captured, on = always (an error when it
+        """``mcl.step_graph``: auto = when the step can be captured (a CUDA graph on a GPU, Warp's CPU graph on a
+        CPU: there it saves the ~15 launches' Python, 0.5-1 ms a step at 10k particles), on = always (an error when it
         cannot), off = launch one by one. A step can be captured when nothing in it needs the host between
         launches: recovery off (it reads the mean likelihood back mid-step), an estimate that stays on the
         device (top_share or mean) and a weighting made only of Warp launches."""
@@ -240,7 +243,7 @@ class ParticleFilter:
         ]
         if mode == "on" and blockers:
             raise ValueError("MCL: mcl.step_graph=on, but a step cannot be captured: " + "; ".join(blockers))
-        return mode == "on" or (mode == "auto" and not blockers and self.device.startswith("cuda"))
+        return mode == "on" or (mode == "auto" and not blockers)
 
     @property
     def recovery_on(self) -> bool:
@@ -295,7 +298,15 @@ class ParticleFilter:
     def _weigh(self) -> None:
         """The observation model's log-likelihoods, accumulated into the log-weights (tempered by
         ``mcl.temper``), their normalisation and N_eff (``ParticleWeights``) and the estimator's sums."""
+        self._observe()
+        self._normalise()
+
+    def _observe(self) -> None:
+        """The observation model's log-likelihood of this scan per particle, into ``log_lik``."""
         self.weighting(self.particles, self.T_base_laser, self.angles, self.inputs.measured, self.log_lik)
+
+    def _normalise(self) -> None:
+        """``log_lik`` into the log-weights, their normalisation and N_eff, and the estimator's sums."""
         wp.launch(
             accumulate_kernel,
             self.log_w.shape[0],
@@ -325,16 +336,51 @@ class ParticleFilter:
             wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
 
     def _replay(self, limit: float) -> None:
-        """``_move``, ``_weigh`` and ``_resample`` as one CUDA graph from the current particle buffer,
-        captured on first use (recovery is off whenever a graph is used: see ``_graph_choice``)."""
+        """``_move``, ``_weigh`` and ``_resample`` as one graph from the current particle buffer, captured on
+        first use (recovery is off whenever a graph is used: see ``_graph_choice``). On a CPU whose motion or
+        weighting splits its particles over the cores (``ParticleBlocks``; a graph would record one core's
+        launch), those two run split before the graph, which then holds the rest of the step."""
         key = self.particles.ptr
+        split = self._splits_on_cpu()
+        if split:
+            self._move_and_observe()
         if key not in self.graphs:
             with wp.ScopedCapture(device=self.device) as capture:
-                self._move()
-                self._weigh()
+                if not split:
+                    self._move()
+                    self._observe()
+                self._normalise()
                 self._resample(limit)
             self.graphs[key] = capture.graph
         wp.capture_launch(self.graphs[key])
+
+    def _move_and_observe(self) -> None:
+        """``_move`` then ``_observe``; where both split their particles into the same blocks, one pass: each core
+        moves its block and weighs it at once (one wait for the cores instead of two, the block still in its cache)."""
+        n, motion, weighting = self.num_particles, self.motion, self.weighting
+        if not all(hasattr(part, "block") and hasattr(part, "blocks") for part in (motion, weighting)) or (
+            motion.blocks.blocks_for(n) != weighting.blocks.blocks_for(n)
+        ):
+            self._move()
+            self._observe()
+            return
+        self.inputs.send()
+        move = motion.block(self.particles, self.inputs.odom, self.inputs.motion_seed)
+        weigh = weighting.block(self.particles, self.T_base_laser, self.angles, self.inputs.measured, self.log_lik)
+
+        def both(p0: int, p1: int) -> None:
+            move(p0, p1)
+            weigh(p0, p1)
+
+        motion.blocks.run(both, n)
+
+    def _splits_on_cpu(self) -> bool:
+        """Whether the motion or the weighting launches this set's particles as more than one block."""
+        n = self.num_particles
+        return any(
+            getattr(part, "blocks", None) is not None and part.blocks.blocks_for(n) > 1
+            for part in (self.motion, self.weighting)
+        )
 
     def _inject(self, p_inject: float) -> None:
         """Augmented MCL's random particles (uniform over the free space's cells), after resampling."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import ParticleBlocks, pick_device
+from irmcl_warp.kernels.registry import CPU_MIN_BLOCK, ParticleBlocks, pick_device
 
 
 @wp.func
@@ -94,7 +94,7 @@ class GridModel:
     """Shared by the grid baselines: the grid on the device, its frame, and one launch, a thread per
     particle adding its valid beams' log q in beam order into ``log_lik`` (no atomics: the same bits on
     every run). On the CPU the particles are split into a block per core (``cpu_threads``, default: the
-    process's cores; ``ParticleBlocks``, from 2 x 16k particles), which changes no bit."""
+    process's cores; ``ParticleBlocks``, from 2 x ``CPU_MIN_BLOCK`` particles), which changes no bit."""
 
     name = "grid model"
     capturable = True  # launches only: a filter step may capture it in a graph (captured, it is one launch)
@@ -105,8 +105,8 @@ class GridModel:
             raise ValueError(f"{self.name}: the map is empty (shape {occupancy.shape}, no occupied cell)")
         self.device = pick_device(device)
         self.origin, self.res = wp.vec2(*map(float, origin_xy)), float(resolution_m)
-        # on the CPU a block per core from 2 x 16k particles (below, the split saved less than it cost on 2 cores)
-        self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=16384)
+        # on the CPU a block per core from 2 x CPU_MIN_BLOCK particles (kernels/registry.py says why)
+        self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=CPU_MIN_BLOCK)
         return occupancy
 
     def beams(self, angles: wp.array) -> wp.array:
@@ -114,6 +114,10 @@ class GridModel:
         return angles
 
     def __call__(self, particles, T_base_laser, angles, measured, log_lik) -> None:
+        self.blocks.run(self.block(particles, T_base_laser, angles, measured, log_lik), particles.shape[0])
+
+    def block(self, particles, T_base_laser, angles, measured, log_lik):
+        """The call for one block of particles: a function (p0, p1) -> None (``ParticleBlocks.block``)."""
         T = wp.vec3(*map(float, T_base_laser))
         inputs = [self.grid, self.origin, self.res, particles, T, self.beams(angles), measured, log_lik]
-        self.blocks.launch(self.kernel, particles.shape[0], inputs, per_particle=(3, 7))
+        return self.blocks.block(self.kernel, particles.shape[0], inputs, per_particle=(3, 7))
