@@ -4,6 +4,9 @@
 # each run scored against the SLAM run's poses of the same scans (python -m eval.analyses.own_slam_map).
 # Usage (after the packages and the logs are unpacked: ../shared/tools/gpu/README.md, eval/gpu/stage_data.sh):
 #   LOGS="fr079 intel" SEEDS=0,1,2,3,4 bash eval/gpu/own_slam_map.sh
+# SLAM_ARGS: overrides of the SLAM run (MIT Killian: "slam.num_particles=60 slam.proposal=gmapping_code slam.seed=6",
+# a seed whose map converged, 0.045 m on the relations: the experiment's 30-particle map did not, 0.19 m);
+# JOBS: localization runs at once (separate processes sharing the GPU; each run is host-bound), default 1.
 # Results: $OUT/own_slam_map-<log>.json (the scores) and $OUT/own_slam_map.tgz (the runs' trajectories, metrics and
 # settings, the SLAM runs' maps and poses; not the MCAP replays or animations). Unpack into the repository root.
 set -uo pipefail
@@ -11,13 +14,25 @@ export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 N=${N:-100000}
 SEEDS=${SEEDS:-0,1,2,3,4,5,6,7,8,9}
+JOBS=${JOBS:-1}
 for log in ${LOGS:-fr079 intel mit_csail}; do
   echo "=== $log: SLAM"
-  python -m irmcl_warp.slam +exp="gmapping_$log" 2>&1 | grep -E "ATE|scans processed|Error" | tail -2
+  # shellcheck disable=SC2086
+  python -m irmcl_warp.slam +exp="gmapping_$log" ${SLAM_ARGS:-} 2>&1 | grep -E "ATE|relations|scans processed|Error" | tail -3
   slam=$(dirname "$(ls -td outputs/gmapping_"$log"/slam/*/map.yaml | head -1)")
-  echo "=== $log: localized in $slam/map.yaml, $N particles, seeds $SEEDS"
-  python -m irmcl_warp.localize -m +exp="$log" mcl=amcl mcl.num_particles="$N" localize.map_path="$slam/map.yaml" \
-    localize.run_s=null mcl.seed="$SEEDS" 2>&1 | grep -E "localized|Error" | sed 's/ -> .*//' | tail -12
+  echo "=== $log: localized in $slam/map.yaml, $N particles, seeds $SEEDS, $JOBS at once"
+  localize=(+exp="$log" mcl=amcl mcl.num_particles="$N" localize.map_path="$slam/map.yaml" localize.run_s=null)
+  if [ "$JOBS" -gt 1 ]; then
+    for s in ${SEEDS//,/ }; do
+      python -m irmcl_warp.localize "${localize[@]}" mcl.seed="$s" > "$OUT/localize-$log-seed$s.log" 2>&1 &
+      while [ "$(jobs -rp | wc -l)" -ge "$JOBS" ]; do sleep 1; done
+    done
+    wait
+    grep -hE "localized|Error" "$OUT"/localize-"$log"-seed*.log | sed 's/ -> .*//' | tail -12
+  else
+    python -m irmcl_warp.localize -m "${localize[@]}" mcl.seed="$SEEDS" 2>&1 | grep -E "localized|Error" \
+      | sed 's/ -> .*//' | tail -12
+  fi
   runs=$(grep -l "$slam/map.yaml" outputs/"$log"/localize/*-in-map-*/config.yaml | xargs -n1 dirname)
   python -m eval.analyses.own_slam_map --slam "$slam" --runs $runs --out "$OUT/own_slam_map-$log.json" | tail -14
 done
