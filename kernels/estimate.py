@@ -111,6 +111,10 @@ class TopShareMean:
         from the same log-weights and particles before every ``launch``) instead of computing them again."""
         if weights is not None and weights.w.shape[0] != self.n:
             raise ValueError(f"top_share: weights of {weights.w.shape[0]} particles, built for {self.n}")
+        if weights is not None and not weights.keeps_cos_sin:
+            raise ValueError(
+                "top_share: these weights do not keep the yaws' cos and sin (ParticleWeights keep_cos_sin)"
+            )
         self.weights = weights
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:

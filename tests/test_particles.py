@@ -52,7 +52,7 @@ def _weights(rng, n):
         np.float32
     )
     pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
-    weights = ParticleWeights(n, device=DEVICE)
+    weights = ParticleWeights(n, device=DEVICE, keep_cos_sin=True)
     weights.update(wp.array(log_w, dtype=wp.float32, device=DEVICE), pw)
     return log_w, particles, pw, weights
 
@@ -185,6 +185,8 @@ def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
     assert np.array_equal(alone.sums.numpy(), shared.sums.numpy()), f"seed {rng.seed}"
     with pytest.raises(ValueError, match="built for"):
         ESTIMATE.build("top_share", num_particles=n + 1, device=DEVICE).share_weights(weights)
+    with pytest.raises(ValueError, match="do not keep"):
+        shared.share_weights(ParticleWeights(n, device=DEVICE, keep_cos_sin=False))
 
 
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):

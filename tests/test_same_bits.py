@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from eval.same_bits import compare, digest_outputs
 
 
@@ -41,12 +43,13 @@ def test_a_changed_trajectory_or_metric_is_found(tmp_path):
     assert compare(a, {"runs": {}}) == ["sim: only in the first record"]
 
 
-def test_issue_34s_refactor_kept_every_output_on_the_cpu_and_the_gpu():
-    """The record the closing note of issue 34 cites: the same runs before and after the refactor, on the CPU and
-    on cuda:0, hashed file by file; every run wrote files, and none differs."""
+@pytest.mark.parametrize("name", ["same_bits_issue34", "same_bits_session20"])
+def test_kept_same_bits_records_show_every_output_unchanged_on_the_cpu_and_the_gpu(name):
+    """The records closing notes cite (issue 34's refactor; the twentieth session's CPU step): the same runs before
+    and after, on the CPU and on cuda:0, hashed file by file; every run wrote files, and none differs."""
     from pathlib import Path
 
-    record = json.loads((Path(__file__).parents[1] / "results/checks/same_bits_issue34.json").read_text())
+    record = json.loads((Path(__file__).parents[1] / f"results/checks/{name}.json").read_text())
     assert set(record["devices"]) == {"cpu", "cuda:0"}
     for device, runs in record["devices"].items():
         assert set(runs["before"]) == set(runs["after"]) and len(runs["after"]) >= 8, device

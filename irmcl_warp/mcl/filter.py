@@ -154,7 +154,7 @@ class ParticleFilter:
         centre = ((self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2)
         self.weights = ParticleWeights(n, device=d, centre=centre)
         self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d)
-        if hasattr(self.estimator, "share_weights"):  # it reads w and (cos, sin) of the yaws from self.weights
+        if hasattr(self.estimator, "share_weights") and self.weights.keeps_cos_sin:  # w and the yaws' cos, sin
             self.estimator.share_weights(self.weights)
         self.weighting = None  # the old set's scratch is released before the new one is allocated
         self.weighting = self.make_weighting(n, len(self.beam_index))
