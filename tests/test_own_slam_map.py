@@ -48,3 +48,30 @@ def test_a_run_on_a_look_alike_place_fails_where_an_alignment_would_pass_it(tmp_
     assert rec["log"] == "toy" and (rec["successes"], rec["of"]) == (1, 2)
     table = own_slam_map_table([rec])
     assert "| toy | likelihood field | 2k | cpu | 2 (0,1) | 1/2 |" in table and table.endswith("| 2/2 |")
+
+
+def test_the_record_says_how_the_confidence_separates_right_scans_from_wrong(tmp_path, rng):
+    """Per scan, the run's confidence (spread.csv) against whether the estimate lies within 0.5 m / 10 deg of the
+    SLAM pose, pooled over the runs: a confidence high exactly where the estimate is right has AUROC 1, the same
+    numbers turned upside down 0; scans before the first update (NaN) are left out."""
+    t = np.arange(0.0, 40.0, 0.2)
+    path = np.column_stack([t / 4, np.zeros_like(t), np.zeros_like(t)])
+    slam = tmp_path / "slam"
+    slam.mkdir()
+    write_tum(slam / "trajectory.tum", t, path)
+    OmegaConf.save(OmegaConf.create({"data": {"name": "toy"}}), slam / "config.yaml")
+    est = path + rng.normal(0, 0.02, path.shape)
+    wrong = rng.random(len(t)) < 0.3
+    est[wrong, 0] += 2.0  # 2 m off on these scans
+    good_conf = np.where(wrong, rng.uniform(0.0, 0.3, len(t)), rng.uniform(0.6, 1.0, len(t)))
+    good_conf[:5] = np.nan  # before the filter's first update
+    for name, conf in (("fits", good_conf), ("upside_down", 1.0 - good_conf)):
+        run = _run(tmp_path / name, t, est, 0, 0.9)
+        lines = "".join(f"{s:.6f},0.1,1000,{c:.4f}\n" for s, c in zip(t, conf))
+        (run / "spread.csv").write_text("stamp,spread_m,particles,confidence\n" + lines)
+        out = tmp_path / f"{name}.json"
+        score(["--slam", str(slam), "--runs", str(run), "--out", str(out)])
+        judged = json.loads(out.read_text())["confidence"]
+        assert judged["scans"] == len(t) - 5 and judged["scans_right"] == int((~wrong[5:]).sum())
+        assert judged["auroc"] == (1.0 if name == "fits" else 0.0), f"seed {rng.seed}"
+        assert "scan_confidence" not in json.loads(out.read_text())["runs"][0]  # pooled, not kept per scan

@@ -19,6 +19,8 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from irmcl_warp.io import read_tum
+from irmcl_warp.mcl.confidence import auroc, right
+from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.metrics import localization_metrics
 from irmcl_warp.services.outputs import write_json
@@ -32,6 +34,28 @@ def on_reference(stamps: np.ndarray, est: np.ndarray, ref_stamps: np.ndarray, re
     out = ref[k].astype(float).copy()
     out[np.abs(ref_stamps[k] - stamps) > tol_s] = np.nan
     return out
+
+
+def confidence_per_scan(run: Path, stamps: np.ndarray) -> np.ndarray:
+    """The run's calibrated confidence at each of its scans (spread.csv; NaN before the filter's first update and
+    where the run had none)."""
+    if not (run / "spread.csv").is_file():
+        return np.full(len(stamps), np.nan)
+    rows = np.genfromtxt(run / "spread.csv", delimiter=",", names=True)
+    if "confidence" not in rows.dtype.names:
+        return np.full(len(stamps), np.nan)
+    # in the trajectory's order: read_tum sorts by stamp (stable) and drops repeated stamps (intel's log has 628
+    # scans stamped before the one before them), spread.csv keeps the scans' order
+    at, conf = np.atleast_1d(rows["stamp"]).astype(float), np.atleast_1d(rows["confidence"]).astype(float)
+    order = np.argsort(at, kind="stable")
+    at, conf = at[order], conf[order]
+    keep = np.concatenate([[True], np.diff(at) != 0])
+    at, conf = at[keep], conf[keep]
+    # each trajectory pose's row (the trajectory leaves out scans without an estimate; spread.csv has every scan)
+    k = np.clip(np.searchsorted(at, stamps - 1e-6), 0, len(at) - 1)
+    if np.abs(at[k] - stamps).max() > 1e-5:
+        raise ValueError(f"{run / 'spread.csv'}: a trajectory stamp has no row (stamps differ by more than 10 us)")
+    return conf[k]
 
 
 def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
@@ -61,6 +85,34 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "error_at_end_m": end_error,
         "confidence_at_end": m.get("confidence_at_end"),
         "localized_at_end": m.get("localized_at_end"),
+        # per scan, where the confidence and the SLAM pose exist: the confidence, and whether the estimate was right
+        # (within RIGHT_M and RIGHT_DEG of the SLAM pose); pooled over the runs by ``judge_confidence``
+        **per_scan_judgement(confidence_per_scan(run, stamps), est, on_ref),
+    }
+
+
+def per_scan_judgement(conf: np.ndarray, est: np.ndarray, on_ref: np.ndarray) -> dict:
+    has = np.isfinite(conf) & np.isfinite(est).all(1) & np.isfinite(on_ref).all(1)
+    return {"scan_confidence": conf[has].round(4).tolist(), "scan_right": right(est[has], on_ref[has]).tolist()}
+
+
+def judge_confidence(rows: list[dict], threshold: float = CONFIDENT_ABOVE) -> dict:
+    """How the confidence separates right from wrong over every scan of the runs: the AUROC (right against wrong
+    scans), the confidence's median when right and when wrong, and the share of scans above the threshold when
+    right (said localized) and when wrong (said localized although wrong)."""
+    conf = np.concatenate([np.asarray(r["scan_confidence"], float) for r in rows]) if rows else np.zeros(0)
+    ok = np.concatenate([np.asarray(r["scan_right"], bool) for r in rows]) if rows else np.zeros(0, bool)
+    med = lambda v: float(np.median(v)) if len(v) else None  # noqa: E731
+    share = lambda v: float(np.mean(v >= threshold)) if len(v) else None  # noqa: E731
+    return {
+        "scans": int(len(conf)),
+        "scans_right": int(ok.sum()),
+        "auroc": None if ok.all() or not ok.any() else auroc(conf, ok),
+        "median_when_right": med(conf[ok]),
+        "median_when_wrong": med(conf[~ok]),
+        "above_threshold_when_right": share(conf[ok]),
+        "above_threshold_when_wrong": share(conf[~ok]),
+        "threshold": threshold,
     }
 
 
@@ -83,10 +135,30 @@ def main(argv=None):
         conf = "-" if r["confidence_at_end"] is None else f"{r['confidence_at_end']:.2f}"
         print(f"| {r['seed']} | {r['scans']} | {conv} | {r['success']} | {rmse} | {end} | {conf} |")
     print(f"success {ok}/{len(rows)}")
+    judged = judge_confidence(rows)
+    for r in rows:  # the per-scan arrays are pooled above; the record keeps each run's share of right scans
+        conf, hit = r.pop("scan_confidence"), r.pop("scan_right")
+        r["scans_judged"], r["scans_judged_right"] = len(conf), int(sum(hit))
+    if judged["scans"]:
+        auc = "-" if judged["auroc"] is None else f"{judged['auroc']:.3f}"
+        print(
+            f"confidence over {judged['scans']:,} scans ({judged['scans_right']:,} right): AUROC {auc}; median "
+            f"{judged['median_when_right']} when right, {judged['median_when_wrong']} when wrong"
+        )
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         log = OmegaConf.select(OmegaConf.load(a.slam / "config.yaml"), "data.name")
-        write_json(a.out, {"log": log, "slam_run": str(a.slam), "runs": rows, "successes": ok, "of": len(rows)})
+        write_json(
+            a.out,
+            {
+                "log": log,
+                "slam_run": str(a.slam),
+                "runs": rows,
+                "successes": ok,
+                "of": len(rows),
+                "confidence": judged,
+            },
+        )
         print(f"-> {a.out}")
     return rows
 
