@@ -47,7 +47,10 @@ def test_a_run_on_a_look_alike_place_fails_where_an_alignment_would_pass_it(tmp_
     rec = json.loads(out.read_text())
     assert rec["log"] == "toy" and (rec["successes"], rec["of"]) == (1, 2)
     table = own_slam_map_table([rec])
-    assert "| toy | likelihood field | 2k | cpu | 2 (0,1) | 1/2 |" in table and table.endswith("| 2/2 |")
+    # both said localized at the end; the one 4 m along the look-alike path was wrong; no per-scan confidence here
+    assert "| toy | likelihood field | 2k | cpu | 2 (0,1) | 1/2 |" in table and table.endswith(
+        "| 2/2 | 1 | - | - / - |"
+    )
 
 
 def test_the_record_says_how_the_confidence_separates_right_scans_from_wrong(tmp_path, rng):

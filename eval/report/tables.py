@@ -428,8 +428,9 @@ def own_slam_map_table(records: list) -> str:
     row per record of eval.analyses.own_slam_map (results/own_slam_map/), its runs scored against the SLAM poses."""
     rows = [
         "| log | weighting | particles | device | runs (seeds) | success (protocol) | converged after (s), median "
-        "[min-max] | RMSE after (cm), median | ended confident (>= 0.8) |",
-        "|" + "---|" * 9,
+        "[min-max] | RMSE after (cm), median | ended confident (>= 0.8) | ended confident and wrong | AUROC, every "
+        "scan | confidence when right / wrong, median |",
+        "|" + "---|" * 12,
     ]
     for rec in sorted(records, key=lambda r: (r["log"], r["runs"][0]["particles"])):
         runs = rec["runs"]
@@ -437,11 +438,17 @@ def own_slam_map_table(records: list) -> str:
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
         e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
         conf = sum(bool(r["localized_at_end"]) for r in runs)
+        # said localized at the end although more than the protocol's 0.5 m off the SLAM pose
+        wrong = sum(bool(r["localized_at_end"]) and (r["error_at_end_m"] or 0.0) > 0.5 for r in runs)
+        judged = rec.get("confidence") or {}  # records before the per-scan judgement have none
+        auc = _f(judged.get("auroc"), "{:.3f}")
+        when_right, when_wrong = (_f(judged.get(k), "{:.2f}") for k in ("median_when_right", "median_when_wrong"))
+        medians = f"{when_right} / {when_wrong}" if judged else "-"
         span = f"{np.median(t):.1f} [{min(t):.1f}-{max(t):.1f}]" if t else "-"
         seeds = ",".join(str(r["seed"]) for r in sorted(runs, key=lambda r: r["seed"]))
         rows.append(
             f"| {rec['log']} | {first['weighting'].replace('_', ' ')} | {first['particles'] // 1000}k | {first['device']} "
             f"| {len(runs)} ({seeds}) | {rec['successes']}/{len(runs)} | {span} | {_f(np.median(e) if e else None)} "
-            f"| {conf}/{len(runs)} |"
+            f"| {conf}/{len(runs)} | {wrong} | {auc} | {medians} |"
         )
     return "\n".join(rows)
