@@ -53,9 +53,9 @@ def plot_error(path: Path, stamps, est, gt_map, converged_s) -> None:
     save_figure(fig, path)
 
 
-def failure_note(stamps, est, gt_map, loc: dict) -> str | None:
+def failure_note(stamps, est, gt_map, loc: dict, reference: str = "truth") -> str | None:
     """None where the localization succeeded, else a plain sentence: whether it ever converged, when and
-    where it was last more than 0.3 m off, and how far off it ended."""
+    where it was last more than 0.3 m off, and how far off it ended (``reference``: what ``gt_map`` is)."""
     if loc is None or loc["success"]:
         return None
     t = np.asarray(stamps) - stamps[0]
@@ -71,7 +71,7 @@ def failure_note(stamps, est, gt_map, loc: dict) -> str | None:
     )
     return (
         f"Localization FAILED: it {how}; {err[last]:.2f} m off at {t[last]:.1f} s (estimate "
-        f"({est[last, 0]:.2f}, {est[last, 1]:.2f}) m, truth ({gt_map[last, 0]:.2f}, {gt_map[last, 1]:.2f}) m), "
+        f"({est[last, 0]:.2f}, {est[last, 1]:.2f}) m, {reference} ({gt_map[last, 0]:.2f}, {gt_map[last, 1]:.2f}) m), "
         f"{err[ok][-1]:.2f} m off at the end ({t[ok][-1]:.1f} s)."
     )
 
@@ -118,6 +118,13 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
     if slam["relations_m"] is not None:
         lines.append(f"Relations metric: {slam['relations_m']:.3f} m.")
     lines += ["", "## Localization (global, from a uniform start)", ""]
+    own = metrics.get("against_slam_poses")
+    if own:  # the mapping log localized again: its SLAM poses of the same scans, in the map's frame
+        lines += [
+            f"Against the mapping log's own SLAM poses (no alignment): {own['verdict']}."
+            + (f" **{own['failure']}**" if own.get("failure") else ""),
+            "",
+        ]
     if metrics.get("failure"):
         lines += [f"**{metrics['failure']}**", ""]
     if loc is None:

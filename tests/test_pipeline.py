@@ -112,3 +112,36 @@ def test_pipeline_on_bags_without_a_far_bound(tmp_path, monkeypatch):
         torch.load(Path(trained) / "nof.pt", map_location="cpu", weights_only=False)["far_m"] == 12.0
     )  # floor(range_max)
     assert (out / "localization.tum").is_file() and (out / "report.md").is_file()
+    assert "against_slam_poses" not in m  # another drive: scored against its own truth only
+    # the mapping log localized again (no pipeline.path; SLAM and NOF reused): scored against its own SLAM poses too
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        again = compose(
+            "pipeline", overrides=[o for o in SMALL if not o.startswith("sim.")] + ["data=bag", f"data.path={bags[0]}"]
+        )
+    out2 = run_pipeline(again)
+    own = json.loads((out2 / "metrics.json").read_text())["against_slam_poses"]
+    assert own["poses"] == json.loads((out2 / "metrics.json").read_text())["localized_scans"]
+    assert own["verdict"] in (out2 / "report.md").read_text()
+
+
+def test_the_mapping_log_localized_again_is_scored_against_its_own_slam_poses(rng):
+    """Issue 33: a pipeline that localizes its mapping log again compares the estimate with the SLAM poses it
+    already holds (the same scans, the map's frame, no alignment); a run that followed a look-alike place 4 m
+    along says so, with its distance at the end, where before it reported "no ground truth to score"."""
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.pipeline import against_slam_poses, localizes_mapping_log
+
+    t = np.arange(0.0, 80.0, 0.2)
+    slam = np.column_stack([np.cos(t / 12) * 6, np.sin(t / 12) * 4, t / 12 + np.pi / 2])
+    right = slam + rng.normal(0, 0.03, slam.shape)
+    right[:25] += [5.0, 1.0, 0.5]  # the global start: 5 s off, then right
+    good = against_slam_poses(t, right, slam)
+    assert good["success"] and good["failure"] is None and "converged after" in good["verdict"]
+    along = slam + [4.0, 0.0, 0.0]
+    bad = against_slam_poses(t, along, slam)
+    assert not bad["success"] and abs(bad["error_at_end_m"] - 4.0) < 1e-6
+    assert "FAILED, 4.00 m from its own SLAM pose" in bad["verdict"] and "SLAM pose (" in bad["failure"]
+    cfg = lambda path, fmt: OmegaConf.create({"pipeline": {"path": path}, "data": {"format": fmt}})  # noqa: E731
+    assert localizes_mapping_log(cfg(None, "bag")) and not localizes_mapping_log(cfg("other.bag", "bag"))
+    assert not localizes_mapping_log(cfg(None, "sim"))  # the simulator's second session is another drive
