@@ -566,7 +566,9 @@ def test_grid_models_split_over_cpu_cores_give_the_same_bits(rng, model):
     every particle the bits one launch gives (on a GPU both are one launch)."""
     occ = (rng.random((50, 70)) < 0.04).astype(np.float32)
     occ[0, :] = 1.0
-    P = int(rng.integers(3 * 16384 + 1, 55000))  # at least 3 blocks of 16k particles
+    from irmcl_warp.kernels.registry import CPU_MIN_BLOCK
+
+    P = int(rng.integers(3 * CPU_MIN_BLOCK + 1, 4 * CPU_MIN_BLOCK))  # 3 blocks
     particles = np.column_stack([rng.uniform(0, 7, P), rng.uniform(0, 5, P), rng.uniform(-3, 3, P)])
     angles = np.sort(rng.uniform(-np.pi, np.pi, 20)).astype(np.float32)
     measured = rng.uniform(0.2, 6.0, 20).astype(np.float32)
@@ -585,3 +587,32 @@ def test_grid_models_split_over_cpu_cores_give_the_same_bits(rng, model):
         m(*inputs, outs[-1])
     assert np.isfinite(outs[0].numpy()).all()
     assert np.array_equal(outs[0].numpy(), outs[1].numpy()), f"seed {rng.seed}"
+
+
+def test_the_range_table_split_over_cpu_cores_gives_the_same_bits(rng):
+    """nog_table with mcl.cpu_threads: its likelihood launched in a block of particles per core (as the filter's
+    step runs it on a CPU, each core moving and weighing its block) gives every particle the bits of one launch."""
+    from irmcl_warp.kernels.registry import CPU_MIN_BLOCK
+
+    occ = _random_nog_grid(rng, "walls")[:30, :45]
+    occ[[0, -1], :] = occ[:, [0, -1]] = 1.0
+    nog = NOG(occ, (0.0, 0.0), 0.1)
+    P, B = int(rng.integers(3 * CPU_MIN_BLOCK + 1, 4 * CPU_MIN_BLOCK)), 12
+    particles = np.stack([rng.uniform(0, 4.5, P), rng.uniform(0, 3, P), rng.uniform(-4, 4, P)], -1).astype(np.float32)
+    inputs = (
+        wp.array(particles, dtype=wp.vec3, device=DEVICE),
+        (0.1, -0.05, 0.02),
+        wp.array(np.sort(rng.uniform(-2.0, 2.0, B)).astype(np.float32), dtype=wp.float32, device=DEVICE),
+        wp.array(rng.uniform(0.5, 4.0, B).astype(np.float32), dtype=wp.float32, device=DEVICE),
+    )
+    table, outs = None, []
+    for threads in (1, 3):
+        w = WEIGHTING.build(
+            "nog_table", nog=nog, num_particles=P, num_beams=B, num_angles=24, num_samples=64, far_m=8.0,
+            table=table, cpu_threads=threads, device=DEVICE,
+        )  # fmt: skip
+        table = w.table
+        assert w.blocks.blocks_for(P) == (1 if threads == 1 or DEVICE.startswith("cuda") else 3)
+        outs.append(wp.zeros(P, dtype=wp.float32, device=DEVICE))
+        w(*inputs, outs[-1])
+    assert np.isfinite(outs[0].numpy()).all() and np.array_equal(outs[0].numpy(), outs[1].numpy()), f"seed {rng.seed}"

@@ -93,6 +93,7 @@ def make_weighting(mcl, far_m: float, device: str, maps: WeightingMaps, num_part
                 t_min=mcl.t_min,
                 empty_below=mcl.empty_below,
                 table=maps.built[key],
+                cpu_threads=mcl.cpu_threads,
                 **shared,
             )
         return WEIGHTING.build(

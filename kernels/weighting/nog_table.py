@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import WEIGHTING, pick_device
+from irmcl_warp.kernels.registry import CPU_MIN_BLOCK, WEIGHTING, ParticleBlocks, pick_device
 from irmcl_warp.kernels.weighting.common import laser_pose, mean_l1_log_weight
 from irmcl_warp.kernels.weighting.nog_raymarch import NogRaymarch
 
@@ -144,10 +144,13 @@ class NogTable:
         sigma_m: float = 0.5,
         empty_below: float = 0.0,
         table=None,
+        cpu_threads: int | None = None,
         device: str = "auto",
     ):
         H, W = nog.occupancy.shape
         self.device = pick_device(device)
+        # on the CPU a block of particles per core, as the grid models (kernels/registry.py ParticleBlocks)
+        self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=CPU_MIN_BLOCK)
         self.shape, self.num_beams, self.quantum = (H, W), num_beams, float(far_m) / TABLE_LEVELS
         self.origin, self.res = wp.vec2(*map(float, nog.origin_xy)), float(nog.resolution_m)
         if table is None:
@@ -236,12 +239,12 @@ class NogTable:
                 f"nog_table: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                 f"built for {self.num_beams} beams"
             )
-        wp.launch(
-            self.likelihood_kernel,
-            particles.shape[0],
-            self._args(particles, T_base_laser, angles) + [measured, log_weights],
-            device=self.device,
-        )
+        self.blocks.run(self.block(particles, T_base_laser, angles, measured, log_weights), particles.shape[0])
+
+    def block(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array):
+        """The call for one block of particles: a function (p0, p1) -> None (``ParticleBlocks.block``)."""
+        inputs = self._args(particles, T_base_laser, angles) + [measured, log_weights]
+        return self.blocks.block(self.likelihood_kernel, particles.shape[0], inputs, per_particle=(6, 10))
 
 
 def table_headings(num_angles: int) -> np.ndarray:
