@@ -413,6 +413,13 @@ def shipped_calibration(weighting: str) -> Path | None:
     return path if path.is_file() else None
 
 
+def own_map_calibration(weighting: str, num_particles: int) -> Path | None:
+    """The calibration a run in your own map judges itself with: the one fitted on the worlds stage's filter at this
+    particle count (``<weighting>.json`` for 20k, ``<weighting>-<n>k.json`` otherwise), or None."""
+    n = int(num_particles)
+    return shipped_calibration(weighting if n == 20000 else f"{weighting}-{n // 1000}k")
+
+
 def compose_config(overrides=(), name: str = "config"):
     """``conf/<name>`` composed with Hydra ``overrides`` outside a Hydra app (benchmarks, reference checks)."""
     from hydra import compose, initialize_config_dir

@@ -45,7 +45,7 @@ from typing import Callable, Iterator
 
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.atomic import atomic_write_json as write_json
-from irmcl_warp.config import shipped_calibration
+from irmcl_warp.config import own_map_calibration, shipped_calibration
 
 REPO = Path(__file__).resolve().parents[1]
 OUTPUTS = Path("outputs")  # relative to the working directory, as Hydra's run dir
@@ -256,7 +256,17 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
         if value:
             path = resolve(value)  # as given (absolute, or from the working directory), else under IRMCL_DATA
             out[key] = map_files(path) if key == "localize.map_path" else [path]
+    if "localize.map_path" in out:  # a run in your own map judges itself with the calibration for its filter
+        try:
+            calibration = own_map_calibration(_get(settings, "mcl.weighting"), _get(settings, "mcl.num_particles"))
+        except KeyError:
+            calibration = None
+        if calibration is not None:
+            out[OWN_MAP_CALIBRATION] = [calibration]
     return out
+
+
+OWN_MAP_CALIBRATION = "localize.calibration"  # an input no setting names: the file own_map_calibration picks
 
 
 def _by_name(key: str, value):
@@ -347,7 +357,8 @@ def identify(cfg, stage: str) -> Identity:
     # upstream ids; exp only places the folder
     named = json.loads(json.dumps({k: v for k, v in settings.items() if k != "exp"}))  # a copy: settings stay whole
     for key in inputs:
-        _set(named, key, None)
+        if key != OWN_MAP_CALIBRATION:  # (no setting to blank: the file is picked from mcl.*)
+            _set(named, key, None)
     run_id = digest(
         {
             "stage": stage,

@@ -99,6 +99,30 @@ def test_file_settings_count_by_content_not_by_name(tmp_path):
     assert runs.identify(cfg(log), "slam").id != first.id
 
 
+def test_a_run_in_your_own_map_is_another_run_when_its_confidence_calibration_changes(tmp_path, monkeypatch):
+    """A localization in your own map judges itself with the calibration shipped for its filter (the worlds stage's
+    at its particle count): that file is one of the run's inputs, so a run made with another calibration is not
+    reported as this one (a stale run reported finished), and a count without a calibration reads none."""
+    import irmcl_warp.config as config
+
+    cal_dir = tmp_path / "calibration"
+    cal_dir.mkdir()
+    monkeypatch.setattr(config, "CALIBRATION_DIR", cal_dir)
+    grid = tmp_path / "map.pgm"
+    grid.write_bytes(b"P5 2 2 255\n" + bytes([255, 0, 0, 255]))
+    (tmp_path / "map.yaml").write_text(
+        "image: map.pgm\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
+    cfg = _cfg(*SMALL, f"localize.map_path={tmp_path / 'map.yaml'}", "mcl=amcl", "mcl.num_particles=100000")
+    (cal_dir / "likelihood_field-100k.json").write_text('{"coef": [1.0]}')
+    first = runs.identify(cfg, "localize")
+    assert [f["path"] for f in first.inputs[runs.OWN_MAP_CALIBRATION]] == [str(cal_dir / "likelihood_field-100k.json")]
+    (cal_dir / "likelihood_field-100k.json").write_text('{"coef": [2.0]}')  # fitted again
+    assert runs.identify(cfg, "localize").id != first.id
+    fewer = _cfg(*SMALL, f"localize.map_path={tmp_path / 'map.yaml'}", "mcl=amcl", "mcl.num_particles=5000")
+    assert runs.OWN_MAP_CALIBRATION not in runs.identify(fewer, "localize").inputs
+
+
 # --- stages: folders of their own, never overwritten ------------------------------------------------------------
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.config import CONF_DIR, shipped_calibration
+from irmcl_warp.config import CONF_DIR, own_map_calibration
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
@@ -48,7 +48,7 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
     """(the confidence judge for this run, what it is or why there is none). A calibration holds for the filter
     it was fitted on: the worlds stage's (``mcl=amcl``, conf/mcl/amcl.yaml) at the calibration's particle count."""
     m = cfg.mcl
-    path = shipped_calibration(m.weighting if m.num_particles == 20000 else f"{m.weighting}-{m.num_particles // 1000}k")
+    path = own_map_calibration(m.weighting, m.num_particles)
     preset = OmegaConf.load(CONF_DIR / "mcl" / "amcl.yaml")
     differ = sorted(k for k in preset if k != "num_particles" and m.get(k) != preset[k])
     if path is None or differ:
