@@ -28,12 +28,13 @@ for log in ${LOGS:-fr079 intel mit_csail}; do
       while [ "$(jobs -rp | wc -l)" -ge "$JOBS" ]; do sleep 1; done
     done
     wait
-    grep -hE "localized|Error" "$OUT"/localize-"$log"-seed*.log | sed 's/ -> .*//' | tail -12
   else
-    python -m irmcl_warp.localize -m "${localize[@]}" mcl.seed="$SEEDS" 2>&1 | grep -E "localized|Error" \
-      | sed 's/ -> .*//' | tail -12
+    python -m irmcl_warp.localize -m "${localize[@]}" mcl.seed="$SEEDS" > "$OUT/localize-$log-seeds.log" 2>&1
   fi
-  runs=$(grep -l "$slam/map.yaml" outputs/"$log"/localize/*-in-map-*/config.yaml | xargs -n1 dirname)
+  grep -hE "localized|Error" "$OUT"/localize-"$log"-seed*.log | sed 's/ -> .*//' | tail -12
+  # the runs these seeds made or reused (each names its folder last), not every run ever made in this map: a run
+  # judged by another calibration or with other settings is another run in the same map
+  runs=$(grep -hoE "( -> |^)outputs/$log/localize/[^ :]*" "$OUT"/localize-"$log"-seed*.log | sed 's/^ -> //' | sort -u)
   python -m eval.analyses.own_slam_map --slam "$slam" --runs $runs --out "$OUT/own_slam_map-$log.json" | tail -14
 done
 find outputs -path "*/localize/*-in-map-*" \( -name trajectory.tum -o -name metrics.json -o -name config.yaml \
