@@ -171,17 +171,17 @@ def test_a_calibration_reads_features_outside_its_data_at_the_nearest_end(tmp_pa
     y = rng.random(len(X)) < 1 / (1 + np.exp(-(X[:, 0] - 1.2 * X[:, k])))  # more updates: less right, in the data
     model = fit_logistic(X, y)
     assert np.allclose(model.lo, X.min(0)) and np.allclose(model.hi, X.max(0))
-    inside, far = X[:1].copy(), X[:1].copy()
-    inside[0, k], far[0, k] = X[:, k].max(), X[:, k].max() + 4.0  # far past the data
-    assert model(far)[0] == model(inside)[0]
+    inside, beyond = X[:1].copy(), X[:1].copy()
+    inside[0, k], beyond[0, k] = X[:, k].max(), X[:, k].max() + 4.0  # well past the data
+    assert model(beyond)[0] == model(inside)[0]
     unbounded = Confidence(model.coef, model.intercept, model.mean, model.scale)
-    assert unbounded(far)[0] < 0.5 * unbounded(inside)[0]  # what the shipped 100k model did on long logs
+    assert unbounded(beyond)[0] < 0.5 * unbounded(inside)[0]  # what the shipped 100k model did on long logs
     path = tmp_path / "cal.json"
     path.write_text(json.dumps(model.to_json()))
-    assert Confidence.load(path)(far)[0] == model(far)[0]
+    assert Confidence.load(path)(beyond)[0] == model(beyond)[0]
     old = {key: v for key, v in model.to_json().items() if key not in ("lo", "hi")}
     path.write_text(json.dumps(old))
-    assert Confidence.load(path).lo is None and Confidence.load(path)(far)[0] == unbounded(far)[0]
+    assert Confidence.load(path).lo is None and Confidence.load(path)(beyond)[0] == unbounded(beyond)[0]
 
 
 def test_right_means_within_half_a_metre_and_ten_degrees():
