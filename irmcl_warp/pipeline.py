@@ -40,7 +40,7 @@ from irmcl_warp.pipeline_report import failure_note, write_report
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.filters import WeightingMaps, build_filter, free_space_view
-from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.metrics import error_at_end, localization_metrics
 from irmcl_warp.slam.stage import run_slam
 from irmcl_warp.kernels import pick_device
 from irmcl_warp.services.cli import hydra_main, run_entry
@@ -117,12 +117,11 @@ def against_slam_poses(stamps, est, slam_ref) -> dict:
     the failure sentence (None on success) and a one-line verdict."""
     scored = localization_metrics(stamps, est, slam_ref)
     note = failure_note(stamps, est, slam_ref, scored, reference="SLAM pose")
-    last = np.isfinite(est).all(1) & np.isfinite(slam_ref).all(1)
-    end = float(np.hypot(*(est[last][-1, :2] - slam_ref[last][-1, :2]))) if last.any() else float("nan")
+    end = error_at_end(est, slam_ref)
     verdict = (
         f"converged after {scored['time_to_converge_s']:.1f} s, RMSE {_cm(scored['location_rmse_cm'])}"
         if scored["success"]
-        else f"FAILED, {end:.2f} m from its own SLAM pose at the end"
+        else f"FAILED, {'-' if end is None else f'{end:.2f}'} m from its own SLAM pose at the end"
     )
     return {**scored, "error_at_end_m": end, "failure": note, "verdict": verdict}
 

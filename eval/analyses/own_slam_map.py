@@ -22,7 +22,7 @@ from irmcl_warp.io import read_tum
 from irmcl_warp.mcl.confidence import auroc, right
 from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
 from irmcl_warp.services.cli import guard
-from irmcl_warp.services.metrics import localization_metrics
+from irmcl_warp.services.metrics import error_at_end, localization_metrics
 from irmcl_warp.services.outputs import write_json
 
 
@@ -67,8 +67,6 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
     cfg = OmegaConf.load(run / "config.yaml")  # the settings the run read
     manifest = json.loads((run / "manifest.json").read_text())
     scored = localization_metrics(stamps, est, on_ref)
-    last = np.isfinite(est).all(1) & np.isfinite(on_ref).all(1)
-    end_error = float(np.hypot(*(est[last][-1, :2] - on_ref[last][-1, :2]))) if last.any() else None
     return {
         "run": str(run),
         "seed": OmegaConf.select(cfg, "mcl.seed"),
@@ -82,7 +80,7 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
             k: scored[k]
             for k in ("converged", "time_to_converge_s", "success", "location_rmse_cm", "yaw_rmse_deg", "divergences")
         },
-        "error_at_end_m": end_error,
+        "error_at_end_m": error_at_end(est, on_ref),
         "confidence_at_end": m.get("confidence_at_end"),
         "localized_at_end": m.get("localized_at_end"),
         # per scan, where the confidence and the SLAM pose exist: the confidence, and whether the estimate was right

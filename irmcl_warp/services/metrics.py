@@ -184,6 +184,12 @@ def localization_metrics(
     return out
 
 
+def error_at_end(est: np.ndarray, ref: np.ndarray) -> float | None:
+    """The position error (m) at the last pose where the estimate and the reference [n, 3] both exist; None if none."""
+    both = np.isfinite(est).all(1) & np.isfinite(ref).all(1)
+    return float(np.hypot(*(est[both][-1, :2] - ref[both][-1, :2]))) if both.any() else None
+
+
 def aligned_error(est: np.ndarray, gt: np.ndarray) -> dict:
     """RMSE of positions after the rigid 2D alignment (Horn / Umeyama without scale) of est onto gt, and the
     mean absolute yaw error after it; over poses where both are finite."""
