@@ -35,9 +35,15 @@ vec5 = wp.types.vector(length=5, dtype=wp.float32)
 
 
 @wp.func
-def pose_moments(w: float, p: wp.vec3) -> vec5:
+def moments_of(w: float, p: wp.vec3, cos_yaw: float, sin_yaw: float) -> vec5:
     """(w, w x, w y, w cos yaw, w sin yaw): what a weighted mean pose with a circular yaw sums."""
-    return vec5(w, w * p[0], w * p[1], w * wp.cos(p[2]), w * wp.sin(p[2]))
+    return vec5(w, w * p[0], w * p[1], w * cos_yaw, w * sin_yaw)
+
+
+@wp.func
+def pose_moments(w: float, p: wp.vec3) -> vec5:
+    """``moments_of`` with the yaw's cos and sin computed here."""
+    return moments_of(w, p, wp.cos(p[2]), wp.sin(p[2]))
 
 
 def mean_pose(sums: np.ndarray) -> np.ndarray:
@@ -87,10 +93,8 @@ def top_sums_from_weights_kernel(
     acc = vec5()
     for r in range(wp.tid(), k, stride):
         j = order[r]
-        v = w[j]
-        p = particles[j]
         cs = cos_sin[j]
-        acc += vec5(v, v * p[0], v * p[1], v * cs[0], v * cs[1])
+        acc += moments_of(w[j], particles[j], cs[0], cs[1])
     leave_moments(partials, wp.tid(), acc)
 
 

@@ -86,6 +86,13 @@ def resample_now(sums: wp.array(dtype=wp.float32), limit: float) -> bool:
     return sums[5] * sums[5] / sums[0] < limit
 
 
+@wp.func
+def systematic_pointer(offset: float, i: int, n: int, total: float) -> float:
+    """The i-th of n low-variance pointers into a cdf ending at ``total`` (offset in [0, 1)); one expression for
+    both draws, so that the walk and the search see the same pointers to the bit."""
+    return (offset + float(i)) / float(n) * total
+
+
 @wp.kernel
 def systematic_kernel(
     cdf: wp.array(dtype=wp.float32),
@@ -100,8 +107,7 @@ def systematic_kernel(
     N_eff < limit, else dst = src (weights kept)."""
     i = wp.tid()
     if resample_now(sums, limit):
-        n = dst.shape[0]
-        u = (offset[0] + float(i)) / float(n) * cdf[cdf.shape[0] - 1]
+        u = systematic_pointer(offset[0], i, dst.shape[0], cdf[cdf.shape[0] - 1])
         dst[i] = src[search(cdf, u)]
         log_w[i] = 0.0
     else:
@@ -128,7 +134,7 @@ def systematic_merge_kernel(
         total = cdf[last]
         j = int(0)
         for i in range(n):
-            u = (offset[0] + float(i)) / float(n) * total
+            u = systematic_pointer(offset[0], i, n, total)
             while j < last and cdf[j] <= u:
                 j += 1
             dst[i] = src[j]
