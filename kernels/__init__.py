@@ -19,6 +19,7 @@ from irmcl_warp.kernels.registry import (
     Registry,
     init_warp,
     launch_reduction,
+    reduction_threads,
     pick_device,
 )
 
@@ -36,6 +37,7 @@ __all__ = [
     "Registry",
     "init_warp",
     "launch_reduction",
+    "reduction_threads",
     "pick_device",
 ]
 

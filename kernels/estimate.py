@@ -19,7 +19,7 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.kernels.resample import max_kernel
-from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device
+from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device, reduction_threads
 
 
 @wp.kernel
@@ -98,6 +98,24 @@ def top_sums_from_weights_kernel(
     leave_moments(partials, wp.tid(), acc)
 
 
+@wp.kernel
+def top_sums_w_kernel(
+    order: wp.array(dtype=wp.int32),
+    w: wp.array(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    partials: wp.array2d(dtype=wp.float32),
+    k: int,
+    stride: int,
+):
+    """``top_sums_kernel`` with each particle's exp(log w - max) read from ParticleWeights' ``w`` (the same bits,
+    as above): a GPU's step sums the estimate while resampling, on another stream, zeroes the log-weights."""
+    acc = vec5()
+    for r in range(wp.tid(), k, stride):
+        j = order[r]
+        acc += pose_moments(w[j], particles[j])
+    leave_moments(partials, wp.tid(), acc)
+
+
 class TopShareMean:
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -107,7 +125,7 @@ class TopShareMean:
         self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N
         self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
-        self.partial = PartialSums(5, self.device)
+        self.partial = PartialSums(5, self.device, reduction_threads(self.k, self.device))
         self.weights = None
 
     def share_weights(self, weights) -> None:
@@ -128,15 +146,34 @@ class TopShareMean:
 
     def launch(self, particles: wp.array, log_w: wp.array) -> None:
         """Rank and sum on the device, nothing read back (the filter reads once per step)."""
+        self.rank(log_w)
+        self.sort()
+        self.sum(particles, log_w)
+
+    def rank_buffers(self) -> tuple[wp.array, wp.array]:
+        """(keys, values) to sort: ``rank`` fills them, or a GPU filter's ParticleWeights.accumulate."""
+        return self.keys, self.values
+
+    def rank(self, log_w: wp.array) -> None:
+        """The sort keys -log w and the indices."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
+
+    def sort(self) -> None:
+        """The particles by weight, heaviest first (Warp's radix sort; ties keep their index order)."""
         wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
-        if self.weights is None:
-            kernel, inputs = top_sums_kernel, [self.values, self.keys, log_w, particles]
-        else:
+
+    def sum(self, particles: wp.array, log_w: wp.array, w: wp.array | None = None) -> None:
+        """The five sums over the first k ranks: from ``share_weights``' weights and yaws (a CPU), from ``w`` (the
+        weights exp(log w - max), ready), or from the log-weights and the sorted keys."""
+        if self.weights is not None:
             kernel, inputs = (
                 top_sums_from_weights_kernel,
                 [self.values, self.weights.w, self.weights.cos_sin, particles],
             )
+        elif w is not None:
+            kernel, inputs = top_sums_w_kernel, [self.values, w, particles]
+        else:
+            kernel, inputs = top_sums_kernel, [self.values, self.keys, log_w, particles]
         threads = launch_reduction(kernel, self.k, [*inputs, self.partial.partials, self.k], self.device)
         self.partial.finish(threads, self.sums)
 
@@ -214,7 +251,7 @@ class BestCluster:
         self.hist = wp.zeros(self.nyaw * self.ny * self.nx, dtype=wp.float32, device=self.device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
-        self.partial = PartialSums(5, self.device)
+        self.partial = PartialSums(5, self.device, reduction_threads(num_particles, self.device))
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:
         n, d = particles.shape[0], self.device

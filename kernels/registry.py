@@ -163,17 +163,32 @@ class ParticleBlocks:
         return block
 
 
-REDUCE_THREADS = 4096  # threads of a reduction launch (see launch_reduction)
-REDUCE_GROUP = 64  # a GPU adds the threads' partial sums in REDUCE_GROUP groups of REDUCE_GROUP (PartialSums)
+REDUCE_THREADS = 4096  # threads of a reduction launch up to GPU_WIDE_FROM items, and always on a CPU
+REDUCE_GROUP = 64  # a GPU adds 4096 threads' partial sums in REDUCE_GROUP groups of REDUCE_GROUP (PartialSums)
+# Above this many items a GPU reduction gives each thread GPU_ITEMS_PER_THREAD items (at most GPU_MAX_THREADS
+# threads): with 4096 threads a 1M-particle reduction ran 244 items per thread one after another on 32 of the
+# H100's 132 SMs (the weights' sums 126 us, the top-share sums 155 us of a 0.77 ms step; twelfth and twentieth
+# sessions). Up to here the threads, and so the bits of every sum, are what they always were.
+GPU_WIDE_FROM = 1 << 18
+GPU_ITEMS_PER_THREAD = 16
+GPU_MAX_THREADS = 1 << 16
+
+
+def reduction_threads(n: int, device: str) -> int:
+    """How many threads ``launch_reduction`` uses for n items on ``device``."""
+    n = max(1, int(n))
+    if n > GPU_WIDE_FROM and wp.get_device(device).is_cuda:
+        return min(GPU_MAX_THREADS, -(-n // GPU_ITEMS_PER_THREAD))
+    return min(n, REDUCE_THREADS)
 
 
 def launch_reduction(kernel, n: int, inputs: list, device: str) -> int:
-    """Launch a reduction over n items on min(n, REDUCE_THREADS) threads and return that number; the kernel's
-    last argument is the stride: thread t accumulates items t, t + stride, ... in registers and then
+    """Launch a reduction over n items on ``reduction_threads(n, device)`` threads and return that number; the
+    kernel's last argument is the stride: thread t accumulates items t, t + stride, ... in registers and then
     writes its partial sums to row t of a ``PartialSums`` (or, for a maximum, makes one atomic max: any
     order gives the same bits). (One atomic per item on one address serialises: 8 sums over 1M particles
     cost ~20 ms on an H100, measured by eval.bench mcl.)"""
-    threads = max(1, min(int(n), REDUCE_THREADS))
+    threads = reduction_threads(n, device)
     wp.launch(kernel, threads, [*inputs, threads], device=device)
     return threads
 
@@ -187,33 +202,47 @@ def _sum_row_groups(partials: wp.array2d(dtype=wp.float32), rows: int, group: in
     out[g, c] = s
 
 
+def row_groups(rows: int) -> tuple[int, int]:
+    """(groups, rows per group) in which a GPU first adds ``rows`` partial sums: REDUCE_GROUP x REDUCE_GROUP up
+    to REDUCE_THREADS rows (as always), else about sqrt(rows) groups of about sqrt(rows)."""
+    if rows <= REDUCE_THREADS:
+        return REDUCE_GROUP, REDUCE_GROUP
+    size = int(np.ceil(np.sqrt(rows)))
+    return -(-rows // size), size
+
+
 class PartialSums:
     """C sums over many items, the same bits on every run: a reduction kernel's thread t leaves its C
-    partial sums in row t of ``partials`` [REDUCE_THREADS, C], and ``finish(threads, out)`` adds the rows
+    partial sums in row t of ``partials`` [threads, C], and ``finish(threads, out)`` adds the rows
     in a fixed order into ``out`` [C]. (Atomic adds from GPU threads come in a different order each run,
     and the last bits of a sum with them; resampling can turn those into different particles.)
 
     On the CPU the rows are added one after another: the order in which its threads used to add
-    atomically, so CPU results are what they were. On a GPU, REDUCE_GROUP groups of rows first (one
-    thread each), then the group sums; a run repeats itself, and a GPU and a CPU still differ in rounding.
+    atomically, so CPU results are what they were. On a GPU, groups of rows first (one thread each;
+    ``row_groups``), then the group sums; a run repeats itself, and a GPU and a CPU still differ in rounding.
+    ``rows``: the most threads a reduction into it will use (``reduction_threads`` of the largest n).
     """
 
-    def __init__(self, num_sums: int, device: str):
+    def __init__(self, num_sums: int, device: str, rows: int = REDUCE_THREADS):
         self.device, self.num_sums = device, int(num_sums)
-        self.partials = wp.zeros((REDUCE_THREADS, self.num_sums), dtype=wp.float32, device=device)
-        self.groups = wp.zeros((REDUCE_GROUP, self.num_sums), dtype=wp.float32, device=device)
+        rows = max(int(rows), REDUCE_THREADS)
+        self.partials = wp.zeros((rows, self.num_sums), dtype=wp.float32, device=device)
+        self.groups = wp.zeros((row_groups(rows)[0], self.num_sums), dtype=wp.float32, device=device)
         self.on_gpu = wp.get_device(device).is_cuda
 
     def finish(self, threads: int, out: wp.array) -> None:
+        if threads > self.partials.shape[0]:
+            raise ValueError(f"PartialSums: {threads} rows, room for {self.partials.shape[0]}")
         rows, total = self.partials, out.reshape((1, self.num_sums))  # the sums as one group of all rows
         if self.on_gpu:
+            groups, size = row_groups(threads)
             wp.launch(
                 _sum_row_groups,
-                (REDUCE_GROUP, self.num_sums),
-                [self.partials, threads, REDUCE_GROUP, self.groups],
+                (groups, self.num_sums),
+                [self.partials, threads, size, self.groups],
                 device=self.device,
             )
-            rows, threads = self.groups, REDUCE_GROUP
+            rows, threads = self.groups, groups
         wp.launch(_sum_row_groups, (1, self.num_sums), [rows, threads, threads, total], device=self.device)
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device
+from irmcl_warp.kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device, reduction_threads
 
 
 @wp.kernel
@@ -30,6 +30,37 @@ def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32
     for i in range(wp.tid(), log_w.shape[0], stride):
         top = wp.max(top, log_w[i])
     wp.atomic_max(out, 0, top)
+
+
+TILE = 256  # threads per block of a tiled launch on a GPU (a CPU runs blocks of one thread)
+
+
+@wp.kernel
+def accumulate_max_kernel(
+    log_w: wp.array(dtype=wp.float32),
+    log_likelihood: wp.array(dtype=wp.float32),
+    temper: float,
+    top: wp.array(dtype=wp.float32),
+    keys: wp.array(dtype=wp.float32),
+    values: wp.array(dtype=wp.int32),
+    rank: int,
+):
+    """``accumulate_kernel`` and ``max_kernel`` in one tiled launch (a GPU's step, one launch and one pass over the
+    log-weights fewer): each block's largest new log-weight by a tile reduction, then one atomic max per block (a
+    maximum: the same bits in any order). With ``rank``, also the top-share estimate's sort keys -log w and
+    indices (``rank_keys_kernel`` in kernels/estimate.py)."""
+    b, lane = wp.tid()
+    i = b * wp.block_dim() + lane
+    v = float(-3.0e38)
+    if i < log_w.shape[0]:
+        v = log_w[i] + temper * log_likelihood[i]
+        log_w[i] = v
+        if rank != 0:
+            keys[i] = -v
+            values[i] = i
+    m = wp.tile_max(wp.tile(v))
+    if lane == 0:
+        wp.atomic_max(top, 0, m[0])
 
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -170,6 +201,8 @@ class ParticleWeights:
     (``TopShareMean.share_weights``): on a CPU that saves the estimate a third of its work; on an H100 writing them
     cost more than it saved (the step at 1M 0.80 against 0.77 ms, twentieth session)."""
 
+    TILED = None  # accumulate in one tiled launch: None = on a GPU (tests set True or False on any device)
+
     def __init__(self, num_particles: int, device: str = "auto", centre=(0.0, 0.0), keep_cos_sin: bool | None = None):
         self.device = pick_device(device)
         d = self.device
@@ -180,13 +213,45 @@ class ParticleWeights:
         self.cos_sin = wp.zeros(num_particles, dtype=wp.vec2, device=d)  # (cos yaw, sin yaw) per particle
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
         self.sums = wp.zeros(8, dtype=wp.float32, device=d)
-        self.partial = PartialSums(8, d)
+        self.partial = PartialSums(8, d, reduction_threads(num_particles, d))
+        self.tiled = wp.get_device(d).is_cuda if self.TILED is None else bool(self.TILED)  # see ``accumulate``
+        self._no_keys = wp.zeros(1, dtype=wp.float32, device=d)  # accumulate's keys when there are none to write
+        self._no_values = wp.zeros(1, dtype=wp.int32, device=d)
+
+    def accumulate(self, log_w: wp.array, log_lik: wp.array, temper: float, ranks=None) -> None:
+        """log_w += temper * log_lik (``accumulate_kernel``) and the new maximum into ``top``; then ``weigh`` and
+        ``cumulate`` finish what ``update`` does. On a GPU one tiled launch (``accumulate_max_kernel``), which also
+        writes the top-share estimate's sort keys when given ``ranks`` = (keys, values); on a CPU two launches, as
+        before (``ranks`` must be None there: the estimate ranks its own keys). ``TILED`` overrides the choice."""
+        self._check(log_w)
+        self.top.fill_(-3.0e38)
+        n, d = log_w.shape[0], self.device
+        if self.tiled:
+            keys, values = ranks if ranks is not None else (self._no_keys, self._no_values)
+            block = TILE if wp.get_device(d).is_cuda else 1  # (a CPU runs a block as one thread)
+            wp.launch_tiled(
+                accumulate_max_kernel,
+                dim=[-(-n // block)],
+                inputs=[log_w, log_lik, float(temper), self.top, keys, values, int(ranks is not None)],
+                block_dim=block,
+                device=d,
+            )
+            return
+        if ranks is not None:
+            raise ValueError("ParticleWeights.accumulate: sort keys are written by the tiled launch only")
+        wp.launch(accumulate_kernel, n, [log_w, log_lik, float(temper)], device=d)
+        launch_reduction(max_kernel, n, [log_w, self.top], d)
 
     def update(self, log_w: wp.array, particles: wp.array) -> None:
-        if log_w.shape[0] != self.w.shape[0]:
-            raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
+        """w, the eight sums and the cdf of log-weights as they stand (the maximum found here)."""
+        self._check(log_w)
         self.top.fill_(-3.0e38)
         launch_reduction(max_kernel, log_w.shape[0], [log_w, self.top], self.device)
+        self.weigh(log_w, particles)
+        self.cumulate()
+
+    def weigh(self, log_w: wp.array, particles: wp.array) -> None:
+        """w = exp(log_w - max) and the eight sums (``top`` holds the maximum: ``accumulate`` or ``update``)."""
         threads = launch_reduction(
             exp_kernel,
             log_w.shape[0],
@@ -203,7 +268,14 @@ class ParticleWeights:
             self.device,
         )
         self.partial.finish(threads, self.sums)
+
+    def cumulate(self) -> None:
+        """The cumulative weights, for resampling."""
         wp.utils.array_scan(self.w, self.cdf, inclusive=True)
+
+    def _check(self, log_w: wp.array) -> None:
+        if log_w.shape[0] != self.w.shape[0]:
+            raise ValueError(f"ParticleWeights: {log_w.shape[0]} log-weights, built for {self.w.shape[0]}")
 
     def summary(self, sums: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
         """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums;
@@ -353,7 +425,7 @@ class LogMeanLikelihood:
         self.device = pick_device(device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
         self.acc = wp.zeros(2, dtype=wp.float32, device=self.device)
-        self.partial = PartialSums(2, self.device)
+        self.partial = None  # sized for the first call's particles
         self.none = None
 
     def __call__(self, log_lik: wp.array, skip: wp.array | None = None) -> float:
@@ -361,6 +433,9 @@ class LogMeanLikelihood:
             if self.none is None or self.none.shape[0] != log_lik.shape[0]:
                 self.none = wp.zeros(log_lik.shape[0], dtype=wp.int32, device=self.device)
             skip = self.none
+        rows = reduction_threads(log_lik.shape[0], self.device)
+        if self.partial is None or self.partial.partials.shape[0] < rows:
+            self.partial = PartialSums(2, self.device, rows)
         self.top.fill_(-3.0e38)
         launch_reduction(masked_max_kernel, log_lik.shape[0], [log_lik, skip, self.top], self.device)
         threads = launch_reduction(

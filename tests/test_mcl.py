@@ -326,6 +326,28 @@ def test_step_graph_replays_exactly_what_launching_one_by_one_does(weighting, rn
         assert np.array_equal(graph, eager), f"seed {seed} on {DEVICE}"
 
 
+@pytest.mark.parametrize("graph", ["on", "off"])
+def test_a_tiled_step_with_the_estimate_on_a_second_stream_keeps_every_bit(graph, rng, monkeypatch):
+    """The log-weights accumulated in one tiled launch with their maximum (and on a GPU the sort keys, the
+    top-share estimate then sorted and summed on a second stream beside the weights' sums, the scan and the
+    resampling) against the launches one after another on one stream: the same estimates, N_eff and particles."""
+    from eval.analyses.determinism import run
+    from irmcl_warp.kernels.resample import ParticleWeights
+
+    log, nog = _world_and_map(duration_s=4.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed = int(rng.integers(1 << 16))
+    runs = {}
+    for tiled in (False, True):
+        monkeypatch.setattr(ParticleWeights, "TILED", tiled)
+        poses, neffs, pf = run(log, nog, maps, "likelihood_field", seed, graph, DEVICE)
+        assert pf.weights.tiled == tiled and pf._fork() == (tiled and DEVICE.startswith("cuda"))
+        runs[tiled] = (poses, neffs, pf.particles.numpy())
+    for fused, apart in zip(runs[True], runs[False]):
+        assert np.array_equal(fused, apart), f"seed {seed} on {DEVICE}"
+
+
 @pytest.mark.cpu_only
 def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bit(rng):
     """On a CPU with two cores' blocks (mcl.cpu_threads=2, more than 2 x CPU_MIN_BLOCK particles) the motion and the

@@ -189,6 +189,65 @@ def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
         shared.share_weights(ParticleWeights(n, device=DEVICE, keep_cos_sin=False))
 
 
+@pytest.mark.parametrize("tiled", [False, True])
+def test_accumulate_fused_with_the_maximum_keeps_the_bits_of_two_launches(rng, monkeypatch, tiled):
+    """ParticleWeights.accumulate (log w += temper log p, the maximum; a GPU's one tiled launch, which also writes the
+    top-share sort keys) against accumulate_kernel, max_kernel and rank_keys_kernel launched one after another: the
+    same log-weights, maximum, keys and indices to the bit, and the maximum the numpy one."""
+    from irmcl_warp.kernels.estimate import rank_keys_kernel
+    from irmcl_warp.kernels.resample import accumulate_kernel, max_kernel
+    from irmcl_warp.kernels import launch_reduction
+
+    monkeypatch.setattr(ParticleWeights, "TILED", tiled)
+    n, temper = int(rng.integers(300, 3000)), float(rng.uniform(0.1, 1.0))
+    log_w, log_lik = rng.normal(0, 3, (2, n)).astype(np.float32)
+    weights = ParticleWeights(n, device=DEVICE)
+    assert weights.tiled == tiled
+    keys, values = wp.zeros(2 * n, dtype=wp.float32, device=DEVICE), wp.zeros(2 * n, dtype=wp.int32, device=DEVICE)
+    ours = wp.array(log_w, dtype=wp.float32, device=DEVICE)
+    lik = wp.array(log_lik, dtype=wp.float32, device=DEVICE)
+    weights.accumulate(ours, lik, temper, (keys, values) if tiled else None)
+    theirs, top = wp.array(log_w, dtype=wp.float32, device=DEVICE), wp.full(1, -3.0e38, dtype=wp.float32, device=DEVICE)
+    their_keys, their_values = wp.zeros_like(keys), wp.zeros_like(values)
+    wp.launch(accumulate_kernel, n, [theirs, lik, temper], device=DEVICE)
+    launch_reduction(max_kernel, n, [theirs, top], DEVICE)
+    wp.launch(rank_keys_kernel, n, [theirs, their_keys, their_values], device=DEVICE)
+    assert np.array_equal(ours.numpy(), theirs.numpy()) and weights.top.numpy()[0] == top.numpy()[0]
+    assert top.numpy()[0] == pytest.approx(float(np.max(log_w + np.float32(temper) * log_lik)), abs=1e-5)
+    if tiled:
+        assert np.array_equal(keys.numpy()[:n], their_keys.numpy()[:n])
+        assert np.array_equal(values.numpy()[:n], their_values.numpy()[:n])
+    else:
+        with pytest.raises(ValueError, match="tiled launch only"):
+            weights.accumulate(ours, lik, temper, (keys, values))
+
+
+def test_sums_over_more_particles_than_a_reduction_has_threads_match_the_twins(rng):
+    """Above GPU_WIDE_FROM particles a GPU's reductions give each thread 16 items (more rows, summed in about
+    sqrt(rows) groups): the weights' sums, N_eff, the spread and the top-share estimate still match the numpy twins
+    (on a CPU the same sizes, on 4096 threads); the grouping covers every row once."""
+    from irmcl_warp.kernels import ESTIMATE, reduction_threads
+    from irmcl_warp.kernels.registry import GPU_WIDE_FROM, REDUCE_THREADS, row_groups
+    from irmcl_warp.reference.estimate import top_share_mean
+
+    for rows in (1, 100, REDUCE_THREADS, REDUCE_THREADS + 1, int(rng.integers(5000, 1 << 16)), 1 << 16):
+        groups, size = row_groups(rows)
+        assert groups * size >= rows and (rows <= REDUCE_THREADS or (groups - 1) * size < rows)
+    assert row_groups(REDUCE_THREADS) == (64, 64)  # the grouping up to 4096 rows: as it always was
+    assert reduction_threads(100_000, DEVICE) == REDUCE_THREADS  # 100k particles keep their bits
+    n = GPU_WIDE_FROM + int(rng.integers(1, 50_000))
+    log_w, particles, pw, weights = _weights(rng, n)
+    pose, neff, spread = weights.summary()
+    assert neff == pytest.approx(effective_sample_size(log_w), rel=1e-3), f"seed {rng.seed}"
+    assert np.allclose(pose, weighted_mean(particles.astype(np.float64), log_w), atol=1e-3), f"seed {rng.seed}"
+    assert spread == pytest.approx(weighted_spread(particles, log_w), rel=1e-2), f"seed {rng.seed}"
+    est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
+    ours = est(pw, wp.array(log_w, dtype=wp.float32, device=DEVICE))
+    twin = top_share_mean(particles, log_w, 0.8)
+    assert np.allclose(ours[:2], twin[:2], atol=2e-3), f"seed {rng.seed}"
+    assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"seed {rng.seed}"
+
+
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     n = 300
     log_w, particles, pw, weights = _weights(rng, n)
