@@ -363,7 +363,7 @@ def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bi
     for graph, threads in (("on", 2), ("off", 1)):
         cfg = MCLConfig(num_particles=n, weighting="likelihood_field", seed=seed, step_graph=graph, cpu_threads=threads)
         pf = build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, maps)
-        pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))  # (0.5 m put a particle off the map once in CI-like runs)
+        pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))  # 0.5 m once put a particle off the map
         out = [pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k]) for k in range(1, len(log))]
         assert pf._splits_on_cpu() == (threads == 2) and len(pf.graphs) == (2 if graph == "on" else 0)
         runs[graph] = ([o[0] for o in out], [o[1] for o in out], pf.particles.numpy())
