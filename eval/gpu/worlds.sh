@@ -3,6 +3,10 @@
 #   tuning  the tuning split with the GPU's 100k particles (conf/exp/worlds.yaml), the confidence calibrated on it,
 #           kidnapped tuning runs choosing the lost-robot delay by a rule fixed here (results/worlds/lost_after_s.txt)
 #   test    the test split with that calibration and delay, then kidnapped test runs (30 s in, 5 per world)
+#   lost    the lost-robot rule (mcl/worlds.py LostRule): kidnapped tuning and test runs recorded without relocalizing,
+#           the scan-agreement trigger chosen on the tuning runs by eval.analyses.lost_rules' rule
+#           (results/worlds/lost_rule.txt), replayed on the test runs beside the confidence alone, then the kidnapped
+#           test runs made again live with the chosen rule (relocalizing: how soon the filter is right again)
 #   tests   the tests this change touched, kernels on cuda:0 (IRMCL_TEST_DEVICE)
 # Results: $OUT/worlds-{tuning,test}.tgz (outputs/worlds/worlds/<run>/, results/worlds/); unpack into the repository root.
 set -uo pipefail
@@ -39,6 +43,20 @@ PY
     $W worlds.split=test worlds.calibration=$CAL worlds.lost_after_s=$d 2>&1 | tail -1
     $W worlds.split=test worlds.runs=5 worlds.kidnap_at_s=30 worlds.calibration=$CAL worlds.lost_after_s=$d 2>&1 | tail -1
     tar czf "${OUT:-.}/worlds-test.tgz" outputs/worlds/worlds/test-* ;;
+  lost)
+    mkdir -p results/worlds
+    K="worlds.kidnap_at_s=30 worlds.relocalize=false worlds.calibration=$CAL"
+    $W worlds.split=tuning worlds.runs=3 $K 2>&1 | tail -1
+    tuning=$(ls -d outputs/worlds/worlds/tuning-likelihood_field-100k-* | head -1)
+    python -m eval.analyses.lost_rules "$tuning" --choose results/worlds/lost_rule.txt --out results/worlds/lost_rules-tuning.json
+    $W worlds.split=test worlds.runs=5 $K 2>&1 | tail -1
+    test=$(ls -d outputs/worlds/worlds/test-likelihood_field-100k-* | head -1)
+    a=$(sed -n 's/^lost_agreement_below=\([^ ]*\) .*/\1/p' results/worlds/lost_rule.txt)
+    n=$(sed -n 's/.*lost_agreement_updates=\([0-9]*\):.*/\1/p' results/worlds/lost_rule.txt)
+    python -m eval.analyses.lost_rules "$test" --agreement-below 0 "$a" --updates "$n" --out results/worlds/lost_rules-test.json
+    $W worlds.split=test worlds.runs=5 worlds.kidnap_at_s=30 worlds.calibration=$CAL worlds.lost_agreement_below="$a" \
+      worlds.lost_agreement_updates="$n" 2>&1 | tail -1
+    tar czf "${OUT:-.}/worlds-lost.tgz" outputs/worlds/worlds results/worlds ;;
   tests)
     IRMCL_TEST_DEVICE=cuda:0 python -m pytest -q -p no:cacheprovider -m "not data and not slow and not cpu_only" \
       --timeout 300 tests/test_worlds.py tests/test_weighting.py tests/test_particles.py tests/test_mcl.py 2>&1 \

@@ -9,8 +9,9 @@ the robot is carried, that far into a run, to where another drive is (the odomet
 At every filter update the stage reads the particle set back and computes what the robot has (the modes, the
 scan's agreement with the map: irmcl_warp/mcl/confidence.py); with a calibration it turns them into the
 confidence, declares the robot localized at ``worlds.confident_above`` and lost when the confidence stays below
-``worlds.lost_below`` for ``worlds.lost_after_s`` (then, with ``worlds.relocalize``, starts again from a uniform
-spread and says so). The estimate is the heaviest mode's pose.
+``worlds.lost_below`` for ``worlds.lost_after_s``, or the scan's agreement at the estimate below
+``worlds.lost_agreement_below`` for ``worlds.lost_agreement_updates`` updates (``LostRule``; then, with
+``worlds.relocalize``, starts again from a uniform spread and says so). The estimate is the heaviest mode's pose.
 
 Writes outputs/<exp>/worlds/<split>-<weighting>-<particles>-<id>/: per world and run ``<world>-run<k>.npz``
 (stamps, estimate, truth, features, confidence, updated) and ``.tum``; metrics.json (per run: the protocol's
@@ -208,15 +209,53 @@ def search_grid(grid, spacing_m: float = 0.5, headings: int = 16) -> np.ndarray:
     return np.column_stack([np.repeat(xy, headings, 0), np.tile(yaw, len(xy))])
 
 
+class LostRule:
+    """When a localized robot counts as lost (issue 33), update by update: ``rule(t, confidence, agreement)`` is True
+    at the update where it is declared lost. Localized: the confidence reached ``confident_above``. Lost: either the
+    confidence stayed below ``lost_below`` for ``lost_after_s``, or (``agreement_below`` > 0) the scan's agreement
+    with the map at the estimate stayed below ``agreement_below`` for ``agreement_updates`` updates in a row. The
+    second trigger reads one feature, the one a kidnapping moves at once (from ~1 to 0.1-0.3 on the first scan after
+    it, on the kidnapped test floors), where the calibrated confidence falls over several updates. After a lost
+    event the rule waits for the confidence to reach ``confident_above`` again. The worlds stage runs it live; an
+    analysis can run it again over a trace recorded with ``worlds.relocalize=false`` (eval.analyses.lost_rules)."""
+
+    def __init__(self, w):
+        self.confident_above, self.lost_below, self.lost_after_s = w.confident_above, w.lost_below, w.lost_after_s
+        self.agreement_below = float(getattr(w, "lost_agreement_below", 0.0))
+        self.agreement_updates = max(1, int(getattr(w, "lost_agreement_updates", 1)))
+        self.reset()
+
+    def reset(self) -> None:
+        self.localized, self.low_since, self.low_agreement = False, None, 0
+
+    def __call__(self, t: float, p: float, agreement: float) -> bool:
+        if p >= self.confident_above:
+            self.localized, self.low_since = True, None
+        elif self.localized and p < self.lost_below:
+            self.low_since = t if self.low_since is None else self.low_since
+        else:
+            self.low_since = None
+        low = self.agreement_below > 0 and agreement < self.agreement_below
+        self.low_agreement = self.low_agreement + 1 if (self.localized and low) else 0
+        timed_out = self.low_since is not None and t - self.low_since >= self.lost_after_s
+        if self.localized and (timed_out or self.low_agreement >= self.agreement_updates):
+            self.reset()
+            return True
+        return False
+
+
+AGREEMENT = FEATURES.index("agreement")  # the scan's agreement at the heaviest mode, in a feature row
+
+
 def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, conf: Confidence | None) -> dict:
     """Drive the filter over the whole log (AMCL's gates and ``mcl.first_update`` as in mcl/track.follow); at
-    every update the features, the confidence and the heaviest mode's pose; lost-robot detection as the
-    module's text says. Returns per-scan arrays and the events."""
+    every update the features, the confidence and the heaviest mode's pose; lost-robot detection by ``LostRule``
+    (with ``worlds.relocalize``, a uniform spread again). Returns per-scan arrays and the events."""
     n = len(log.stamps)
     est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
     prob, updated = np.full(n, np.nan), np.zeros(n, bool)
     lost_at, pose, p, weighed = [], None, np.nan, False
-    localized, low_since, last_odom = False, None, log.odom[0]
+    rule, last_odom = LostRule(w), log.odom[0]
     angles, T = log.info.angles_rad, log.T_base_laser
     for i in range(n):
         u = odometry_step(last_odom, log.odom[i])
@@ -228,20 +267,12 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
             feats[i], pose = f, md.poses[0]
             if conf is not None:
                 p = float(conf(f))
-                t = log.stamps[i]
-                if p >= w.confident_above:
-                    localized, low_since = True, None
-                elif localized and p < w.lost_below:
-                    low_since = t if low_since is None else low_since
-                    if t - low_since >= w.lost_after_s:
-                        lost_at.append(float(t - log.stamps[0]))
-                        localized, low_since = False, None
-                        if w.relocalize:
-                            pf.init_uniform()
-                            tracker.reset()
-                            weighed, pose = False, None
-                else:
-                    low_since = None
+                if rule(log.stamps[i], p, f[AGREEMENT]):
+                    lost_at.append(float(log.stamps[i] - log.stamps[0]))
+                    if w.relocalize:
+                        pf.init_uniform()
+                        tracker.reset()
+                        weighed, pose = False, None
         est[i] = between_updates(pose, last_odom, log.odom[i])
         prob[i] = p
     return {

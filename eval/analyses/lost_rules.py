@@ -1,0 +1,153 @@
+"""``python -m eval.analyses.lost_rules <worlds run>... [--agreement-below 0 0.3 ...] [--updates 1 2 3] [--choose FILE]``
+
+Lost-robot rules replayed over recorded worlds runs (issue 33; irmcl_warp/mcl/worlds.py ``LostRule``): each run's
+traces (``<world>-run<k>.npz``: the confidence and the features at every update) are fed to the rule again, and the
+run is scored as the stage scores it (``score_run``: kidnappings detected within 2 s, false alarms per hour of right
+tracking). A replay is what the stage would have done as long as the filter was not started again: runs recorded
+with ``worlds.relocalize=false`` replay whole; in a run recorded with relocalization, only the updates before its
+first recorded lost event are replayed (``replayed_share`` says how much of the runs that was).
+
+``--choose FILE``: the rule kept by the rule the lost-robot delay was chosen by (eval/gpu/worlds.sh): the most
+kidnappings detected within 2 s with at most 1 false alarm per hour of right tracking, the earlier detection on a
+tie, then the stricter rule (fewer updates, the lower threshold). Meant for tuning runs only; written to FILE.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from irmcl_warp.mcl.worlds import AGREEMENT, LostRule, score_run, world_summary
+from irmcl_warp.services.cli import guard
+from irmcl_warp.services.outputs import write_json
+
+
+def replay(trace, w, agreement_below: float, updates: int, stop_at_s: float = np.inf) -> list[float]:
+    """The lost events (s from the first scan) of ``LostRule`` with these settings over a recorded trace, up to
+    ``stop_at_s``."""
+    rule = LostRule(
+        SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates})
+    )
+    t = trace["stamps"] - trace["stamps"][0]
+    lost = []
+    for i in np.flatnonzero(trace["updated"] & np.isfinite(trace["confidence"])):
+        if t[i] > stop_at_s:  # (the update of a recorded lost event is still the recorded run)
+            break
+        if rule(t[i], float(trace["confidence"][i]), float(trace["features"][i, AGREEMENT])):
+            lost.append(float(t[i]))
+    return lost
+
+
+def run_traces(folder: Path):
+    """(the run's worlds settings, [(world, k, trace)]) of a worlds run folder."""
+    metrics = json.loads((folder / "metrics.json").read_text())
+    w = metrics["settings"]["worlds"]
+    traces = []
+    for row in metrics["runs"]:
+        path = folder / f"{row['world']}-run{row['run']}.npz"
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"{path}: the trace of {row['world']} run {row['run']} listed in {folder}/metrics.json"
+            )
+        traces.append((row["world"], row["run"], dict(np.load(path))))
+    return w, traces
+
+
+def score_rule(folders: list[Path], agreement_below: float, updates: int) -> dict:
+    rows, replayed, total = [], 0.0, 0.0
+    for folder in folders:
+        w, traces = run_traces(folder)
+        settings = SimpleNamespace(**w)
+        for world, k, tr in traces:
+            t = tr["stamps"] - tr["stamps"][0]
+            recorded = tr["lost_at_s"]
+            stop = np.inf if not w["relocalize"] or len(recorded) == 0 else float(recorded[0])
+            lost = replay(tr, w, agreement_below, updates, stop)
+            cut = int(np.searchsorted(t, w["kidnap_at_s"])) if w["kidnap_at_s"] > 0 else None
+            log = SimpleNamespace(stamps=tr["stamps"], ground_truth=tr["truth"])
+            trace = {**tr, "lost_at_s": np.array(lost, float)}
+            scored = score_run(log, trace, cut, settings)
+            if np.isfinite(stop):  # beyond the recorded event the replay is not the stage's run: kidnap verdicts too
+                if cut is not None and stop <= t[cut] + 2.0 and not any(s >= t[cut] for s in lost):
+                    scored["detected_after_s"] = None  # undecided: the trace was cut before 2 s after the jump
+                    scored["undecided"] = True
+            replayed += min(stop, t[-1]) - t[0]
+            total += t[-1] - t[0]
+            rows.append({"world": world, "run": k, **scored})
+    s = world_summary(rows)
+    detected = [
+        r["detected_after_s"] for r in rows if r.get("right_before_kidnap") and r["detected_after_s"] is not None
+    ]
+    return {
+        "agreement_below": agreement_below,
+        "updates": updates,
+        **s,
+        "false_alarms_per_h": s["false_alarms"] / max(s["tracking_right_h"], 1e-9),
+        "median_detection_s": float(np.median(detected)) if detected else None,
+        "undecided_kidnaps": int(sum(bool(r.get("undecided")) for r in rows)),
+        "replayed_share": replayed / max(total, 1e-9),
+    }
+
+
+def choose(results: list[dict]) -> dict:
+    """The most kidnappings detected within 2 s with at most 1 false alarm per hour; then the earlier median
+    detection; then fewer updates and the lower threshold (the stricter rule)."""
+    ok = [r for r in results if r["false_alarms_per_h"] <= 1.0 and r.get("kidnaps")]
+    if not ok:
+        raise ValueError("lost_rules: no rule keeps to 1 false alarm per hour on these runs (or none is kidnapped)")
+    return max(
+        ok,
+        key=lambda r: (
+            r["detected_within_2s"],
+            -(r["median_detection_s"] if r["median_detection_s"] is not None else np.inf),
+            -r["updates"],
+            -r["agreement_below"],
+        ),
+    )
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.lost_rules")
+    ap.add_argument("runs", nargs="+", type=Path, help="worlds run folders (outputs/worlds/worlds/<run>)")
+    ap.add_argument("--agreement-below", nargs="+", type=float, default=[0.0, 0.3, 0.4, 0.5, 0.6])
+    ap.add_argument("--updates", nargs="+", type=int, default=[1, 2, 3])
+    ap.add_argument("--choose", type=Path, help="write the kept rule here (tuning runs only)")
+    ap.add_argument("--out", type=Path, help="the JSON record")
+    a = ap.parse_args(argv)
+    results = []
+    for below in a.agreement_below:
+        for n in [1] if below == 0 else a.updates:
+            results.append(score_rule(a.runs, below, n))
+    print("| agreement below | updates | kidnaps detected within 2 s | median detection (s) | false alarms (per h) |")
+    print("|---|---|---|---|---|")
+    for r in results:
+        rule = "off (confidence only)" if r["agreement_below"] == 0 else f"{r['agreement_below']:.2f}"
+        med = "-" if r["median_detection_s"] is None else f"{r['median_detection_s']:.1f}"
+        print(
+            f"| {rule} | {r['updates'] if r['agreement_below'] else '-'} | {r.get('detected_within_2s', '-')}/"
+            f"{r.get('kidnaps', 0)} | {med} | {r['false_alarms']} ({r['false_alarms_per_h']:.1f}) |"
+        )
+    record = {"runs": [str(p) for p in a.runs], "rules": results}
+    if a.choose:
+        kept = choose(results)
+        record["chosen"] = {"agreement_below": kept["agreement_below"], "updates": kept["updates"]}
+        a.choose.parent.mkdir(parents=True, exist_ok=True)
+        a.choose.write_text(
+            f"lost_agreement_below={kept['agreement_below']} lost_agreement_updates={kept['updates']}: detected within "
+            f"2 s {kept['detected_within_2s']}/{kept['kidnaps']}, false alarms {kept['false_alarms']} "
+            f"({kept['false_alarms_per_h']:.1f}/h) on {', '.join(p.name for p in a.runs)}\n"
+        )
+        print(
+            f"chosen: worlds.lost_agreement_below={kept['agreement_below']} worlds.lost_agreement_updates={kept['updates']}"
+        )
+    if a.out:
+        write_json(a.out, record)
+    return record
+
+
+if __name__ == "__main__":
+    guard(main)
