@@ -355,7 +355,8 @@ class WorldsConfig:
     lost_after_s: float = 1.0  # ... means lost: the filter starts again from a uniform spread and says so (1 s
     # against 2 s, chosen on kidnapped tuning runs by eval/gpu/worlds.sh's rule: results/worlds/lost_after_s.txt)
     lost_agreement_below: float = 0.0  # > 0: also lost when the scan's agreement with the map at the estimate ...
-    lost_agreement_updates: int = 2  # ... stays below it for this many updates in a row (mcl/worlds.py LostRule)
+    lost_agreement_updates: int = 2  # ... stays below it for this many updates in a row (mcl/worlds.py LostRule;
+    # off by default, as runs before it; +exp=worlds sets the pair chosen on tuning runs)
     relocalize: bool = True  # False: only report when lost (side-by-side runs of the detector alone)
     refine_rivals: bool = False  # the confidence's rival places re-aligned with each scan (mcl/confidence.py,
     # FeatureTracker; False: moved by the odometry only)

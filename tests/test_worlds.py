@@ -482,3 +482,83 @@ def test_the_search_finds_a_twin_floors_look_alike_place():
     best, score = found[0]
     assert np.hypot(*(best[:2] - twin[:2])) < 0.3 and abs(np.angle(np.exp(1j * (best[2] - twin[2])))) < 0.1
     assert score > agree(truth, log.ranges_m[i], log.info.angles_rad, log.T_base_laser) - 0.1
+
+
+def _lost_settings(**extra):
+    from types import SimpleNamespace
+
+    base = dict(
+        confident_above=0.8, lost_below=0.2, lost_after_s=1.0, lost_agreement_below=0.0, lost_agreement_updates=2
+    )
+    return SimpleNamespace(**{**base, **extra})
+
+
+def test_the_lost_rule_fires_on_a_low_confidence_held_or_a_low_agreement_in_a_row():
+    """LostRule: the confidence trigger as the stage always had it (localized first; below lost_below for lost_after_s);
+    the agreement trigger only once localized, after the given updates in a row; both start over after an event."""
+    from irmcl_warp.mcl.worlds import LostRule
+
+    rule = LostRule(_lost_settings())
+    # never localized: nothing fires however low
+    assert not any(rule(t, 0.05, 0.1) for t in np.arange(0, 3, 0.4))
+    rule = LostRule(_lost_settings())
+    assert not rule(0.0, 0.9, 1.0)  # localized
+    assert [rule(t, 0.1, 0.1) for t in (0.5, 1.0, 1.5, 2.0)] == [False, False, True, False]  # 1.5 - 0.5 >= 1 s
+    assert not rule(2.5, 0.1, 0.1)  # after an event the rule waits for the confidence to rise again
+    rule = LostRule(_lost_settings(lost_agreement_below=0.4, lost_agreement_updates=2))
+    assert not rule(0.0, 0.95, 1.0)
+    assert [rule(t, 0.6, a) for t, a in ((0.4, 0.3), (0.8, 0.5), (1.2, 0.3), (1.6, 0.35))] == [
+        False,
+        False,
+        False,
+        True,
+    ]
+    one = LostRule(_lost_settings(lost_agreement_below=0.4, lost_agreement_updates=1))
+    assert not one(0.0, 0.95, 1.0) and one(0.4, 0.95, 0.39)  # one low scan: lost, even with the confidence high
+    assert not one(0.8, 0.5, 0.1)  # and not localized again until the confidence says so
+
+
+def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger(tmp_path):
+    """eval.analyses.lost_rules over a recorded kidnapped run (a synthetic trace: right until the jump at 10 s, then
+    the agreement at once and the confidence slowly down): with the agreement trigger off the replay gives the events
+    the run recorded; the agreement trigger detects the jump on its first scan; a rule that fires during right
+    tracking counts a false alarm; the chooser keeps the faster rule without false alarms."""
+    from eval.analyses.lost_rules import choose, score_rule
+    from irmcl_warp.mcl.confidence import FEATURES
+    from irmcl_warp.mcl.worlds import AGREEMENT
+
+    t = np.arange(0.0, 20.0, 0.2)
+    truth = np.column_stack([t * 0.1, np.zeros_like(t), np.zeros_like(t)])
+    est = truth.copy()
+    est[t >= 10.0, 0] += 5.0  # carried 5 m at 10 s: the estimate stays where it was
+    conf = np.where(t < 1.0, 0.5, 0.99)
+    drop = t >= 10.0
+    conf[drop] = np.maximum(0.99 - 0.25 * (np.arange(drop.sum()) + 1), 0.01)
+    feats = np.full((len(t), len(FEATURES)), 0.5)
+    feats[:, AGREEMENT] = np.where(drop, 0.15, 0.95)
+    feats[25, AGREEMENT] = 0.3  # one poor scan while right (4.9-5.0 s)
+    rule_settings = dict(
+        confident_above=0.8, lost_below=0.2, lost_after_s=1.0, relocalize=False, kidnap_at_s=10.0, run_s=20.0
+    )
+    from eval.analyses.lost_rules import replay
+
+    trace = dict(
+        stamps=t + 100.0, truth=truth, estimate=est, features=feats, confidence=conf, updated=np.ones(len(t), bool)
+    )
+    recorded = replay({**trace, "lost_at_s": np.array([])}, rule_settings, 0.0, 1)
+    assert recorded and 11.0 <= recorded[0] <= 12.5  # the confidence alone: > 1 s after the jump
+    run = tmp_path / "run"
+    run.mkdir()
+    np.savez(run / "office-1-run1.npz", **trace, lost_at_s=np.array(recorded))
+    w = {**rule_settings, "lost_agreement_below": 0.0, "lost_agreement_updates": 2}
+    (run / "metrics.json").write_text(
+        json.dumps({"settings": {"worlds": w}, "runs": [{"world": "office-1", "run": 1}]})
+    )
+    off = score_rule([run], 0.0, 1)
+    assert off["kidnaps"] == 1 and off["detected_within_2s"] == (recorded[0] - 10.0 <= 2.0)
+    fast = score_rule([run], 0.2, 1)
+    assert fast["detected_within_2s"] == 1 and fast["median_detection_s"] == pytest.approx(0.0, abs=1e-9)
+    assert fast["false_alarms"] == 0
+    loose = score_rule([run], 0.4, 1)  # the poor scan at 5 s is taken for a kidnapping
+    assert loose["false_alarms"] == 1 and loose["detected_within_2s"] == 1  # localized again at once after it
+    assert choose([off, fast, loose]) is fast

@@ -48,15 +48,15 @@ PY
     K="worlds.kidnap_at_s=30 worlds.relocalize=false worlds.calibration=$CAL"
     $W worlds.split=tuning worlds.runs=3 $K 2>&1 | tail -1
     tuning=$(ls -d outputs/worlds/worlds/tuning-likelihood_field-100k-* | head -1)
-    python -m eval.analyses.lost_rules "$tuning" --choose results/worlds/lost_rule.txt --out results/worlds/lost_rules-tuning.json
+    python -m eval.analyses.lost_rules "$tuning" --choose results/worlds/lost_rule.txt --out results/checks/lost_rules_tuning_100k.json
     $W worlds.split=test worlds.runs=5 $K 2>&1 | tail -1
     test=$(ls -d outputs/worlds/worlds/test-likelihood_field-100k-* | head -1)
     a=$(sed -n 's/^lost_agreement_below=\([^ ]*\) .*/\1/p' results/worlds/lost_rule.txt)
     n=$(sed -n 's/.*lost_agreement_updates=\([0-9]*\):.*/\1/p' results/worlds/lost_rule.txt)
-    python -m eval.analyses.lost_rules "$test" --agreement-below 0 "$a" --updates "$n" --out results/worlds/lost_rules-test.json
+    python -m eval.analyses.lost_rules "$test" --agreement-below 0 "$a" --updates "$n" --out results/checks/lost_rules_test_100k.json
     $W worlds.split=test worlds.runs=5 worlds.kidnap_at_s=30 worlds.calibration=$CAL worlds.lost_agreement_below="$a" \
       worlds.lost_agreement_updates="$n" 2>&1 | tail -1
-    tar czf "${OUT:-.}/worlds-lost.tgz" outputs/worlds/worlds results/worlds ;;
+    tar czf "${OUT:-.}/worlds-lost.tgz" outputs/worlds/worlds results/worlds results/checks/lost_rules_* ;;
   tests)
     IRMCL_TEST_DEVICE=cuda:0 python -m pytest -q -p no:cacheprovider -m "not data and not slow and not cpu_only" \
       --timeout 300 tests/test_worlds.py tests/test_weighting.py tests/test_particles.py tests/test_mcl.py 2>&1 \

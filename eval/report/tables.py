@@ -408,10 +408,16 @@ def worlds_table(runs: list) -> str:
         fa = s["false_alarms"] / s["tracking_right_h"] if s["tracking_right_h"] > 0 else None
         detected = f"{s['detected_within_2s']}/{k}" if k else "-"
         back = f"{s['reconverged_within_5s']}/{k}" if k else "-"
-        how = (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else []) + (
-            [f"searched every {r.setting('worlds.search_rivals_every')} updates"]
-            if r.setting("worlds.search_rivals_every")
-            else []
+        agree = r.setting("worlds.lost_agreement_below") or 0  # (runs before the agreement trigger: none)
+        how = (
+            (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else [])
+            + (
+                [f"searched every {r.setting('worlds.search_rivals_every')} updates"]
+                if r.setting("worlds.search_rivals_every")
+                else []
+            )
+            + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
+            + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
         )
         label = s["weighting"].replace("_", " ") + (f" ({', '.join(how)})" if how else "")
         rows.append(
