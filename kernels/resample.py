@@ -4,7 +4,7 @@ one random offset, N evenly spaced pointers; Thrun et al. Table 4.4) and ``RESAM
 CPU the low-variance draw walks the cumulative weights once in one thread instead (the same particles).
 
 ``ParticleWeights`` turns log-weights into weights (subtracting their maximum, found by atomic max),
-their cumulative sum (Warp's array_scan), the effective sample size 1 / sum(w_norm^2), and the
+their cumulative sum (``ordered_scan`` on a GPU, Warp's array_scan on a CPU), the effective sample size 1 / sum(w_norm^2), and the
 weighted mean pose (circular mean for yaw). Numpy twins: irmcl_warp/reference/resample.py.
 """
 
@@ -61,6 +61,59 @@ def accumulate_max_kernel(
     m = wp.tile_max(wp.tile(v))
     if lane == 0:
         wp.atomic_max(top, 0, m[0])
+
+
+SCAN_TILE = 1024  # elements a block scans at once on a GPU (``ordered_scan``)
+
+
+@wp.kernel
+def block_scan_kernel(
+    w: wp.array(dtype=wp.float32), cdf: wp.array(dtype=wp.float32), totals: wp.array(dtype=wp.float32)
+):
+    """Each block's inclusive prefix sums of ``w`` into ``cdf`` (a tile scan: a fixed order) and its total."""
+    b, lane = wp.tid()
+    i = b * wp.block_dim() + lane
+    v = float(0.0)
+    if i < w.shape[0]:
+        v = w[i]
+    mine = wp.untile(wp.tile_scan_inclusive(wp.tile(v)))
+    if i < w.shape[0]:
+        cdf[i] = mine
+    if lane == wp.block_dim() - 1:
+        totals[b] = mine
+
+
+@wp.kernel
+def totals_scan_kernel(totals: wp.array(dtype=wp.float32), count: int):
+    """The blocks' totals into their running sums, one after another in one thread."""
+    s = float(0.0)
+    for j in range(count):
+        s += totals[j]
+        totals[j] = s
+
+
+@wp.kernel
+def add_block_offsets_kernel(cdf: wp.array(dtype=wp.float32), totals: wp.array(dtype=wp.float32), block: int):
+    i = wp.tid()
+    b = i // block
+    if b > 0:
+        cdf[i] = cdf[i] + totals[b - 1]
+
+
+def ordered_scan(w: wp.array, cdf: wp.array, totals: wp.array, device: str) -> None:
+    """cdf = the inclusive prefix sums of w, the same bits on every run: blocks of SCAN_TILE scanned as tiles, their
+    totals summed in order, each block's elements moved by the totals before it. (CUB's scan, which
+    ``wp.utils.array_scan`` runs on a GPU, adds its tiles' partial sums in the order the tiles finish: two runs
+    can round a float differently, and resampling then draws other particles: found in the twenty-first session,
+    a 100k worlds run on an H100 parting from itself at its first resampling.) ``totals``: ceil(n / SCAN_TILE)."""
+    n = w.shape[0]
+    block = SCAN_TILE if wp.get_device(device).is_cuda else 1  # (a CPU runs a block as one thread)
+    blocks = -(-n // block)
+    if totals.shape[0] < blocks:
+        raise ValueError(f"ordered_scan: room for {totals.shape[0]} block totals, {blocks} needed")
+    wp.launch_tiled(block_scan_kernel, dim=[blocks], inputs=[w, cdf, totals], block_dim=block, device=device)
+    wp.launch(totals_scan_kernel, 1, [totals, blocks], device=device)
+    wp.launch(add_block_offsets_kernel, n, [cdf, totals, block], device=device)
 
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -202,6 +255,7 @@ class ParticleWeights:
     cost more than it saved (the step at 1M 0.80 against 0.77 ms, twentieth session)."""
 
     TILED = None  # accumulate in one tiled launch: None = on a GPU (tests set True or False on any device)
+    ORDERED_SCAN = None  # the cdf by ordered_scan: None = on a GPU (tests set True or False on any device)
 
     def __init__(self, num_particles: int, device: str = "auto", centre=(0.0, 0.0), keep_cos_sin: bool | None = None):
         self.device = pick_device(device)
@@ -214,7 +268,11 @@ class ParticleWeights:
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
         self.sums = wp.zeros(8, dtype=wp.float32, device=d)
         self.partial = PartialSums(8, d, reduction_threads(num_particles, d))
-        self.tiled = wp.get_device(d).is_cuda if self.TILED is None else bool(self.TILED)  # see ``accumulate``
+        on_gpu = wp.get_device(d).is_cuda
+        self.tiled = on_gpu if self.TILED is None else bool(self.TILED)  # see ``accumulate``
+        self.ordered = on_gpu if self.ORDERED_SCAN is None else bool(self.ORDERED_SCAN)  # see ``cumulate``
+        self.scan_totals = wp.zeros(num_particles, dtype=wp.float32, device=d)  # ordered_scan's block totals (a GPU
+        # needs ceil(n / SCAN_TILE), a CPU running TILED one per particle)
         self._no_keys = wp.zeros(1, dtype=wp.float32, device=d)  # accumulate's keys when there are none to write
         self._no_values = wp.zeros(1, dtype=wp.int32, device=d)
 
@@ -270,8 +328,12 @@ class ParticleWeights:
         self.partial.finish(threads, self.sums)
 
     def cumulate(self) -> None:
-        """The cumulative weights, for resampling."""
-        wp.utils.array_scan(self.w, self.cdf, inclusive=True)
+        """The cumulative weights, for resampling: on a GPU by ``ordered_scan`` (the same bits on every run), on a CPU
+        by Warp's array_scan (a loop in order)."""
+        if self.ordered:
+            ordered_scan(self.w, self.cdf, self.scan_totals, self.device)
+        else:
+            wp.utils.array_scan(self.w, self.cdf, inclusive=True)
 
     def _check(self, log_w: wp.array) -> None:
         if log_w.shape[0] != self.w.shape[0]:

@@ -339,6 +339,9 @@ def test_a_tiled_step_keeps_every_bit(graph, rng, monkeypatch):
     maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
     seed = int(rng.integers(1 << 16))
     runs = {}
+    monkeypatch.setattr(
+        ParticleWeights, "ORDERED_SCAN", False
+    )  # the same scan both ways (its own test: test_particles)
     for tiled in (False, True):
         monkeypatch.setattr(ParticleWeights, "TILED", tiled)
         poses, neffs, pf = run(log, nog, maps, "likelihood_field", seed, graph, DEVICE)

@@ -248,6 +248,31 @@ def test_sums_over_more_particles_than_a_reduction_has_threads_match_the_twins(r
     assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"seed {rng.seed}"
 
 
+def test_the_ordered_scan_is_the_cumulative_sum_and_repeats_itself_bit_for_bit(rng):
+    """ordered_scan (the cdf a GPU resamples from): the numpy cumulative sum within float32 rounding, never
+    decreasing for non-negative weights, and the same bits on every call (CUB's scan was not: its tiles' partial sums
+    are added in the order the tiles finish). Sizes around the block size, and a set of nearly equal weights, where a
+    last-bit difference moves low-variance pointers across particles."""
+    from irmcl_warp.kernels.resample import SCAN_TILE, ordered_scan
+
+    for n in (1, SCAN_TILE - 1, SCAN_TILE, SCAN_TILE + 1, int(rng.integers(3 * SCAN_TILE, 40 * SCAN_TILE))):
+        w = (1.0 + 1e-3 * rng.random(n)).astype(np.float32) if n > SCAN_TILE else rng.random(n).astype(np.float32)
+        wd = wp.array(w, dtype=wp.float32, device=DEVICE)
+        totals = wp.zeros(n, dtype=wp.float32, device=DEVICE)
+        outs = []
+        for _ in range(3):
+            cdf = wp.zeros(n, dtype=wp.float32, device=DEVICE)
+            ordered_scan(wd, cdf, totals, DEVICE)
+            outs.append(cdf.numpy())
+        twin = np.cumsum(w.astype(np.float64))
+        # float32 running sums: a CPU's (blocks of one) lose up to ~n ulp over n terms, a GPU's blocks far less
+        assert np.allclose(outs[0], twin, rtol=max(1e-5, 2 * n * 6e-8), atol=1e-6), f"n {n}, seed {rng.seed}"
+        assert np.all(np.diff(outs[0]) >= 0), f"n {n}, seed {rng.seed}"
+        assert all(np.array_equal(outs[0], o) for o in outs[1:]), f"n {n} on {DEVICE}, seed {rng.seed}"
+    with pytest.raises(ValueError, match="block totals"):
+        ordered_scan(wd, cdf, wp.zeros(0, dtype=wp.float32, device=DEVICE), DEVICE)
+
+
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     n = 300
     log_w, particles, pw, weights = _weights(rng, n)
