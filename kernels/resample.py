@@ -93,6 +93,18 @@ def totals_scan_kernel(totals: wp.array(dtype=wp.float32), count: int):
 
 
 @wp.kernel
+def totals_tile_scan_kernel(totals: wp.array(dtype=wp.float32), count: int):
+    """``totals_scan_kernel`` for at most a block's worth of totals (a GPU, up to SCAN_TILE^2 elements): one tile scan."""
+    _b, lane = wp.tid()
+    v = float(0.0)
+    if lane < count:
+        v = totals[lane]
+    mine = wp.untile(wp.tile_scan_inclusive(wp.tile(v)))
+    if lane < count:
+        totals[lane] = mine
+
+
+@wp.kernel
 def add_block_offsets_kernel(cdf: wp.array(dtype=wp.float32), totals: wp.array(dtype=wp.float32), block: int):
     i = wp.tid()
     b = i // block
@@ -112,7 +124,10 @@ def ordered_scan(w: wp.array, cdf: wp.array, totals: wp.array, device: str) -> N
     if totals.shape[0] < blocks:
         raise ValueError(f"ordered_scan: room for {totals.shape[0]} block totals, {blocks} needed")
     wp.launch_tiled(block_scan_kernel, dim=[blocks], inputs=[w, cdf, totals], block_dim=block, device=device)
-    wp.launch(totals_scan_kernel, 1, [totals, blocks], device=device)
+    if block > 1 and blocks <= block:  # a GPU's totals fit one tile (up to SCAN_TILE^2 = 1M elements)
+        wp.launch_tiled(totals_tile_scan_kernel, dim=[1], inputs=[totals, blocks], block_dim=block, device=device)
+    else:
+        wp.launch(totals_scan_kernel, 1, [totals, blocks], device=device)
     wp.launch(add_block_offsets_kernel, n, [cdf, totals, block], device=device)
 
 
