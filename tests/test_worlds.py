@@ -307,6 +307,10 @@ def test_the_worlds_stage_records_every_update_and_ends_with_a_verdict(tmp_path,
     z = np.load(out / "hall-5-run1.npz")
     assert z["features"].shape == (len(z["stamps"]), len(FEATURES))
     assert np.isfinite(z["features"][z["updated"]]).all() and np.isnan(z["features"][~z["updated"]]).all()
+    lik = z["log_mean_likelihood"]  # what AMCL's w_slow / w_fast would average (eval.analyses.lost_rules)
+    assert (
+        np.isfinite(lik[z["updated"]]).all() and np.isnan(lik[~z["updated"]]).all() and (lik[z["updated"]] <= 0).all()
+    )
     r = doc["runs"][0]
     assert r["localized_at_end"] == (r["confidence_at_end"] >= 0.8)
     last = capsys.readouterr().out.strip().splitlines()[-1]
@@ -562,3 +566,12 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     loose = score_rule([run], 0.4, 1)  # the poor scan at 5 s is taken for a kidnapping
     assert loose["false_alarms"] == 1 and loose["detected_within_2s"] == 1  # localized again at once after it
     assert choose([off, fast, loose]) is fast
+    # AMCL's recovery as a detector: the mean likelihood falls from e^-1 to e^-5 at the jump; w_fast follows at 0.1 a
+    # scan, so 1 - w_fast / w_slow passes 0.3 after 4 updates (0.8 s) and 0.9 only after 22 (4.4 s)
+    from eval.analyses.lost_rules import AmclRule
+
+    trace["log_mean_likelihood"] = np.where(t >= 10.0, -5.0, -1.0)
+    np.savez(run / "office-1-run1.npz", **trace, lost_at_s=np.array(recorded))
+    amcl = {b: score_rule([run], 0.0, 1, lambda w, b=b: AmclRule(w, 0.001, 0.1, b)) for b in (0.3, 0.9)}
+    assert amcl[0.3]["detected_within_2s"] == 1 and amcl[0.3]["median_detection_s"] == pytest.approx(0.6, abs=0.01)
+    assert amcl[0.9]["detected_within_2s"] == 0 and amcl[0.3]["false_alarms"] == amcl[0.9]["false_alarms"] == 0

@@ -7,6 +7,9 @@ tracking). A replay is what the stage would have done as long as the filter was 
 with ``worlds.relocalize=false`` replay whole; in a run recorded with relocalization, only the updates before its
 first recorded lost event are replayed (``replayed_share`` says how much of the runs that was).
 
+``--amcl SLOW:FAST``: AMCL's w_slow / w_fast recovery read as a detector (``AmclRule``), at each ``--amcl-above``
+threshold, side by side; the threshold the rule below keeps is printed and recorded (``chosen_amcl``).
+
 ``--choose FILE``: the rule kept by the rule the lost-robot delay was chosen by (eval/gpu/worlds.sh): the most
 kidnappings detected within 2 s with at most 1 false alarm per hour of right tracking, the earlier detection on a
 tie, then the stricter rule (fewer updates, the lower threshold). Meant for tuning runs only; written to FILE.
@@ -26,18 +29,55 @@ from irmcl_warp.services.cli import guard
 from irmcl_warp.services.outputs import write_json
 
 
-def replay(trace, w, agreement_below: float, updates: int, stop_at_s: float = np.inf) -> list[float]:
-    """The lost events (s from the first scan) of ``LostRule`` with these settings over a recorded trace, up to
-    ``stop_at_s``."""
+class AmclRule:
+    """AMCL's recovery read as a lost detector, for the side by side (Thrun et al., Probabilistic Robotics, Table 8.3;
+    nav2's recovery_alpha_slow / recovery_alpha_fast): w_slow and w_fast, running averages of the scan's mean
+    likelihood at rates ``alpha_slow`` < ``alpha_fast`` (kept as logs, updated as ParticleFilter.recovery_probability
+    does), and AMCL's injection probability max(0, 1 - w_fast / w_slow). Once localized (the confidence reached
+    ``confident_above``, as for LostRule), lost when that probability exceeds ``above``; then localized again only
+    when the confidence says so."""
+
+    def __init__(self, w, alpha_slow: float, alpha_fast: float, above: float):
+        self.confident_above = w["confident_above"]
+        self.a_slow, self.a_fast, self.above = alpha_slow, alpha_fast, above
+        self.l_slow = self.l_fast = None
+        self.localized = False
+
+    def __call__(self, t: float, p: float, agreement: float, log_mean_likelihood: float) -> bool:
+        l_avg = log_mean_likelihood
+        if np.isfinite(l_avg):
+            if self.l_slow is None:
+                self.l_slow = self.l_fast = l_avg
+            self.l_slow = float(np.logaddexp(np.log1p(-self.a_slow) + self.l_slow, np.log(self.a_slow) + l_avg))
+            self.l_fast = float(np.logaddexp(np.log1p(-self.a_fast) + self.l_fast, np.log(self.a_fast) + l_avg))
+        if p >= self.confident_above:
+            self.localized = True
+        inject = 0.0 if self.l_slow is None else 1.0 - np.exp(self.l_fast - self.l_slow)
+        if self.localized and inject > self.above:
+            self.localized = False
+            return True
+        return False
+
+
+def lost_rule(w, agreement_below: float, updates: int):
+    """LostRule with these agreement settings, called as the replay calls a rule."""
     rule = LostRule(
         SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates})
     )
+    return lambda t, p, agreement, _mean: rule(t, p, agreement)
+
+
+def replay(trace, w, agreement_below: float, updates: int, stop_at_s: float = np.inf, make_rule=None) -> list[float]:
+    """The lost events (s from the first scan) of ``LostRule`` with these settings (or of ``make_rule(w)``) over a
+    recorded trace, up to ``stop_at_s``."""
+    rule = make_rule(w) if make_rule is not None else lost_rule(w, agreement_below, updates)
     t = trace["stamps"] - trace["stamps"][0]
+    mean = trace["log_mean_likelihood"] if "log_mean_likelihood" in trace else np.full(len(t), np.nan)
     lost = []
     for i in np.flatnonzero(trace["updated"] & np.isfinite(trace["confidence"])):
         if t[i] > stop_at_s:  # (the update of a recorded lost event is still the recorded run)
             break
-        if rule(t[i], float(trace["confidence"][i]), float(trace["features"][i, AGREEMENT])):
+        if rule(t[i], float(trace["confidence"][i]), float(trace["features"][i, AGREEMENT]), float(mean[i])):
             lost.append(float(t[i]))
     return lost
 
@@ -57,7 +97,7 @@ def run_traces(folder: Path):
     return w, traces
 
 
-def score_rule(folders: list[Path], agreement_below: float, updates: int) -> dict:
+def score_rule(folders: list[Path], agreement_below: float, updates: int, make_rule=None, name: str = "") -> dict:
     rows, replayed, total = [], 0.0, 0.0
     for folder in folders:
         w, traces = run_traces(folder)
@@ -66,7 +106,9 @@ def score_rule(folders: list[Path], agreement_below: float, updates: int) -> dic
             t = tr["stamps"] - tr["stamps"][0]
             recorded = tr["lost_at_s"]
             stop = np.inf if not w["relocalize"] or len(recorded) == 0 else float(recorded[0])
-            lost = replay(tr, w, agreement_below, updates, stop)
+            if make_rule is not None and "log_mean_likelihood" not in tr:
+                raise ValueError(f"{folder}: {world} run {k} has no log mean likelihood (recorded before it was kept)")
+            lost = replay(tr, w, agreement_below, updates, stop, make_rule)
             cut = int(np.searchsorted(t, w["kidnap_at_s"])) if w["kidnap_at_s"] > 0 else None
             log = SimpleNamespace(stamps=tr["stamps"], ground_truth=tr["truth"])
             trace = {**tr, "lost_at_s": np.array(lost, float)}
@@ -83,6 +125,7 @@ def score_rule(folders: list[Path], agreement_below: float, updates: int) -> dic
         r["detected_after_s"] for r in rows if r.get("right_before_kidnap") and r["detected_after_s"] is not None
     ]
     return {
+        "rule": name or ("confidence" if agreement_below == 0 else f"agreement < {agreement_below:g} x {updates}"),
         "agreement_below": agreement_below,
         "updates": updates,
         **s,
@@ -106,6 +149,7 @@ def choose(results: list[dict]) -> dict:
             -(r["median_detection_s"] if r["median_detection_s"] is not None else np.inf),
             -r["updates"],
             -r["agreement_below"],
+            -r.get("above", 0.0),
         ),
     )
 
@@ -115,6 +159,8 @@ def main(argv=None) -> dict:
     ap.add_argument("runs", nargs="+", type=Path, help="worlds run folders (outputs/worlds/worlds/<run>)")
     ap.add_argument("--agreement-below", nargs="+", type=float, default=[0.0, 0.3, 0.4, 0.5, 0.6])
     ap.add_argument("--updates", nargs="+", type=int, default=[1, 2, 3])
+    ap.add_argument("--amcl", nargs="*", default=[], help="AMCL's alphas SLOW:FAST, each side by side (e.g. 0.001:0.1)")
+    ap.add_argument("--amcl-above", nargs="+", type=float, default=[0.0, 0.1, 0.3, 0.5])
     ap.add_argument("--choose", type=Path, help="write the kept rule here (tuning runs only)")
     ap.add_argument("--out", type=Path, help="the JSON record")
     a = ap.parse_args(argv)
@@ -122,16 +168,35 @@ def main(argv=None) -> dict:
     for below in a.agreement_below:
         for n in [1] if below == 0 else a.updates:
             results.append(score_rule(a.runs, below, n))
-    print("| agreement below | updates | kidnaps detected within 2 s | median detection (s) | false alarms (per h) |")
-    print("|---|---|---|---|---|")
-    for r in results:
-        rule = "off (confidence only)" if r["agreement_below"] == 0 else f"{r['agreement_below']:.2f}"
+    amcl = []
+    for pair in a.amcl:
+        slow, fast = (float(x) for x in pair.split(":"))
+        for above in a.amcl_above:
+            r = score_rule(
+                a.runs,
+                0.0,
+                1,
+                lambda w, s=slow, f=fast, b=above: AmclRule(w, s, f, b),
+                f"AMCL {slow:g}/{fast:g} > {above:g}",
+            )
+            amcl.append({**r, "alpha_slow": slow, "alpha_fast": fast, "above": above})
+    print("| rule | kidnaps detected within 2 s | median detection (s) | false alarms (per h) |")
+    print("|---|---|---|---|")
+    for r in results + amcl:
         med = "-" if r["median_detection_s"] is None else f"{r['median_detection_s']:.1f}"
         print(
-            f"| {rule} | {r['updates'] if r['agreement_below'] else '-'} | {r.get('detected_within_2s', '-')}/"
-            f"{r.get('kidnaps', 0)} | {med} | {r['false_alarms']} ({r['false_alarms_per_h']:.1f}) |"
+            f"| {r['rule']} | {r.get('detected_within_2s', '-')}/{r.get('kidnaps', 0)} | {med} "
+            f"| {r['false_alarms']} ({r['false_alarms_per_h']:.1f}) |"
         )
-    record = {"runs": [str(p) for p in a.runs], "rules": results}
+    record = {"runs": [str(p) for p in a.runs], "rules": results, "amcl": amcl}
+    if amcl:  # AMCL's threshold by the same rule (meaningful on tuning runs only)
+        try:
+            kept = choose(amcl)
+            record["chosen_amcl"] = {k: kept[k] for k in ("alpha_slow", "alpha_fast", "above")}
+            print(f"chosen AMCL: {kept['rule']}")
+        except ValueError as e:
+            record["chosen_amcl"] = None
+            print(f"AMCL: {e}")
     if a.choose:
         kept = choose(results)
         record["chosen"] = {"agreement_below": kept["agreement_below"], "updates": kept["updates"]}

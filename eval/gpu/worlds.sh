@@ -7,6 +7,9 @@
 #           the scan-agreement trigger chosen on the tuning runs by eval.analyses.lost_rules' rule
 #           (results/worlds/lost_rule.txt), replayed on the test runs beside the confidence alone, then the kidnapped
 #           test runs made again live with the chosen rule (relocalizing: how soon the filter is right again)
+#   amcl    the lost-robot rules side by side with AMCL's w_slow / w_fast recovery read as a detector: kidnapped tuning
+#           and test runs recorded without relocalizing (AMCL's threshold chosen on the tuning runs by the same rule)
+#   plain   the non-kidnapped test runs recorded without relocalizing: every rule's false alarms per hour
 #   tests   the tests this change touched, kernels on cuda:0 (IRMCL_TEST_DEVICE)
 # Results: $OUT/worlds-{tuning,test}.tgz (outputs/worlds/worlds/<run>/, results/worlds/); unpack into the repository root.
 set -uo pipefail
@@ -57,6 +60,21 @@ PY
     $W worlds.split=test worlds.runs=5 worlds.kidnap_at_s=30 worlds.calibration=$CAL worlds.lost_agreement_below="$a" \
       worlds.lost_agreement_updates="$n" 2>&1 | tail -1
     tar czf "${OUT:-.}/worlds-lost.tgz" outputs/worlds/worlds results/worlds results/checks/lost_rules_* ;;
+  amcl)
+    R="--agreement-below 0 0.4 --updates 1 --amcl 0.001:0.1 0.01:0.2"
+    K="worlds.kidnap_at_s=30 worlds.relocalize=false worlds.calibration=$CAL"
+    $W worlds.split=tuning worlds.runs=3 $K 2>&1 | tail -1
+    python -m eval.analyses.lost_rules $(ls -dt outputs/worlds/worlds/tuning-likelihood_field-100k-* | head -1) $R \
+      --out results/checks/lost_rules_amcl_tuning_100k.json
+    $W worlds.split=test worlds.runs=5 $K 2>&1 | tail -1
+    python -m eval.analyses.lost_rules $(ls -dt outputs/worlds/worlds/test-likelihood_field-100k-* | head -1) $R \
+      --out results/checks/lost_rules_amcl_test_100k.json
+    tar czf "${OUT:-.}/worlds-amcl.tgz" outputs/worlds/worlds results/checks/lost_rules_amcl_* ;;
+  plain)
+    $W worlds.split=test worlds.relocalize=false worlds.calibration=$CAL 2>&1 | tail -1
+    python -m eval.analyses.lost_rules $(ls -dt outputs/worlds/worlds/test-likelihood_field-100k-* | head -1) \
+      --agreement-below 0 0.4 --updates 1 --amcl 0.001:0.1 0.01:0.2 --out results/checks/lost_rules_amcl_plain_100k.json
+    tar czf "${OUT:-.}/worlds-plain.tgz" results/checks/lost_rules_amcl_plain_100k.json ;;
   tests)
     IRMCL_TEST_DEVICE=cuda:0 python -m pytest -q -p no:cacheprovider -m "not data and not slow and not cpu_only" \
       --timeout 300 tests/test_worlds.py tests/test_weighting.py tests/test_particles.py tests/test_mcl.py 2>&1 \

@@ -14,7 +14,8 @@ confidence, declares the robot localized at ``worlds.confident_above`` and lost 
 ``worlds.relocalize``, starts again from a uniform spread and says so). The estimate is the heaviest mode's pose.
 
 Writes outputs/<exp>/worlds/<split>-<weighting>-<particles>-<id>/: per world and run ``<world>-run<k>.npz``
-(stamps, estimate, truth, features, confidence, updated) and ``.tum``; metrics.json (per run: the protocol's
+(stamps, estimate, truth, features, confidence, updated, the log mean likelihood of each update's scan) and
+``.tum``; metrics.json (per run: the protocol's
 success, the verdict at the end, lost events, false alarms, kidnap detection; per world and overall counts).
 """
 
@@ -253,7 +254,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
     (with ``worlds.relocalize``, a uniform spread again). Returns per-scan arrays and the events."""
     n = len(log.stamps)
     est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
-    prob, updated = np.full(n, np.nan), np.zeros(n, bool)
+    prob, updated, mean_lik = np.full(n, np.nan), np.zeros(n, bool), np.full(n, np.nan)
     lost_at, pose, p, weighed = [], None, np.nan, False
     rule, last_odom = LostRule(w), log.odom[0]
     angles, T = log.info.angles_rad, log.T_base_laser
@@ -265,6 +266,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
             last_odom, weighed, updated[i] = log.odom[i], True, True
             f, md = tracker(pf.particles.numpy(), pf.log_w.numpy(), log.ranges_m[i], angles, T, delta)
             feats[i], pose = f, md.poses[0]
+            mean_lik[i] = pf.log_mean_likelihood(pf.log_lik)  # what AMCL's w_slow / w_fast average (lost_rules)
             if conf is not None:
                 p = float(conf(f))
                 if rule(log.stamps[i], p, f[AGREEMENT]):
@@ -280,6 +282,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
         "features": feats,
         "confidence": prob,
         "updated": updated,
+        "log_mean_likelihood": mean_lik,
         "lost_at_s": np.array(lost_at, float),
     }
 
