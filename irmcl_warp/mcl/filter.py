@@ -312,7 +312,8 @@ class ParticleFilter:
 
         (Tried and left out, twenty-first session: the estimate's sort and sums on a second stream beside the weights'
         sums, scan and resampling, 0.02-0.04 ms faster at 100k on an H100, did not repeat itself: two 100k global runs
-        on fr079 parted after 19 steps, while the same code on one stream repeated the runs of the code before.)"""
+        on fr079 parted after 19 steps, while the same code on one stream repeated the runs of the code before;
+        probably CUB's scan, which rounded by the order its tiles finished, since replaced by ``ordered_scan``.)"""
         weights, estimator = self.weights, self.estimator
         ranks = estimator.rank_buffers() if weights.tiled and hasattr(estimator, "rank_buffers") else None
         weights.accumulate(self.log_w, self.log_lik, float(self.cfg.temper), ranks)
