@@ -35,6 +35,12 @@ def max_kernel(log_w: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32
 TILE = 256  # threads per block of a tiled launch on a GPU (a CPU runs blocks of one thread)
 
 
+def tile_block(size: int, device: str) -> int:
+    """Threads per block of a tiled launch of ``size`` on ``device``: ``size`` on a GPU, 1 on a CPU (Warp runs a CPU
+    block as one thread)."""
+    return size if wp.get_device(device).is_cuda else 1
+
+
 @wp.kernel
 def accumulate_max_kernel(
     log_w: wp.array(dtype=wp.float32),
@@ -119,7 +125,7 @@ def ordered_scan(w: wp.array, cdf: wp.array, totals: wp.array, device: str) -> N
     can round a float differently, and resampling then draws other particles: found in the twenty-first session,
     a 100k worlds run on an H100 parting from itself at its first resampling.) ``totals``: ceil(n / SCAN_TILE)."""
     n = w.shape[0]
-    block = SCAN_TILE if wp.get_device(device).is_cuda else 1  # (a CPU runs a block as one thread)
+    block = tile_block(SCAN_TILE, device)
     blocks = -(-n // block)
     if totals.shape[0] < blocks:
         raise ValueError(f"ordered_scan: room for {totals.shape[0]} block totals, {blocks} needed")
@@ -286,8 +292,9 @@ class ParticleWeights:
         on_gpu = wp.get_device(d).is_cuda
         self.tiled = on_gpu if self.TILED is None else bool(self.TILED)  # see ``accumulate``
         self.ordered = on_gpu if self.ORDERED_SCAN is None else bool(self.ORDERED_SCAN)  # see ``cumulate``
-        self.scan_totals = wp.zeros(num_particles, dtype=wp.float32, device=d)  # ordered_scan's block totals (a GPU
-        # needs ceil(n / SCAN_TILE), a CPU running TILED one per particle)
+        self.block = tile_block(TILE, d)  # accumulate's tiled launch
+        self.scan_totals = wp.zeros(-(-num_particles // tile_block(SCAN_TILE, d)), dtype=wp.float32, device=d)
+        # (ordered_scan's block totals, one per block of the scan)
         self._no_keys = wp.zeros(1, dtype=wp.float32, device=d)  # accumulate's keys when there are none to write
         self._no_values = wp.zeros(1, dtype=wp.int32, device=d)
 
@@ -301,12 +308,11 @@ class ParticleWeights:
         n, d = log_w.shape[0], self.device
         if self.tiled:
             keys, values = ranks if ranks is not None else (self._no_keys, self._no_values)
-            block = TILE if wp.get_device(d).is_cuda else 1  # (a CPU runs a block as one thread)
             wp.launch_tiled(
                 accumulate_max_kernel,
-                dim=[-(-n // block)],
+                dim=[-(-n // self.block)],
                 inputs=[log_w, log_lik, float(temper), self.top, keys, values, int(ranks is not None)],
-                block_dim=block,
+                block_dim=self.block,
                 device=d,
             )
             return

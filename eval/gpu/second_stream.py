@@ -1,6 +1,6 @@
 """The top-share estimate's sort and sums on a second CUDA stream (an experiment, not the filter's code: twenty-first
 session, docs/benchmarks.md). ``FORK=1 python eval/gpu/second_stream.py localize <hydra args>`` or ``... bench <eval.bench
-mcl args>`` runs the stage or the benchmark with ParticleFilter's ``_normalise`` / ``_resample`` forking the estimate onto
+mcl args>`` runs the stage or the benchmark with ParticleFilter's ``_normalise`` / ``_copy_sums`` forking the estimate onto
 a second stream beside the weights' sums, the scan and the resampling (joined before the read-back); ``FORK=0`` runs
 them as they are. With the ordered scan the forked runs repeat themselves and the one-stream run's bits; it is not
 the filter's default because its final form was not tested on a GPU in that session."""
@@ -35,33 +35,23 @@ def _normalise(self) -> None:
         self._side.wait_event(wp.get_stream(self.device).record_event(self._weighed))
         with wp.ScopedStream(self._side, sync_enter=False):
             estimator.sum(self.particles, self.log_w, weights.w)
-            wp.copy(self.readback, estimator.sums, 8, 0, 5)
     weights.cumulate()
     if estimator is not None and not fork:
         estimator.launch(self.particles, self.log_w)
 
 
-def _resample(self, limit: float) -> None:
-    inp = self.inputs
-    self.resampler.launch(
-        self.weights.cdf,
-        self.particles,
-        self.scratch,
-        inp.draw,
-        inp.resample_seed,
-        self.weights.sums,
-        limit,
-        self.log_w,
-    )
-    wp.copy(self.readback, self.weights.sums, 0, 0, 8)
+_one_stream_copy = ParticleFilter._copy_sums
+
+
+def _copy_sums(self) -> None:
+    """The estimate's stream joined before the filter's own read-back copies."""
     if self._fork():
         wp.get_stream(self.device).wait_stream(self._side)
-    elif self.estimator is not None:
-        wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
+    _one_stream_copy(self)
 
 
 if os.environ.get("FORK") == "1":
-    ParticleFilter._fork, ParticleFilter._normalise, ParticleFilter._resample = _fork, _normalise, _resample
+    ParticleFilter._fork, ParticleFilter._normalise, ParticleFilter._copy_sums = _fork, _normalise, _copy_sums
 what, sys.argv = sys.argv[1], [sys.argv[1]] + sys.argv[2:]
 if what == "localize":
     runpy.run_module("irmcl_warp.localize", run_name="__main__")

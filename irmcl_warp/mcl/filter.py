@@ -341,6 +341,10 @@ class ParticleFilter:
             limit,
             self.log_w,
         )
+        self._copy_sums()
+
+    def _copy_sums(self) -> None:
+        """The weights' eight sums and the estimator's five into the pinned read-back buffer (one copy each)."""
         wp.copy(self.readback, self.weights.sums, 0, 0, 8)
         if self.estimator is not None:
             wp.copy(self.readback, self.estimator.sums, 8, 0, 5)

@@ -222,8 +222,7 @@ class LostRule:
 
     def __init__(self, w):
         self.confident_above, self.lost_below, self.lost_after_s = w.confident_above, w.lost_below, w.lost_after_s
-        self.agreement_below = float(getattr(w, "lost_agreement_below", 0.0))
-        self.agreement_updates = max(1, int(getattr(w, "lost_agreement_updates", 1)))
+        self.agreement_below, self.agreement_updates = float(w.lost_agreement_below), int(w.lost_agreement_updates)
         self.reset()
 
     def reset(self) -> None:
