@@ -71,3 +71,34 @@ def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch, preset):
     if cfg.train.sampler == "occupancy":  # the grid skipped samples: most of them where the field also ends the beams
         share = 0.5 if cfg.train.grid_end == "field" else 0.75
         assert metrics["history"][-1]["samples_per_beam"] < share * cfg.train.num_samples, metrics["history"][-1]
+
+
+def test_a_wide_global_start_repeats_itself_and_one_stream(monkeypatch):
+    """300k particles spread over the simulator's free space (above 2^18: the wide reductions and the ordered scan),
+    the step as one CUDA graph: two runs with the estimate on a second stream give the same estimates, N_eff and
+    particles as each other and as a run on one stream (ParticleFilter._normalise)."""
+    from irmcl_warp.kernels.motion import odometry_step
+    from irmcl_warp.mcl import MCLConfig
+    from irmcl_warp.mcl.filter import ParticleFilter
+    from irmcl_warp.services.filters import WeightingMaps, build_filter
+    from irmcl_warp.sim import simulate
+    from eval.bench.mcl import simulator_nog
+
+    cfg = _cfg("sim.duration_s=6")
+    log, _ = simulate(cfg.sim, "cuda:0")
+    nog = simulator_nog(0.1, "cuda:0")
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.occupancy, origin_xy=corner, resolution_m=nog.resolution_m)
+    runs = []
+    for second in (True, True, False):
+        monkeypatch.setattr(ParticleFilter, "SECOND_STREAM", second)
+        mc = MCLConfig(num_particles=300_000, weighting="likelihood_field", seed=11, step_graph="on")
+        pf = build_filter(mc, nog, log.T_base_laser, log.info.angles_rad, 10.0, "cuda:0", maps)
+        pf.init_uniform()
+        out = [pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k]) for k in range(1, len(log))]
+        assert (pf._side is not None) == second
+        runs.append((np.array([o[0] for o in out]), np.array([o[1] for o in out]), pf.particles.numpy()))
+    assert (runs[0][1] < 0.5 * 300_000).any(), "resampled at least once"
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other):
+            assert np.array_equal(a, b)

@@ -351,6 +351,28 @@ def test_a_tiled_step_keeps_every_bit(graph, rng, monkeypatch):
         assert np.array_equal(fused, apart), f"seed {seed} on {DEVICE}"
 
 
+@pytest.mark.parametrize("graph", ["on", "off"])
+def test_the_estimate_on_a_second_stream_keeps_every_bit(graph, rng, monkeypatch):
+    """On a GPU the top-share estimate's sort and sums run on a stream of their own beside the weights' sums, the
+    scan and the resampling (ParticleFilter._normalise): the same estimates, N_eff and particles as on one stream,
+    in a graph and launched one by one. On a CPU there is no second stream."""
+    from eval.analyses.determinism import run
+    from irmcl_warp.mcl.filter import ParticleFilter
+
+    log, nog = _world_and_map(duration_s=4.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed = int(rng.integers(1 << 16))
+    runs = {}
+    for second in (False, True):
+        monkeypatch.setattr(ParticleFilter, "SECOND_STREAM", second)
+        poses, neffs, pf = run(log, nog, maps, "likelihood_field", seed, graph, DEVICE)
+        assert (pf._side is not None) == (second and DEVICE.startswith("cuda")), "a second stream only on a GPU"
+        runs[second] = (poses, neffs, pf.particles.numpy())
+    for forked, one in zip(runs[True], runs[False]):
+        assert np.array_equal(forked, one), f"seed {seed} on {DEVICE}"
+
+
 @pytest.mark.cpu_only
 def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bit(rng):
     """On a CPU with two cores' blocks (mcl.cpu_threads=2, more than 2 x CPU_MIN_BLOCK particles) the motion and the

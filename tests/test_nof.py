@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import json
 from pathlib import Path
 
@@ -45,6 +47,32 @@ def test_paper_network_shape_and_output_range(rng):
     assert p.shape == (64,) and torch.all((p >= 0) & (p <= 1))
     with pytest.raises(ValueError, match="skip_after"):
         NOF(ModelConfig(depth=4, skip_after=4))
+
+
+def test_the_mlp_benchmark_counts_the_papers_multiply_adds_and_its_floor_drops_only_batch_norm(rng):
+    """eval.bench mlp: a step's FLOP are 3 x 2 x the linear layers' multiply-adds per point (42x256, 3 x 256x256,
+    298x256, 3 x 256x256, 256x1 with the paper's skip), and the floor's network keeps every linear layer and ReLU
+    and no batch norm, with the same outputs as the paper's network whose batch norm is an identity."""
+    from eval.bench.mlp import flop_per_step, without_batch_norm
+
+    model = NOF(ModelConfig())
+    macs = 42 * 256 + 3 * 256 * 256 + 298 * 256 + 3 * 256 * 256 + 256
+    assert model.flops_per_point() == 2 * macs
+    points = int(rng.integers(1000, 10**6))
+    assert flop_per_step(model, points) == 3.0 * 2 * macs * points
+    torch.manual_seed(int(rng.integers(1 << 16)))
+    paper = NOF(ModelConfig()).eval()
+    for m in paper.modules():  # running mean 0, variance 1, affine 1, 0 (eps aside): batch norm as the identity
+        if isinstance(m, torch.nn.BatchNorm1d):
+            m.eps = 0.0
+    floor = without_batch_norm(NOF(ModelConfig()))
+    kept = {k: v for k, v in paper.state_dict().items() if not re.match(r"(head|tail)\.\d+\.1\.", k)}
+    floor.load_state_dict(kept)  # every linear layer's weights: strict, so none is missing
+    assert not any(isinstance(m, torch.nn.BatchNorm1d) for m in floor.modules())
+    assert sum(isinstance(m, torch.nn.ReLU) for m in floor.modules()) == 8
+    xy = torch.from_numpy(rng.uniform(-20, 20, (256, 2))).float()
+    with torch.no_grad():
+        assert torch.allclose(floor.eval()(xy), paper(xy), atol=1e-6)
 
 
 def _beams(S=20, B=8, name="unit"):

@@ -1,8 +1,8 @@
-"""``python -m eval.bench train|mcl|slam|globloc|sweeps ...``: see each module's docstring."""
+"""``python -m eval.bench train|mlp|mcl|slam|globloc|sweeps ...``: see each module's docstring."""
 
 import argparse
 
-from eval.bench import globloc, mcl, slam, sweeps, train
+from eval.bench import globloc, mcl, mlp, slam, sweeps, train
 from irmcl_warp.services.cli import guard
 
 
@@ -10,6 +10,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m eval.bench")
     sub = ap.add_subparsers(dest="what", required=True)
     train.add_parser(sub)
+    mlp.add_parser(sub)
     mcl.add_parser(sub)
     slam.add_parser(sub)
     globloc.add_parser(sub)
@@ -21,6 +22,7 @@ def main(argv=None):
         train.run_train_bench(a)
     else:
         {
+            "mlp": mlp.run_mlp_bench,
             "mcl": mcl.run_mcl_bench,
             "slam": slam.run_slam_bench,
             "globloc": globloc.run_globloc_bench,

@@ -84,6 +84,8 @@ def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray
 
 
 class ParticleFilter:
+    SECOND_STREAM = True  # on a GPU, the top-share estimate's sort and sums beside the rest of the step (_normalise)
+
     def __init__(
         self,
         free_space,
@@ -137,6 +139,7 @@ class ParticleFilter:
         self._readback = self.readback.numpy()  # a view, made once
         self.use_graph = self._graph_choice()
         self.graphs = {}  # the particle buffer a step starts from -> its captured launches
+        self._side, self._forked = None, False  # the estimate's stream on a GPU (_side_stream); forked this step
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = 0
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
@@ -308,24 +311,45 @@ class ParticleFilter:
     def _normalise(self) -> None:
         """``log_lik`` into the log-weights (tempered by ``mcl.temper``), their normalisation and N_eff, the cumulative
         weights and the estimator's sums. On a GPU with the top-share estimate, the launch that accumulates the
-        log-weights also writes the estimate's sort keys, and the estimate sums the weights ``w`` already computed.
-
-        (Tried and left out, twenty-first session: the estimate's sort and sums on a second stream beside the weights'
-        sums, scan and resampling, 0.02-0.04 ms faster at 100k on an H100, did not repeat itself: two 100k global runs
-        on fr079 parted after 19 steps, while the same code on one stream repeated the runs of the code before;
-        probably CUB's scan, which rounded by the order its tiles finished, since replaced by ``ordered_scan``.)"""
+        log-weights also writes the estimate's sort keys, and the estimate sums the weights ``w`` already computed;
+        its sort and sums run on a second stream (``_side_stream``) beside the weights' sums, the scan and the
+        resampling, joined in ``_copy_sums``. Nothing on the filter's stream writes what the estimate reads (the
+        keys, ``w``, the particles: resampling writes the scratch buffer) before the join, and no reduction depends
+        on the order in which the streams run, so the bits are those of one stream (tested on cuda:0,
+        ``test_the_estimate_on_a_second_stream_keeps_every_bit``; it was left out in the twenty-first session while
+        CUB's scan, now ``ordered_scan``, rounded by the order its tiles finished)."""
         weights, estimator = self.weights, self.estimator
         ranks = estimator.rank_buffers() if weights.tiled and hasattr(estimator, "rank_buffers") else None
         weights.accumulate(self.log_w, self.log_lik, float(self.cfg.temper), ranks)
+        side = self._side_stream() if ranks is not None else None
+        self._forked = side is not None
+        if side is not None:  # sorted on the side while the weights are computed
+            side.wait_event(wp.get_stream(self.device).record_event(self._ranked))
+            with wp.ScopedStream(side, sync_enter=False):
+                estimator.sort()
         weights.weigh(self.log_w, self.particles)
+        if side is not None:  # summed on the side while the weights are scanned and the particles resampled
+            side.wait_event(wp.get_stream(self.device).record_event(self._weighed))
+            with wp.ScopedStream(side, sync_enter=False):
+                estimator.sum(self.particles, self.log_w, weights.w)
         weights.cumulate()
-        if estimator is None:
+        if estimator is None or side is not None:
             return
         if ranks is None:
             estimator.launch(self.particles, self.log_w)
         else:  # ranked by the accumulate launch
             estimator.sort()
             estimator.sum(self.particles, self.log_w, weights.w)
+
+    def _side_stream(self):
+        """The estimate's stream on a GPU (made on first use, with its two events), or None: on a CPU, or with
+        ``SECOND_STREAM`` off (a test's switch)."""
+        if not (self.SECOND_STREAM and wp.get_device(self.device).is_cuda):
+            return None
+        if self._side is None:
+            self._side = wp.Stream(self.device)
+            self._ranked, self._weighed = wp.Event(self.device), wp.Event(self.device)
+        return self._side
 
     def _resample(self, limit: float) -> None:
         """Resampling into the scratch buffer (decided on the device: only when N_eff < ``limit``) and the
@@ -344,7 +368,11 @@ class ParticleFilter:
         self._copy_sums()
 
     def _copy_sums(self) -> None:
-        """The weights' eight sums and the estimator's five into the pinned read-back buffer (one copy each)."""
+        """The weights' eight sums and the estimator's five into the pinned read-back buffer (one copy each), after
+        the estimate's stream, where it has one, is joined to the filter's."""
+        if self._forked:
+            wp.get_stream(self.device).wait_stream(self._side)
+            self._forked = False
         wp.copy(self.readback, self.weights.sums, 0, 0, 8)
         if self.estimator is not None:
             wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
