@@ -6,7 +6,9 @@ stream; ``FORK=1`` (or no FORK) as the filter does by default, on a second strea
 import os
 import runpy
 import sys
+from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the project root: eval's modules
 from irmcl_warp.mcl.filter import ParticleFilter
 
 ParticleFilter.SECOND_STREAM = os.environ.get("FORK", "1") == "1"
