@@ -165,6 +165,9 @@ class TrainConfig:
         "field"  # where a beam's samples end: field (its transmittance, read without gradient) | grid | none
     )
     grid_t_min: float = 1e-4  # ... once that transmittance is below this
+    fixed_samples: float = (
+        0.0  # occupancy sampler: samples per beam through the MLP, fixed (0 = as many as the grid keeps)
+    )
     checkpoint_every_s: float = 120.0
     seed: int = 42
 
@@ -493,6 +496,7 @@ RANGES = {
     "train.epochs": (1, None),
     "train.batch_rays": (1, None),
     "train.num_samples": (2, None),
+    "train.fixed_samples": (0, None),
     "train.lr": ("> 0", None),
     "train.weight_decay": (0, None),
     "train.steps_per_epoch": (1, None),

@@ -195,8 +195,12 @@ def test_fr079_uses_the_benchmark_ids(data_dir, tmp_path, monkeypatch):
 
 @pytest.mark.parametrize(
     "extra",
-    [[], ["train.lr_schedule=cosine", "train.warmup_steps=5", "train.ema_decay=0.9", "train.bn_recalibrate=2"]],
-    ids=["multistep", "cosine-ema"],
+    [
+        [],
+        ["train.lr_schedule=cosine", "train.warmup_steps=5", "train.ema_decay=0.9", "train.bn_recalibrate=2"],
+        ["train.grid_end=none", "train.fixed_samples=20"],
+    ],
+    ids=["multistep", "cosine-ema", "fixed-samples"],
 )
 def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_does(tmp_path, monkeypatch, extra):
     """train.sampler=occupancy: the grid (and the RNG its readings draw from) are in last.pt, so a run
@@ -249,14 +253,17 @@ def test_guided_training_resumed_after_an_epoch_ends_where_an_uninterrupted_run_
         assert torch.equal(v, resumed.kept_model.state_dict()[k]), k
     assert torch.equal(straight.grid.values, resumed.grid.values)
     assert straight.opt.param_groups[0]["lr"] == resumed.opt.param_groups[0]["lr"]
-    if extra:  # the average is not the weights, and the schedule ended near lr * lr_final
+    if "train.ema_decay=0.9" in extra:  # the average is not the weights, and the schedule ended near lr * lr_final
         assert not torch.equal(straight.kept_model.out.weight, straight.model.out.weight)
         assert straight.opt.param_groups[0]["lr"] == pytest.approx(cfg.train.lr * cfg.train.lr_final)
         saved = torch.load(tmp_path / "a" / "nof.pt", weights_only=False)["model"]
         best = straight.best["epoch"] == 2  # nof.pt holds the average of its epoch
         assert not best or torch.equal(saved["out.weight"], straight.kept_model.out.weight)
     h = straight.history[-1]
-    assert h["samples_per_beam"] < 0.5 * cfg.train.num_samples and h["read_per_beam"] >= h["samples_per_beam"]
+    if "train.fixed_samples=20" in extra:  # 20 per beam through the MLP at every step, the kept ones cut counted
+        assert h["samples_per_beam"] == 20 and 0 <= h["fixed_samples_cut_share"] < 1
+    else:
+        assert h["samples_per_beam"] < 0.5 * cfg.train.num_samples and h["read_per_beam"] >= h["samples_per_beam"]
     assert h["mlp_gflop_per_step"] > 0 and 0 < h["grid_occupied_share"] <= 1
 
 

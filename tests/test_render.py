@@ -167,3 +167,42 @@ def test_guided_rendering_equals_full_rendering_where_the_grid_is_right(rng, end
     assert keep.float().sum(1).mean() < (0.2 if end == "field" else 0.4) * z.shape[1]  # most samples skipped
     assert torch.allclose(guided, full, atol=atol), f"seed {rng.seed}: {(guided - full).abs().max()}"
     assert abs(grid.occupied_share() - 0.2) < 0.15  # two walls and their dilation, not the whole grid
+
+
+def test_a_fixed_count_of_samples_keeps_the_kept_ones_and_renders_the_same(rng):
+    """train.fixed_samples (render_rays' count): exactly ``count`` samples go through the model, every kept one
+    among them when there is room (the rest drawn from the skipped ones), a random ``count`` of the kept ones when
+    there is not; where the field is 0 outside the grid's cells, the ranges are those of the variable count."""
+    from irmcl_warp.nof.render import fixed_sample_index, render_rays
+
+    R, N = int(rng.integers(20, 60)), 64
+    keep = torch.from_numpy(rng.uniform(size=(R, N)) < rng.uniform(0.1, 0.4)).to(DEV)
+    kept = int(keep.sum())
+    for count in (kept, kept + int(rng.integers(1, 200)), max(2, kept - int(rng.integers(1, 20)))):
+        idx = fixed_sample_index(keep, count)
+        assert len(idx) == count and torch.all(idx[1:] > idx[:-1])  # ascending, no sample twice
+        chosen = keep.reshape(-1)[idx]
+        assert int(chosen.sum()) == min(count, kept)  # the kept ones first
+
+    class Cells(torch.nn.Module):  # p > 0 only on the kept samples' points (looked up by position)
+        def __init__(self, points, mask):
+            super().__init__()
+            self.points, self.mask = points.reshape(-1, 2), mask.reshape(-1)
+
+        def forward(self, xy):
+            d = torch.cdist(xy, self.points)
+            nearest = d.argmin(1)
+            return torch.where(self.mask[nearest], 0.3 + 0.6 * torch.sigmoid(xy[:, 0]), torch.zeros_like(xy[:, 0]))
+
+    o = torch.from_numpy(rng.uniform(-1, 1, (R, 2)).astype(np.float32)).to(DEV)
+    a = torch.from_numpy(rng.uniform(-3, 3, R).astype(np.float32)).to(DEV)
+    d = torch.stack([torch.cos(a), torch.sin(a)], 1)
+    z = sample_depths(R, N, 0.02, 5.0, perturb=True, device=DEV)
+    model = Cells(o[:, None] + d[:, None] * z[..., None], keep)
+    render = make_renderer("warp")
+    variable, _, _ = render_rays(model, render, o, d, z, keep)
+    for count in (kept, kept + 50):
+        fixed, _, _ = render_rays(model, render, o, d, z, keep, count)
+        assert torch.allclose(fixed, variable, atol=1e-6), f"seed {rng.seed}, count {count}"
+    fewer, _, p = render_rays(model, render, o, d, z, keep, kept // 2)
+    assert int((p > 0).sum()) == kept // 2  # half the kept samples counted as free

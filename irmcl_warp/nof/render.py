@@ -94,17 +94,28 @@ def sample_points(origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor) ->
 
 
 def render_rays(
-    model, renderer, origins: torch.Tensor, dirs: torch.Tensor, z: torch.Tensor, keep: torch.Tensor | None = None
+    model,
+    renderer,
+    origins: torch.Tensor,
+    dirs: torch.Tensor,
+    z: torch.Tensor,
+    keep: torch.Tensor | None = None,
+    count: int = 0,
 ):
     """Query the model at the sample points and composite: (ranges [R], opacity [R], p [R, N]).
 
     ``keep`` [R, N] (occupancy-guided sampling): only those samples go through the model; the others
     count as p = 0 (free), which leaves the compositing formula unchanged. (Fewer than two kept: every
-    sample goes through, as batch norm needs two.)
+    sample goes through, as batch norm needs two.) With ``count`` > 0 exactly that many go through
+    (``fixed_sample_index``): the same shapes at every step, no wait for the host, so the model may be
+    compiled for them.
     """
     R, N = z.shape
     points = sample_points(origins, dirs, z).reshape(-1, 2)
-    flat = None if keep is None else keep.reshape(-1).nonzero().squeeze(1)
+    if keep is not None and count > 0:
+        flat = fixed_sample_index(keep, count)
+    else:
+        flat = None if keep is None else keep.reshape(-1).nonzero().squeeze(1)
     if flat is None or len(flat) < 2:
         p = model(points).reshape(R, N).float()
     else:
@@ -112,6 +123,16 @@ def render_rays(
         p = torch.zeros(R * N, dtype=p_kept.dtype, device=p_kept.device).index_copy(0, flat, p_kept).reshape(R, N)
     ranges, opacity = renderer(p, z)
     return ranges, opacity, p
+
+
+def fixed_sample_index(keep: torch.Tensor, count: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """``count`` flat indices of the samples [R, N] the model is asked about (``train.fixed_samples``): every kept
+    sample first, topped up with samples the grid skipped, drawn at random (they go through the model and
+    count with what it says, like any sample of the uniform sampler); when more are kept than ``count``, a
+    random ``count`` of them (the others count as free, as the grid's skipped ones do). Ascending, so the
+    model sees the samples in the order the variable-count path gives them."""
+    score = keep.reshape(-1).float() + 0.5 * torch.rand(keep.numel(), device=keep.device, generator=generator)
+    return torch.topk(score, min(count, keep.numel()), sorted=False).indices.sort().values
 
 
 @torch.no_grad()

@@ -106,8 +106,18 @@ class Trainer:
         self.renderer = make_renderer(rc.name, normalize=rc.normalize, t_min=rc.t_min)
         o, d, r, _ = sets["train"].rays()
         self.origins, self.dirs, self.ranges = (torch.from_numpy(a).to(device) for a in (o, d, r))
-        # the training pass may run compiled; the grid's readings (eval mode, no gradient) use the module as is
-        self.net = torch.compile(self.model, dynamic=True) if tc.compile else self.model
+        # train.fixed_samples: the same number of samples through the MLP at every step (render_rays' count)
+        self.count = round(tc.fixed_samples * tc.batch_rays) if tc.fixed_samples > 0 else 0
+        if self.count and tc.sampler != "occupancy":
+            raise ValueError(
+                f"train.fixed_samples={tc.fixed_samples} needs train.sampler=occupancy (the uniform sampler sends "
+                f"all {tc.num_samples} samples of every beam)"
+            )
+        if tc.fixed_samples > tc.num_samples:
+            raise ValueError(f"train.fixed_samples={tc.fixed_samples}: more than the {tc.num_samples} samples per beam")
+        # the training pass may run compiled (for fixed shapes with fixed_samples); the grid's readings (eval mode, no
+        # gradient) use the module as is
+        self.net = torch.compile(self.model, dynamic=not self.count) if tc.compile else self.model
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
         if self.grid is not None:  # its readings grow with the map's area: say what they cost
             cells = self.grid.values.numel()
@@ -117,6 +127,7 @@ class Trainer:
                 f"of a batch's samples)"
             )
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
+        self.cut = []  # per step, with train.fixed_samples: the share of the kept samples left out
         self.opt = torch.optim.Adam(
             model.parameters(),
             lr=tc.lr,
@@ -205,10 +216,13 @@ class Trainer:
             if (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0:
                 self.grid.update(self.model, self.amp)
             keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
-            self.kept.append(keep.sum() / len(idx))
+            kept = keep.sum()
+            self.kept.append(kept / len(idx) if not self.count else torch.full((), self.count / len(idx)))
             self.read.append(self.grid.read / len(idx))
+            if self.count:  # the kept samples left out for the fixed count, as a share of those kept
+                self.cut.append((kept - self.count).clamp(min=0) / kept.clamp(min=1))
         with self.amp():
-            pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep)
+            pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep, self.count)
         loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -277,7 +291,7 @@ class Trainer:
             dynamic_ncols=True,
             mininterval=1.0,
         )
-        t_epoch, t_ckpt, losses, self.kept, self.read = time.time(), time.time(), [], [], []
+        t_epoch, t_ckpt, losses, self.kept, self.read, self.cut = time.time(), time.time(), [], [], [], []
         first = self.step_in_epoch  # a resumed epoch starts part way (the bar itself may be off: TQDM_DISABLE=1)
         for b in bar:
             losses.append(self.step(perm[b * B : (b + 1) * B]))
@@ -335,6 +349,14 @@ class Trainer:
         )
         if self.grid is not None:
             record["grid_occupied_share"] = self.grid.occupied_share()
+        if self.cut:
+            record["fixed_samples_cut_share"] = cut = float(torch.stack(self.cut).mean())
+            if cut > 0.02:
+                print(
+                    f"WARNING: train.fixed_samples={tc.fixed_samples} left out {cut:.1%} of the samples the grid kept in "
+                    f"epoch {self.epoch + 1} (they counted as free space); raise it above the samples per beam the grid "
+                    "keeps (train=guided with fixed_samples=0 prints them)"
+                )
         if tc.bn_recalibrate:  # part of making the field: counted as training time
             t0 = time.time()
             self.recalibrate_batch_norm(tc.bn_recalibrate)
