@@ -527,7 +527,7 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     the agreement at once and the confidence slowly down): with the agreement trigger off the replay gives the events
     the run recorded; the agreement trigger detects the jump on its first scan; a rule that fires during right
     tracking counts a false alarm; the chooser keeps the faster rule without false alarms."""
-    from eval.analyses.lost_rules import choose, score_rule
+    from eval.analyses.lost_rules import agreement_rule, amcl_rule, choose, replay, score_rule
     from irmcl_warp.mcl.confidence import FEATURES
     from irmcl_warp.mcl.worlds import AGREEMENT
 
@@ -544,12 +544,10 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     rule_settings = dict(
         confident_above=0.8, lost_below=0.2, lost_after_s=1.0, relocalize=False, kidnap_at_s=10.0, run_s=20.0
     )
-    from eval.analyses.lost_rules import replay
-
     trace = dict(
         stamps=t + 100.0, truth=truth, estimate=est, features=feats, confidence=conf, updated=np.ones(len(t), bool)
     )
-    recorded = replay({**trace, "lost_at_s": np.array([])}, rule_settings, 0.0, 1)
+    recorded = replay({**trace, "lost_at_s": np.array([])}, rule_settings, agreement_rule(0.0, 1))
     assert recorded and 11.0 <= recorded[0] <= 12.5  # the confidence alone: > 1 s after the jump
     run = tmp_path / "run"
     run.mkdir()
@@ -558,20 +556,20 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     (run / "metrics.json").write_text(
         json.dumps({"settings": {"worlds": w}, "runs": [{"world": "office-1", "run": 1}]})
     )
-    off = score_rule([run], 0.0, 1)
+    off = score_rule([run], agreement_rule(0.0, 1))
     assert off["kidnaps"] == 1 and off["detected_within_2s"] == (recorded[0] - 10.0 <= 2.0)
-    fast = score_rule([run], 0.2, 1)
+    fast = score_rule([run], agreement_rule(0.2, 1))
     assert fast["detected_within_2s"] == 1 and fast["median_detection_s"] == pytest.approx(0.0, abs=1e-9)
     assert fast["false_alarms"] == 0
-    loose = score_rule([run], 0.4, 1)  # the poor scan at 5 s is taken for a kidnapping
+    loose = score_rule([run], agreement_rule(0.4, 1))  # the poor scan at 5 s is taken for a kidnapping
     assert loose["false_alarms"] == 1 and loose["detected_within_2s"] == 1  # localized again at once after it
     assert choose([off, fast, loose]) is fast
     # AMCL's recovery as a detector: the mean likelihood falls from e^-1 to e^-5 at the jump; w_fast follows at 0.1 a
     # scan, so 1 - w_fast / w_slow passes 0.3 after 4 updates (0.8 s) and 0.9 only after 22 (4.4 s)
-    from eval.analyses.lost_rules import AmclRule
-
     trace["log_mean_likelihood"] = np.where(t >= 10.0, -5.0, -1.0)
     np.savez(run / "office-1-run1.npz", **trace, lost_at_s=np.array(recorded))
-    amcl = {b: score_rule([run], 0.0, 1, lambda w, b=b: AmclRule(w, 0.001, 0.1, b)) for b in (0.3, 0.9)}
+    amcl = {b: score_rule([run], amcl_rule(0.001, 0.1, b)) for b in (0.3, 0.9)}
     assert amcl[0.3]["detected_within_2s"] == 1 and amcl[0.3]["median_detection_s"] == pytest.approx(0.6, abs=0.01)
     assert amcl[0.9]["detected_within_2s"] == 0 and amcl[0.3]["false_alarms"] == amcl[0.9]["false_alarms"] == 0
+    assert amcl[0.3]["above"] == 0.3 and "agreement_below" not in amcl[0.3]  # each rule's own settings beside it
+    assert choose([amcl[0.3], amcl[0.9]]) is amcl[0.3]

@@ -20,7 +20,9 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from dataclasses import dataclass
 from types import SimpleNamespace
+from typing import Callable
 
 import numpy as np
 
@@ -59,25 +61,51 @@ class AmclRule:
         return False
 
 
-def lost_rule(w, agreement_below: float, updates: int):
-    """LostRule with these agreement settings, called as the replay calls a rule."""
-    rule = LostRule(
-        SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates})
+@dataclass(frozen=True)
+class Rule:
+    """A lost-robot rule to replay: its name in the tables, the settings that define it (written beside its scores),
+    and ``make(w)``, which builds it for a run's worlds settings ``w`` as a callable (t, confidence, agreement,
+    log mean likelihood) -> lost now?"""
+
+    name: str
+    fields: dict
+    make: Callable
+    needs_mean_likelihood: bool = False
+
+
+def agreement_rule(agreement_below: float, updates: int) -> Rule:
+    """The stage's LostRule with these agreement settings (0 = the confidence alone)."""
+
+    def make(w):
+        rule = LostRule(
+            SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates})
+        )
+        return lambda t, p, agreement, _mean: rule(t, p, agreement)
+
+    name = "confidence" if agreement_below == 0 else f"agreement < {agreement_below:g} x {updates}"
+    return Rule(name, {"agreement_below": agreement_below, "updates": updates}, make)
+
+
+def amcl_rule(alpha_slow: float, alpha_fast: float, above: float) -> Rule:
+    """AMCL's w_slow / w_fast recovery as a detector (``AmclRule``)."""
+    return Rule(
+        f"AMCL {alpha_slow:g}/{alpha_fast:g} > {above:g}",
+        {"alpha_slow": alpha_slow, "alpha_fast": alpha_fast, "above": above},
+        lambda w: AmclRule(w, alpha_slow, alpha_fast, above),
+        needs_mean_likelihood=True,
     )
-    return lambda t, p, agreement, _mean: rule(t, p, agreement)
 
 
-def replay(trace, w, agreement_below: float, updates: int, stop_at_s: float = np.inf, make_rule=None) -> list[float]:
-    """The lost events (s from the first scan) of ``LostRule`` with these settings (or of ``make_rule(w)``) over a
-    recorded trace, up to ``stop_at_s``."""
-    rule = make_rule(w) if make_rule is not None else lost_rule(w, agreement_below, updates)
+def replay(trace, w, rule: Rule, stop_at_s: float = np.inf) -> list[float]:
+    """The lost events (s from the first scan) of ``rule`` over a recorded trace, up to ``stop_at_s``."""
+    decide = rule.make(w)
     t = trace["stamps"] - trace["stamps"][0]
     mean = trace["log_mean_likelihood"] if "log_mean_likelihood" in trace else np.full(len(t), np.nan)
     lost = []
     for i in np.flatnonzero(trace["updated"] & np.isfinite(trace["confidence"])):
         if t[i] > stop_at_s:  # (the update of a recorded lost event is still the recorded run)
             break
-        if rule(t[i], float(trace["confidence"][i]), float(trace["features"][i, AGREEMENT]), float(mean[i])):
+        if decide(t[i], float(trace["confidence"][i]), float(trace["features"][i, AGREEMENT]), float(mean[i])):
             lost.append(float(t[i]))
     return lost
 
@@ -97,7 +125,8 @@ def run_traces(folder: Path):
     return w, traces
 
 
-def score_rule(folders: list[Path], agreement_below: float, updates: int, make_rule=None, name: str = "") -> dict:
+def score_rule(folders: list[Path], rule: Rule) -> dict:
+    """``rule`` replayed over every run of the worlds run folders and scored as the stage scores it."""
     rows, replayed, total = [], 0.0, 0.0
     for folder in folders:
         w, traces = run_traces(folder)
@@ -106,9 +135,9 @@ def score_rule(folders: list[Path], agreement_below: float, updates: int, make_r
             t = tr["stamps"] - tr["stamps"][0]
             recorded = tr["lost_at_s"]
             stop = np.inf if not w["relocalize"] or len(recorded) == 0 else float(recorded[0])
-            if make_rule is not None and "log_mean_likelihood" not in tr:
+            if rule.needs_mean_likelihood and "log_mean_likelihood" not in tr:
                 raise ValueError(f"{folder}: {world} run {k} has no log mean likelihood (recorded before it was kept)")
-            lost = replay(tr, w, agreement_below, updates, stop, make_rule)
+            lost = replay(tr, w, rule, stop)
             cut = int(np.searchsorted(t, w["kidnap_at_s"])) if w["kidnap_at_s"] > 0 else None
             log = SimpleNamespace(stamps=tr["stamps"], ground_truth=tr["truth"])
             trace = {**tr, "lost_at_s": np.array(lost, float)}
@@ -125,9 +154,8 @@ def score_rule(folders: list[Path], agreement_below: float, updates: int, make_r
         r["detected_after_s"] for r in rows if r.get("right_before_kidnap") and r["detected_after_s"] is not None
     ]
     return {
-        "rule": name or ("confidence" if agreement_below == 0 else f"agreement < {agreement_below:g} x {updates}"),
-        "agreement_below": agreement_below,
-        "updates": updates,
+        "rule": rule.name,
+        **rule.fields,
         **s,
         "false_alarms_per_h": s["false_alarms"] / max(s["tracking_right_h"], 1e-9),
         "median_detection_s": float(np.median(detected)) if detected else None,
@@ -147,8 +175,8 @@ def choose(results: list[dict]) -> dict:
         key=lambda r: (
             r["detected_within_2s"],
             -(r["median_detection_s"] if r["median_detection_s"] is not None else np.inf),
-            -r["updates"],
-            -r["agreement_below"],
+            -r.get("updates", 0),
+            -r.get("agreement_below", 0.0),
             -r.get("above", 0.0),
         ),
     )
@@ -167,19 +195,12 @@ def main(argv=None) -> dict:
     results = []
     for below in a.agreement_below:
         for n in [1] if below == 0 else a.updates:
-            results.append(score_rule(a.runs, below, n))
+            results.append(score_rule(a.runs, agreement_rule(below, n)))
     amcl = []
     for pair in a.amcl:
         slow, fast = (float(x) for x in pair.split(":"))
         for above in a.amcl_above:
-            r = score_rule(
-                a.runs,
-                0.0,
-                1,
-                lambda w, s=slow, f=fast, b=above: AmclRule(w, s, f, b),
-                f"AMCL {slow:g}/{fast:g} > {above:g}",
-            )
-            amcl.append({**r, "alpha_slow": slow, "alpha_fast": fast, "above": above})
+            amcl.append(score_rule(a.runs, amcl_rule(slow, fast, above)))
     print("| rule | kidnaps detected within 2 s | median detection (s) | false alarms (per h) |")
     print("|---|---|---|---|")
     for r in results + amcl:
