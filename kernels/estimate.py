@@ -59,60 +59,42 @@ def leave_moments(partials: wp.array2d(dtype=wp.float32), t: int, acc: vec5):
         partials[t, c] = acc[c]
 
 
+# where top_sums_kernel reads a particle's weight and yaw from
+FROM_LOG_W, FROM_W, FROM_W_COS_SIN = wp.constant(0), wp.constant(1), wp.constant(2)
+
+
 @wp.kernel
 def top_sums_kernel(
     order: wp.array(dtype=wp.int32),
     sorted_keys: wp.array(dtype=wp.float32),
     log_w: wp.array(dtype=wp.float32),
-    particles: wp.array(dtype=wp.vec3),
-    partials: wp.array2d(dtype=wp.float32),
-    k: int,
-    stride: int,
-):
-    """Sums over the first k ranks; sorted_keys[0] = -(largest log-weight) makes the exp stable."""
-    acc = vec5()
-    for r in range(wp.tid(), k, stride):
-        j = order[r]
-        acc += pose_moments(wp.exp(log_w[j] + sorted_keys[0]), particles[j])
-    leave_moments(partials, wp.tid(), acc)
-
-
-@wp.kernel
-def top_sums_from_weights_kernel(
-    order: wp.array(dtype=wp.int32),
     w: wp.array(dtype=wp.float32),
     cos_sin: wp.array(dtype=wp.vec2),
     particles: wp.array(dtype=wp.vec3),
     partials: wp.array2d(dtype=wp.float32),
+    source: int,
     k: int,
     stride: int,
 ):
-    """``top_sums_kernel`` with each particle's exp(log w - max) and (cos, sin) of its yaw read from
-    ParticleWeights, which computed them from the same values with the same functions: the same bits for
-    a third of the work (exp(log_w + sorted_keys[0]) is exp(log_w - max) exactly, -max being exact)."""
+    """The five pose moments summed over the first k ranks. A particle's weight is exp(log w - max) computed here
+    (``FROM_LOG_W``: sorted_keys[0] = -(largest log-weight) makes the exp stable, and is exact), or read from
+    ParticleWeights' ``w`` (``FROM_W``, ``FROM_W_COS_SIN``), which computed it from the same values with the same
+    expression: the same bits for less work. With ``FROM_W_COS_SIN`` the yaw's (cos, sin) are read from ``cos_sin``
+    too (kept by ParticleWeights on a CPU); otherwise they are computed here. The arrays a source does not read
+    may be empty."""
     acc = vec5()
     for r in range(wp.tid(), k, stride):
         j = order[r]
-        cs = cos_sin[j]
-        acc += moments_of(w[j], particles[j], cs[0], cs[1])
-    leave_moments(partials, wp.tid(), acc)
-
-
-@wp.kernel
-def top_sums_w_kernel(
-    order: wp.array(dtype=wp.int32),
-    w: wp.array(dtype=wp.float32),
-    particles: wp.array(dtype=wp.vec3),
-    partials: wp.array2d(dtype=wp.float32),
-    k: int,
-    stride: int,
-):
-    """``top_sums_kernel`` with each particle's exp(log w - max) read from ParticleWeights' ``w`` (the same bits,
-    as above): a GPU's step sums the estimate while resampling, on another stream, zeroes the log-weights."""
-    acc = vec5()
-    for r in range(wp.tid(), k, stride):
-        j = order[r]
-        acc += pose_moments(w[j], particles[j])
+        weight = float(0.0)
+        if source == FROM_LOG_W:
+            weight = wp.exp(log_w[j] + sorted_keys[0])
+        else:
+            weight = w[j]
+        if source == FROM_W_COS_SIN:
+            cs = cos_sin[j]
+            acc += moments_of(weight, particles[j], cs[0], cs[1])
+        else:
+            acc += pose_moments(weight, particles[j])
     leave_moments(partials, wp.tid(), acc)
 
 
@@ -127,6 +109,10 @@ class TopShareMean:
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
         self.partial = PartialSums(5, self.device, reduction_threads(self.k, self.device))
         self.weights = None
+        self.nothing = (  # what top_sums_kernel is given for the arrays its source does not read
+            wp.empty(0, dtype=wp.float32, device=self.device),
+            wp.empty(0, dtype=wp.vec2, device=self.device),
+        )
 
     def share_weights(self, weights) -> None:
         """Read each particle's weight and (cos, sin) of its yaw from ``weights`` (a ParticleWeights updated
@@ -165,16 +151,16 @@ class TopShareMean:
     def sum(self, particles: wp.array, log_w: wp.array, w: wp.array | None = None) -> None:
         """The five sums over the first k ranks: from ``share_weights``' weights and yaws (a CPU), from ``w`` (the
         weights exp(log w - max), ready), or from the log-weights and the sorted keys."""
+        nothing_f, nothing_cs = self.nothing
         if self.weights is not None:
-            kernel, inputs = (
-                top_sums_from_weights_kernel,
-                [self.values, self.weights.w, self.weights.cos_sin, particles],
-            )
+            source, w, cos_sin = FROM_W_COS_SIN, self.weights.w, self.weights.cos_sin
         elif w is not None:
-            kernel, inputs = top_sums_w_kernel, [self.values, w, particles]
+            source, cos_sin = FROM_W, nothing_cs
         else:
-            kernel, inputs = top_sums_kernel, [self.values, self.keys, log_w, particles]
-        threads = launch_reduction(kernel, self.k, [*inputs, self.partial.partials, self.k], self.device)
+            source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
+        kernel = top_sums_kernel
+        inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source]
+        threads = launch_reduction(kernel, self.k, [*inputs, self.k], self.device)
         self.partial.finish(threads, self.sums)
 
     def result(self, sums: np.ndarray | None = None) -> np.ndarray:

@@ -170,8 +170,9 @@ def test_the_cpu_walk_draws_the_particles_the_search_draws(rng):
 
 
 def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
-    """The top-share estimate with ParticleWeights' w and (cos, sin) shared (as the filter builds it) against the
-    estimate computing exp and the yaw's cos and sin itself: the same five sums to the bit."""
+    """The top-share estimate with ParticleWeights' w and (cos, sin) shared (as a CPU filter builds it), and with w
+    given to its sums (as a GPU filter does), against the estimate computing exp and the yaw's cos and sin itself:
+    the same five sums to the bit (top_sums_kernel's three sources)."""
     from irmcl_warp.kernels import ESTIMATE
 
     n = int(rng.integers(300, 5000))
@@ -183,6 +184,11 @@ def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
     alone.launch(pw, lw)
     shared.launch(pw, lw)
     assert np.array_equal(alone.sums.numpy(), shared.sums.numpy()), f"seed {rng.seed}"
+    given_w = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)  # a GPU filter's way: w given
+    given_w.rank(lw)
+    given_w.sort()
+    given_w.sum(pw, lw, weights.w)
+    assert np.array_equal(alone.sums.numpy(), given_w.sums.numpy()), f"seed {rng.seed}"
     with pytest.raises(ValueError, match="built for"):
         ESTIMATE.build("top_share", num_particles=n + 1, device=DEVICE).share_weights(weights)
     with pytest.raises(ValueError, match="do not keep"):
