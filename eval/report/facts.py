@@ -20,15 +20,23 @@ GFS_INPUTS = {
 }  # slam=gmapping_gfs data.laser_offset=[0,0,0]
 
 
-def _minute_spans(nof: dict, exp: str) -> dict[str, str]:
-    """The one-minute preset's kept runs on ``exp`` (train.name minute, minute_s1, ...): seeds, and medians
-    [min-max] over them of test MAE, Chamfer (m) and training time (s); {} when none is kept."""
+def _minute_spans(nof: dict, exp: str, fixed: bool = False) -> dict[str, str]:
+    """The one-minute preset's kept runs on ``exp`` (train.name minute, minute_s1, ...), or with ``fixed`` its runs
+    with a fixed sample count and a compiled MLP (``train=minute_compiled``: told by the count's record in their
+    history, whatever their name): seeds, and medians [min-max] over them of test MAE, Chamfer (m) and training time
+    (s); {} when none is kept."""
     found = []
     for (e, preset), (syn, train) in nof.items():
-        if e == exp and (preset == "minute" or preset.startswith("minute_s")) and syn and train:
-            m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None)
-            if m:
-                found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
+        if e != exp or not (syn and train):
+            continue
+        is_fixed = any("fixed_samples_cut_share" in h for h in train.get("history", []))
+        if fixed:
+            wanted = preset.startswith("minute") and is_fixed and train.get("epochs_done") == 10
+        else:
+            wanted = (preset == "minute" or preset.startswith("minute_s")) and not is_fixed
+        m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None) if wanted else None
+        if m:
+            found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
     if not found:
         return {}
     mae, cham, secs = zip(*found)
@@ -164,6 +172,8 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     for ds in ("fr079", "intel"):  # the one-minute preset's kept seeds
         for key, value in _minute_spans(nof, ds).items():
             out[f"nof_minute_{ds}_{key}"] = value
+        for key, value in _minute_spans(nof, ds, fixed=True).items():
+            out[f"nof_compiled_{ds}_{key}"] = value
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
