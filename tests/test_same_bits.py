@@ -43,9 +43,12 @@ def test_a_changed_trajectory_or_metric_is_found(tmp_path):
     assert compare(a, {"runs": {}}) == ["sim: only in the first record"]
 
 
-@pytest.mark.parametrize("name", ["same_bits_issue34", "same_bits_session20", "same_bits_session21", "same_bits_session22"])
+@pytest.mark.parametrize(
+    "name", ["same_bits_issue34", "same_bits_session20", "same_bits_session21", "same_bits_session22"]
+)
 def test_kept_same_bits_records_show_every_output_unchanged_on_the_cpu_and_the_gpu(name):
-    """The records closing notes cite (issue 34's refactor; the twentieth session's CPU step): the same runs before
+    """The records closing notes cite (issue 34's refactor; the twentieth session's CPU step, the twenty-first's GPU step,
+    the twenty-second's one top-share kernel): the same runs before
     and after, on the CPU and on cuda:0, hashed file by file; every run wrote files, and none differs."""
     from pathlib import Path
 
