@@ -158,9 +158,8 @@ class TopShareMean:
             source, cos_sin = FROM_W, nothing_cs
         else:
             source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
-        kernel = top_sums_kernel
-        inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source]
-        threads = launch_reduction(kernel, self.k, [*inputs, self.k], self.device)
+        inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source, self.k]
+        threads = launch_reduction(top_sums_kernel, self.k, inputs, self.device)
         self.partial.finish(threads, self.sums)
 
     def result(self, sums: np.ndarray | None = None) -> np.ndarray:

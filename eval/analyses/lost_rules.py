@@ -26,6 +26,7 @@ from typing import Callable
 
 import numpy as np
 
+from irmcl_warp.mcl.filter import log_running_average
 from irmcl_warp.mcl.worlds import AGREEMENT, LostRule, score_run, world_summary
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.outputs import write_json
@@ -50,8 +51,8 @@ class AmclRule:
         if np.isfinite(l_avg):
             if self.l_slow is None:
                 self.l_slow = self.l_fast = l_avg
-            self.l_slow = float(np.logaddexp(np.log1p(-self.a_slow) + self.l_slow, np.log(self.a_slow) + l_avg))
-            self.l_fast = float(np.logaddexp(np.log1p(-self.a_fast) + self.l_fast, np.log(self.a_fast) + l_avg))
+            self.l_slow = log_running_average(self.l_slow, l_avg, self.a_slow)
+            self.l_fast = log_running_average(self.l_fast, l_avg, self.a_fast)
         if p >= self.confident_above:
             self.localized = True
         inject = 0.0 if self.l_slow is None else 1.0 - np.exp(self.l_fast - self.l_slow)

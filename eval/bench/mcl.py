@@ -35,7 +35,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from eval.bench.timing import record_path, repeated, time_per_call
+from eval.bench.timing import record_path, repeated, step_ms_fields, time_per_call
 from irmcl_warp.mcl import MCLConfig
 from irmcl_warp.nog import NOG
 from irmcl_warp.services.filters import WeightingMaps, build_filter, nog_table_settings
@@ -198,11 +198,7 @@ def bench_filter(
         "variant": variant,
         "graph": pf.use_graph,
         "particles": n,
-        "step_ms": 1e3 * step["median"],
-        "step_ms_min": 1e3 * step["min"],
-        "step_ms_max": 1e3 * step["max"],
-        "step_ms_all": [1e3 * t for t in step["all"]],
-        "repeats": repeats,
+        **step_ms_fields(step),
         "weighting_ms": part_ms["weighting"],
         "parts_ms": part_ms,
         "build_s": build_s,

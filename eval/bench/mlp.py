@@ -26,7 +26,7 @@ import platform
 import torch
 from torch import nn
 
-from eval.bench.timing import record_path, repeated
+from eval.bench.timing import record_path, repeated, step_ms_fields
 from irmcl_warp.config import ModelConfig
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.services.outputs import write_json
@@ -88,11 +88,7 @@ def bench_mlp(form: str, points: int, device: torch.device, steps: int, repeats:
     return {
         "form": form,
         "points": points,
-        "step_ms": 1e3 * r["median"],
-        "step_ms_min": 1e3 * r["min"],
-        "step_ms_max": 1e3 * r["max"],
-        "step_ms_all": [1e3 * t for t in r["all"]],
-        "repeats": repeats,
+        **step_ms_fields(r),
         "gflop_per_step": flop / 1e9,
         "tflop_per_s": tflops,
         "share_of_peak": tflops / peak_tflops,

@@ -31,3 +31,14 @@ def repeated(fn, sync, steps: int, repeats: int, warmup: int = 2) -> dict:
 
     times = [time_per_call(fn, sync, steps, warmup if r == 0 else 0) for r in range(repeats)]
     return {"median": statistics.median(times), "min": min(times), "max": max(times), "all": times}
+
+
+def step_ms_fields(r: dict) -> dict:
+    """A ``repeated`` result as the benchmarks' records write it: ms per call, median, min, max and every repeat."""
+    return {
+        "step_ms": 1e3 * r["median"],
+        "step_ms_min": 1e3 * r["min"],
+        "step_ms_max": 1e3 * r["max"],
+        "step_ms_all": [1e3 * t for t in r["all"]],
+        "repeats": len(r["all"]),
+    }

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from eval.bench.timing import record_path, repeated
+from eval.bench.timing import record_path, repeated, step_ms_fields
 from irmcl_warp.config import ModelConfig
 from irmcl_warp.nof.model import NOF
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths
@@ -41,14 +41,7 @@ def _sync(device):
 
 def _timing(r: dict, batch: int) -> dict:
     """The median of the repeats (and their spread) in ms per step, and rays/s at the median."""
-    return {
-        "step_ms": 1e3 * r["median"],
-        "step_ms_min": 1e3 * r["min"],
-        "step_ms_max": 1e3 * r["max"],
-        "step_ms_all": [1e3 * t for t in r["all"]],
-        "repeats": len(r["all"]),
-        "rays_per_s": batch / r["median"],
-    }
+    return {**step_ms_fields(r), "rays_per_s": batch / r["median"]}
 
 
 def bench_step(model_name, renderer_name, batch, samples, steps, device, amp=False, repeats=5) -> dict:

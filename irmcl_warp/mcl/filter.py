@@ -83,6 +83,12 @@ def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray
     raise ValueError(f"MCL: mcl.beam_pick={how!r}; choose spread or stride")
 
 
+def log_running_average(l_old: float, l_new: float, rate: float) -> float:
+    """AMCL's running average w <- (1 - rate) w + rate w_new, kept as logs (l = log w) so that likelihoods far below
+    float32's range still compare (ParticleFilter.recovery_probability; eval.analyses.lost_rules' AmclRule)."""
+    return float(np.logaddexp(np.log1p(-rate) + l_old, np.log(rate) + l_new))
+
+
 class ParticleFilter:
     SECOND_STREAM = True  # on a GPU, the top-share estimate's sort and sums beside the rest of the step (_normalise)
 
@@ -477,7 +483,7 @@ class ParticleFilter:
             return 0.0
         if self.l_slow is None:
             self.l_slow = self.l_fast = l_avg
-        self.l_slow = float(np.logaddexp(np.log1p(-a_slow) + self.l_slow, np.log(a_slow) + l_avg))
-        self.l_fast = float(np.logaddexp(np.log1p(-a_fast) + self.l_fast, np.log(a_fast) + l_avg))
+        self.l_slow = log_running_average(self.l_slow, l_avg, a_slow)
+        self.l_fast = log_running_average(self.l_fast, l_avg, a_fast)
         p = 1.0 - np.exp(self.l_fast - self.l_slow)
         return float(p) if p > 1e-9 else 0.0  # (a steady level leaves rounding noise only)
