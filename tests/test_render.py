@@ -173,7 +173,7 @@ def test_a_fixed_count_of_samples_keeps_the_kept_ones_and_renders_the_same(rng):
     """train.fixed_samples (render_rays' count): exactly ``count`` samples go through the model, every kept one
     among them when there is room (the rest drawn from the skipped ones), a random ``count`` of the kept ones when
     there is not; where the field is 0 outside the grid's cells, the ranges are those of the variable count."""
-    from irmcl_warp.nof.render import fixed_sample_index, render_rays
+    from irmcl_warp.nof.render import fixed_sample_index, render_rays, sample_points
 
     R, N = int(rng.integers(20, 60)), 64
     keep = torch.from_numpy(rng.uniform(size=(R, N)) < rng.uniform(0.1, 0.4)).to(DEV)
@@ -184,21 +184,18 @@ def test_a_fixed_count_of_samples_keeps_the_kept_ones_and_renders_the_same(rng):
         chosen = keep.reshape(-1)[idx]
         assert int(chosen.sum()) == min(count, kept)  # the kept ones first
 
-    class Cells(torch.nn.Module):  # p > 0 only on the kept samples' points (looked up by position)
-        def __init__(self, points, mask):
-            super().__init__()
-            self.points, self.mask = points.reshape(-1, 2), mask.reshape(-1)
-
+    class Bands(torch.nn.Module):  # p > 0 exactly on points in bands of x (a rule of the point, no lookup)
         def forward(self, xy):
-            d = torch.cdist(xy, self.points)
-            nearest = d.argmin(1)
-            return torch.where(self.mask[nearest], 0.3 + 0.6 * torch.sigmoid(xy[:, 0]), torch.zeros_like(xy[:, 0]))
+            inside = torch.remainder(3.0 * xy[:, 0], 1.0) < 0.25
+            return torch.where(inside, 0.3 + 0.6 * torch.sigmoid(xy[:, 1]), torch.zeros_like(xy[:, 0]))
 
     o = torch.from_numpy(rng.uniform(-1, 1, (R, 2)).astype(np.float32)).to(DEV)
     a = torch.from_numpy(rng.uniform(-3, 3, R).astype(np.float32)).to(DEV)
     d = torch.stack([torch.cos(a), torch.sin(a)], 1)
     z = sample_depths(R, N, 0.02, 5.0, perturb=True, device=DEV)
-    model = Cells(o[:, None] + d[:, None] * z[..., None], keep)
+    model = Bands()
+    keep = (model(sample_points(o, d, z).reshape(-1, 2)) > 0).reshape(R, N)  # the grid right about the field
+    kept = int(keep.sum())
     render = make_renderer("warp")
     variable, _, _ = render_rays(model, render, o, d, z, keep)
     for count in (kept, kept + 50):
