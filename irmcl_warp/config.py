@@ -168,6 +168,7 @@ class TrainConfig:
     fixed_samples: float = (
         0.0  # occupancy sampler: samples per beam through the MLP, fixed (0 = as many as the grid keeps)
     )
+    grid_masks_field: bool = False  # occupancy sampler: the field is read through the grid everywhere (validation, nof.pt, NOG): p = 0 in the cells it skips
     checkpoint_every_s: float = 120.0
     seed: int = 42
 

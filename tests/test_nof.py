@@ -372,3 +372,64 @@ def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path
     torch.testing.assert_close(bn.running_mean.double(), torch.stack(means).mean(0), rtol=1e-5, atol=1e-6)
     assert not torch.allclose(bn.running_mean, before)
     assert max(sizes) <= 64 * 32 and (min(sizes) < 64 * 32) == (sampler == "occupancy")
+
+
+def test_a_field_trained_through_its_grid_is_kept_validated_and_loaded_through_it(tmp_path, monkeypatch):
+    """train.grid_masks_field: the grid that pruned the training samples is part of the field. nof.pt stores its
+    occupied cells at the best epoch; load_nof reads the field through them (p = 0 in every other cell, so the NOG
+    baked from it is 0 there), and the test renders of the loaded field score what validation scored."""
+    from irmcl_warp.nof.checkpoint import load_nof
+    from irmcl_warp.nof.occupancy import MaskedField
+    from irmcl_warp.nof.stage import make_validator
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.nog import evaluate_grid
+    from irmcl_warp.services.data import prepare_beams
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _cfg(
+        [
+            "+exp=sim_office",
+            "device=cpu",
+            "sim.duration_s=40",
+            "train=quick",
+            "train.sampler=occupancy",
+            "train.grid_end=none",
+            "train.grid_threshold=0.05",
+            "train.grid_every=2",
+            "train.grid_masks_field=true",
+            "train.epochs=2",
+            "train.steps_per_epoch=40",
+            "train.val_scans=3",
+            "train.batch_rays=128",
+            "train.num_samples=64",
+            "render.num_samples=64",
+        ]
+    )
+    sets = prepare_beams(cfg)
+    cpu = torch.device("cpu")
+    validate = make_validator(sets["val"], cfg, 0.02, 20.0, cpu)
+    torch.manual_seed(0)
+    model_cfg = ModelConfig(**cfg.model)
+    meta = {"model_config": dict(model_cfg.__dict__)}
+    tr = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, tmp_path, "k", validate, meta)
+    tr.run()
+    assert tr.history[-1]["grid_occupied_share"] < 0.9  # the grid prunes at this threshold
+    saved = torch.load(tmp_path / "nof.pt", weights_only=False)
+    model, meta = load_nof(tmp_path / "nof.pt")
+    assert isinstance(model, MaskedField) and "field_mask" not in meta
+    assert torch.equal(model.occupied, saved["field_mask"]["occupied"])
+    assert validate(model)["mae_m"] == pytest.approx(saved["val"]["mae_m"], abs=1e-6)
+    # the NOG of the loaded field: 0 in the free cells, the field's own p in the occupied ones
+    x0, y0 = model.origin_xy
+    H, W = model.occupied.shape
+    nog = evaluate_grid(model, (x0, y0, x0 + W * model.res, y0 + H * model.res), model.res / 2)
+    iy, ix = np.meshgrid(np.arange(nog.occupancy.shape[0]), np.arange(nog.occupancy.shape[1]), indexing="ij")
+    xy = torch.from_numpy(np.stack([x0 + ix.ravel() * model.res / 2, y0 + iy.ravel() * model.res / 2], -1)).float()
+    free = ~model.cell_occupied(xy).numpy().reshape(nog.occupancy.shape)
+    assert free.any() and (~free).any()
+    assert np.all(nog.occupancy[free] == 0) and np.all(nog.occupancy[~free] > 0)
+    # without the setting nof.pt holds no grid and the field loads bare
+    tr.tc.grid_masks_field = False
+    tr.best = None
+    tr.run_epoch()
+    assert not isinstance(load_nof(tmp_path / "nof.pt")[0], MaskedField)

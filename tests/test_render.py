@@ -116,6 +116,30 @@ def test_occupied_samples_match_the_twin(rng, t_min):
     assert 0 < int(twin.sum()) < twin.numel()  # the inputs exercise both answers
 
 
+def test_a_masked_field_reads_the_cells_the_sampler_keeps(rng):
+    """train.grid_masks_field: MaskedField answers the field's p in exactly the cells the sampler's kernel keeps
+    (t_min 0: every sample in an occupied cell) and 0 elsewhere, off the grid included, on fresh random points."""
+    from irmcl_warp.kernels import RENDER
+    from irmcl_warp.nof.occupancy import MaskedField
+
+    values, occupied = _random_grid(rng)
+    origin, res = (-1.3, 0.7), 0.1
+    points = torch.from_numpy(np.stack([rng.uniform(-1.6, 2.1, (50, 30)), rng.uniform(0.4, 3.3, (50, 30))], -1))
+    points = points.float().to(DEV)  # about a fifth of them off the grid
+    keep = RENDER.build("occupied_samples", origin_xy=origin, resolution_m=res, t_min=0.0)(points, values, occupied)
+
+    class Field(torch.nn.Module):  # a field whose p is never 0, so every 0 comes from the mask
+        def forward(self, xy):
+            return 0.25 + 0.5 * torch.sigmoid(xy[:, 0] * xy[:, 1])
+
+    masked = MaskedField(Field(), occupied, origin, res).to(DEV)
+    flat = points.reshape(-1, 2)
+    assert torch.equal(masked.cell_occupied(flat).reshape(keep.shape), keep), f"seed {rng.seed}"
+    p = masked(flat).reshape(keep.shape)
+    assert torch.equal(p, torch.where(keep, Field()(flat).reshape(keep.shape), torch.zeros(())))
+    assert 0 < int(keep.sum()) < keep.numel()
+
+
 def test_occupied_samples_by_hand():
     from irmcl_warp.kernels import RENDER
 

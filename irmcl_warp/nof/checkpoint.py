@@ -30,7 +30,8 @@ def atomic_torch_save(obj, path: Path) -> None:
 
 
 def load_nof(path, device="cpu"):
-    """(model in eval mode, metadata dict) from a ``nof.pt``; the model is rebuilt from its stored config."""
+    """(model in eval mode, metadata dict) from a ``nof.pt``; the model is rebuilt from its stored config (and read
+    through its training grid when the checkpoint holds one: ``train.grid_masks_field``, nof/occupancy.py)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no NOF checkpoint (train one: python -m irmcl_warp.train +exp=<name>)")
@@ -40,7 +41,12 @@ def load_nof(path, device="cpu"):
         model.load_state_dict(ckpt["model"])
     except (KeyError, RuntimeError, EOFError) as e:
         raise ValueError(f"{path}: not a usable nof.pt ({type(e).__name__}: {e})") from e
-    return model.to(device).eval(), {k: v for k, v in ckpt.items() if k != "model"}
+    mask = ckpt.get("field_mask")
+    if mask is not None:  # trained with train.grid_masks_field: the grid is part of the field
+        from irmcl_warp.nof.occupancy import MaskedField
+
+        model = MaskedField(model, **mask)
+    return model.to(device).eval(), {k: v for k, v in ckpt.items() if k not in ("model", "field_mask")}
 
 
 def check_trained_far_bound(path, meta: dict, far_m: float) -> None:

@@ -38,6 +38,7 @@ import math
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 from irmcl_warp.kernels import RENDER
 
@@ -118,6 +119,14 @@ class OccupancyGrid:
     def occupied_share(self) -> float:
         return float(self.occupied.float().mean())
 
+    def mask(self) -> dict:
+        """What ``MaskedField`` needs (stored in nof.pt with ``train.grid_masks_field``): the occupied cells now."""
+        return {"occupied": self.occupied.detach().clone().cpu(), "origin_xy": self.origin_xy, "res": self.res}
+
+    def masked(self, model) -> "MaskedField":
+        """``model`` read through the grid's occupied cells as they are now."""
+        return MaskedField(model, **self.mask()).to(self.device)
+
     def state_dict(self) -> dict:
         return {
             "values": self.values,
@@ -132,3 +141,40 @@ class OccupancyGrid:
             raise ValueError("occupancy grid of another extent or resolution in the checkpoint")
         self.values, self.latest = s["values"].to(self.device), s["latest"].to(self.device)
         self._refresh_mask()
+
+
+class MaskedField(nn.Module):
+    """A field read through its training grid (``train.grid_masks_field``): p = 0 outside the grid's occupied cells,
+    as the occupancy sampler counts the samples it skips while training; the field's own p inside them.
+
+    Without it the samples a trained field never saw with gradient (the skipped cells' p, which the grid only keeps
+    below its threshold) are rendered at evaluation and baked into the NOG: at a threshold of 0.01, a dozen samples in
+    front of a wall swallow 10 % of a beam's weight. With it, training, validation, the test renders and the NOG read
+    the same field, and the grid is part of the model (nof.pt stores it). A cell is found as the sampler's kernel
+    finds it (floor((x - x0) / res), outside the grid: free)."""
+
+    def __init__(self, field: nn.Module, occupied: torch.Tensor, origin_xy, res: float):
+        super().__init__()
+        self.field = field
+        self.register_buffer("occupied", torch.as_tensor(occupied).bool())
+        self.origin_xy, self.res = (float(origin_xy[0]), float(origin_xy[1])), float(res)
+
+    def forward(self, xy: torch.Tensor) -> torch.Tensor:
+        p = self.field(xy)
+        return torch.where(self.cell_occupied(xy), p, torch.zeros((), dtype=p.dtype, device=p.device))
+
+    def cell_occupied(self, xy: torch.Tensor) -> torch.Tensor:
+        """[B] bool: the point's grid cell is occupied (points outside the grid are not)."""
+        H, W = self.occupied.shape
+        inv = 1.0 / self.res  # as the kernel: (x - x0) * (1 / res), in float32
+        ix = torch.floor((xy[:, 0].float() - self.origin_xy[0]) * inv).long()
+        iy = torch.floor((xy[:, 1].float() - self.origin_xy[1]) * inv).long()
+        inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        return inside & self.occupied[iy.clamp(0, H - 1), ix.clamp(0, W - 1)]
+
+    def flops_per_point(self) -> int:
+        return self.field.flops_per_point()
+
+    @property
+    def cfg(self):
+        return self.field.cfg

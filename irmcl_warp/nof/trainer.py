@@ -113,6 +113,10 @@ class Trainer:
                 f"train.fixed_samples={tc.fixed_samples} needs train.sampler=occupancy (the uniform sampler sends "
                 f"all {tc.num_samples} samples of every beam)"
             )
+        if tc.grid_masks_field and tc.sampler != "occupancy":
+            raise ValueError(
+                "train.grid_masks_field=true needs train.sampler=occupancy (it reads the field through its grid)"
+            )
         if tc.fixed_samples > tc.num_samples:
             raise ValueError(f"train.fixed_samples={tc.fixed_samples}: more than the {tc.num_samples} samples per beam")
         # the training pass may run compiled (for fixed shapes with fixed_samples); the grid's readings (eval mode, no
@@ -148,6 +152,10 @@ class Trainer:
     def kept_model(self):
         """The weights validated and written to nof.pt: the average when ``train.ema_decay`` is set."""
         return self.ema.module if self.ema is not None else self.model
+
+    def field(self):
+        """The field validated: the kept weights, read through the grid with ``train.grid_masks_field``."""
+        return self.grid.masked(self.kept_model) if self.tc.grid_masks_field else self.kept_model
 
     # --- checkpointing -------------------------------------------------------------------------
     def state(self) -> dict:
@@ -364,14 +372,20 @@ class Trainer:
                 torch.cuda.synchronize(self.device)
             self.train_time_s += time.time() - t0
             record["train_time_s"] = self.train_time_s
-        record["val"] = self.validate(self.kept_model)
+        record["val"] = self.validate(self.field())
         self.epoch, self.step_in_epoch = self.epoch + 1, 0
         self.history.append(record)
         improved = self.best is None or record["val"]["mae_m"] < self.best["val"]["mae_m"]
         if improved:
             self.best = record
             atomic_torch_save(
-                {**self.meta, "model": self.kept_model.state_dict(), "epoch": record["epoch"], "val": record["val"]},
+                {
+                    **self.meta,
+                    "model": self.kept_model.state_dict(),
+                    "epoch": record["epoch"],
+                    "val": record["val"],
+                    "field_mask": self.grid.mask() if self.tc.grid_masks_field else None,
+                },
                 self.out / "nof.pt",
             )
         print(
