@@ -168,11 +168,7 @@ class TrainConfig:
     fixed_samples: float = (
         0.0  # occupancy sampler: samples per beam through the MLP, fixed (0 = as many as the grid keeps)
     )
-    skip_beyond_m: Optional[float] = (
-        None  # occupancy sampler: also skip a beam's samples past its measured range + this
-    )
-    grid_masks_field: bool = False  # occupancy sampler: the field is read through the grid everywhere (validation,
-    # nof.pt, NOG): p = 0 in the cells it skips
+    grid_masks_field: bool = False  # occupancy sampler: the field is read through the grid everywhere (validation, nof.pt, NOG): p = 0 in the cells it skips
     checkpoint_every_s: float = 120.0
     seed: int = 42
 
@@ -514,7 +510,6 @@ RANGES = {
     "train.grid_every": (1, None),
     "train.grid_dilate": (0, None),
     "train.grid_t_min": (0, 1),
-    "train.skip_beyond_m": (0, None),
     "mcl.num_particles": (1, None),
     "mcl.num_beams": (1, None),
     "mcl.num_samples": (2, None),

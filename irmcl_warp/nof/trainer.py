@@ -113,10 +113,6 @@ class Trainer:
                 f"train.fixed_samples={tc.fixed_samples} needs train.sampler=occupancy (the uniform sampler sends "
                 f"all {tc.num_samples} samples of every beam)"
             )
-        if tc.skip_beyond_m is not None and tc.sampler != "occupancy":
-            raise ValueError(
-                "train.skip_beyond_m needs train.sampler=occupancy (the uniform sampler sends every sample)"
-            )
         if tc.grid_masks_field and tc.sampler != "occupancy":
             raise ValueError(
                 "train.grid_masks_field=true needs train.sampler=occupancy (it reads the field through its grid)"
@@ -228,8 +224,6 @@ class Trainer:
             if (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0:
                 self.grid.update(self.model, self.amp)
             keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
-            if tc.skip_beyond_m is not None:  # past the measured wall the beam has ended: nothing to learn there
-                keep &= z <= self.ranges[idx][:, None] + tc.skip_beyond_m
             kept = keep.sum()
             self.kept.append(kept / len(idx) if not self.count else torch.full((), self.count / len(idx)))
             self.read.append(self.grid.read / len(idx))
