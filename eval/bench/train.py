@@ -118,6 +118,7 @@ def bench_trainer_steps(a, device) -> list[dict]:
         )
         sets = sets or {"train": prepare_beams(cfg)["train"]}  # the rays do not depend on train= settings
         model, meta = load_nof(a.init, device)
+        model = getattr(model, "field", model)  # trained through its grid (MaskedField): the variant's grid decides
         if ModelConfig(**meta["model_config"]) != ModelConfig(**cfg.model):
             raise ValueError(f"{a.init}: made with another network than model= of +exp={a.exp}")
         torch.manual_seed(0)
