@@ -121,7 +121,9 @@ class Trainer:
             raise ValueError(f"train.fixed_samples={tc.fixed_samples}: more than the {tc.num_samples} samples per beam")
         # the training pass may run compiled (for fixed shapes with fixed_samples); the grid's readings (eval mode, no
         # gradient) use the module as is
-        self.net = torch.compile(self.model, dynamic=not self.count) if tc.compile else self.model
+        self.net = torch.compile(self.model, dynamic=not self.count, mode=tc.compile_mode) if tc.compile else self.model
+        # CUDA graphs (reduce-overhead, max-autotune) replay into the same output buffers: each step says it begins
+        self.graphed = tc.compile and tc.compile_mode in ("reduce-overhead", "max-autotune")
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
         if self.grid is not None:  # its readings grow with the map's area: say what they cost
             cells = self.grid.values.numel()
@@ -218,6 +220,8 @@ class Trainer:
 
     def step(self, idx: torch.Tensor) -> float:
         tc = self.tc
+        if self.graphed:
+            torch.compiler.cudagraph_mark_step_begin()
         z = sample_depths(len(idx), tc.num_samples, self.near_m, self.far_m, tc.perturb, device=self.device)
         o, d, keep = self.origins[idx], self.dirs[idx], None
         if self.grid is not None:
