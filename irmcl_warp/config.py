@@ -150,6 +150,7 @@ class TrainConfig:
     compile: bool = (
         False  # torch.compile the network for the training pass (dynamic shapes; compiling counts as training time)
     )
+    step_graph: bool = False  # CUDA: the whole step captured once as a CUDA graph and replayed (nof/step_graph.py)
     compile_mode: str = (
         "default"  # torch.compile's mode: default | reduce-overhead (CUDA graphs of the MLP's passes) | ...
     )

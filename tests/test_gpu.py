@@ -102,3 +102,101 @@ def test_a_wide_global_start_repeats_itself_and_one_stream(monkeypatch):
     for other in runs[1:]:
         for a, b in zip(runs[0], other):
             assert np.array_equal(a, b)
+
+
+def _trainer(tmp_path, *overrides):
+    import torch
+
+    from irmcl_warp.config import ModelConfig
+    from irmcl_warp.nof.model import NOF
+    from irmcl_warp.nof.stage import make_validator
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    cfg = _cfg(
+        "+exp=sim_office",
+        "sim.duration_s=40",
+        "train=quick",
+        "train.batch_rays=256",
+        "train.num_samples=64",
+        "render.num_samples=64",
+        "train.val_scans=2",
+        "train.fused_adam=true",
+        *overrides,
+    )
+    sets = prepare_beams(cfg)
+    dev = torch.device("cuda:0")
+    torch.manual_seed(0)
+    model = NOF(ModelConfig(**cfg.model))
+    return Trainer(
+        model,
+        sets,
+        cfg.train,
+        cfg.render,
+        0.02,
+        20.0,
+        dev,
+        tmp_path,
+        "k",
+        make_validator(sets["val"], cfg, 0.02, 20.0, dev),
+        {},
+    )
+
+
+def test_a_captured_training_step_does_what_the_launched_one_does(tmp_path, monkeypatch):
+    """train.step_graph: with nothing random in a step (the uniform sampler, fixed depths), 12 replays of the
+    captured step leave the weights, batch norm's statistics and Adam's state where 12 launched steps leave them
+    (the warm-up steps of the capture undone), and the schedule's learning rate reaches the captured Adam."""
+    import torch
+
+    monkeypatch.chdir(tmp_path)
+    runs = {}
+    for graph in (False, True):
+        tr = _trainer(
+            tmp_path / str(graph),
+            "train.perturb=false",
+            "train.lr_schedule=cosine",
+            "train.warmup_steps=4",
+            f"train.step_graph={str(graph).lower()}",
+        )
+        gen = torch.Generator().manual_seed(1)
+        for k in range(12):
+            tr.step_in_epoch = k
+            tr.step(torch.randint(len(tr.ranges), (256,), generator=gen).cuda())
+        torch.cuda.synchronize()
+        runs[graph] = (
+            {k: v.detach().clone() for k, v in tr.model.state_dict().items()},
+            float(tr.opt.param_groups[0]["lr"]),
+        )
+    (eager, lr_eager), (graphed, lr_graphed) = runs[False], runs[True]
+    assert lr_graphed == pytest.approx(lr_eager, rel=1e-6) and lr_eager > 0
+    for k, v in eager.items():
+        torch.testing.assert_close(graphed[k].float(), v.float(), rtol=1e-3, atol=1e-4, msg=k)
+    assert not torch.equal(eager["out.weight"], _trainer(tmp_path / "fresh").model.state_dict()["out.weight"].cuda())
+
+
+def test_a_captured_guided_step_reads_the_grid_as_it_changes(tmp_path, monkeypatch):
+    """train.step_graph with the occupancy sampler and a fixed count: the grid is read outside the graph, in place,
+    so the captured pick follows it (the share of kept samples cut changes as the grid prunes), and validation finds
+    a field."""
+    import torch
+
+    monkeypatch.chdir(tmp_path)
+    tr = _trainer(
+        tmp_path,
+        "train.sampler=occupancy",
+        "train.grid_end=none",
+        "train.fixed_samples=16",
+        "train.grid_every=5",
+        "train.grid_threshold=0.05",
+        "train.step_graph=true",
+        "train.epochs=1",
+        "train.steps_per_epoch=120",
+    )
+    tr.run_epoch()
+    h = tr.history[-1]
+    cuts = torch.stack(tr.cut).cpu()
+    assert tr.step_graph is not None and h["samples_per_beam"] == 16
+    assert len(set(cuts.tolist())) > 10 and h["grid_occupied_share"] < 1.0
+    losses = h["loss"]
+    assert np.isfinite(losses) and h["val"]["mae_m"] < 2.0

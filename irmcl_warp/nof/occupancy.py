@@ -88,15 +88,16 @@ class OccupancyGrid:
         pts = self._corners + torch.rand(self._corners.shape, device=self.device) * self.res
         with evaluating(model), amp():
             p = torch.cat([model(pts[s : s + chunk]).float() for s in range(0, len(pts), chunk)])
-        self.latest = p.view(self.shape)
-        self.values = torch.maximum(self.values * self.decay, self.latest)
+        # in place, here and below: a step captured as a CUDA graph (train.step_graph) reads these tensors
+        self.latest.copy_(p.view(self.shape))
+        torch.maximum(self.values * self.decay, self.latest, out=self.values)
         self._refresh_mask()
 
     def _refresh_mask(self) -> None:
         occ = (self.values > self.threshold).float()[None, None]
         if self.dilate:
             occ = F.max_pool2d(occ, 2 * self.dilate + 1, stride=1, padding=self.dilate)
-        self.occupied = occ[0, 0] > 0
+        self.occupied.copy_(occ[0, 0] > 0)
 
     def keep(self, points: torch.Tensor, model=None, amp=contextlib.nullcontext) -> torch.Tensor:
         """keep [R, N] for sample points [R, N, 2]: the samples the MLP is asked about (``model`` is read
@@ -139,7 +140,8 @@ class OccupancyGrid:
     def load_state_dict(self, s: dict) -> None:
         if tuple(s["shape"]) != self.shape or s["origin_xy"] != self.origin_xy or s["res"] != self.res:
             raise ValueError("occupancy grid of another extent or resolution in the checkpoint")
-        self.values, self.latest = s["values"].to(self.device), s["latest"].to(self.device)
+        self.values.copy_(s["values"])
+        self.latest.copy_(s["latest"])
         self._refresh_mask()
 
 

@@ -30,6 +30,7 @@ from tqdm import tqdm
 from irmcl_warp.nof.checkpoint import atomic_torch_save
 from irmcl_warp.nof.occupancy import OccupancyGrid
 from irmcl_warp.nof.render import make_renderer, render_rays, sample_depths, sample_points
+from irmcl_warp.nof.step_graph import StepGraph
 
 
 def opacity_regulariser(p: torch.Tensor) -> torch.Tensor:
@@ -134,11 +135,24 @@ class Trainer:
             )
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
         self.cut = []  # per step, with train.fixed_samples: the share of the kept samples left out
+        if tc.step_graph:  # what a captured step needs (irmcl_warp/nof/step_graph.py)
+            why = [
+                (torch.device(device).type != "cuda", "a CUDA device"),
+                (tc.sampler == "occupancy" and not self.count, "fixed shapes: train.fixed_samples > 0"),
+                (tc.sampler == "occupancy" and tc.grid_end == "field", "train.grid_end none or grid (field syncs)"),
+                (self.graphed, "train.compile_mode without CUDA graphs of its own (default)"),
+            ]
+            missing = [w for bad, w in why if bad]
+            if missing:
+                raise ValueError(f"train.step_graph=true needs {', '.join(missing)}")
+        self.step_graph = None  # captured at the first step with train.step_graph
         self.opt = torch.optim.Adam(
             model.parameters(),
-            lr=tc.lr,
+            # a captured Adam reads its learning rate from a tensor the schedule fills in place
+            lr=torch.tensor(tc.lr, device=device) if tc.step_graph else tc.lr,
             weight_decay=tc.weight_decay,
             fused=True if tc.fused_adam and torch.device(device).type == "cuda" else None,
+            capturable=bool(tc.step_graph),
         )
         self.epoch, self.step_in_epoch, self.history, self.best, self.train_time_s = 0, 0, [], None, 0.0
         self.epoch_loss = (
@@ -222,28 +236,51 @@ class Trainer:
         tc = self.tc
         if self.graphed:
             torch.compiler.cudagraph_mark_step_begin()
-        z = sample_depths(len(idx), tc.num_samples, self.near_m, self.far_m, tc.perturb, device=self.device)
-        o, d, keep = self.origins[idx], self.dirs[idx], None
-        if self.grid is not None:
-            if (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0:
+        if tc.step_graph and self.step_graph is None:
+            self.step_graph = StepGraph(self, idx)
+        due = self.grid is not None and (self.epoch * self.steps_per_epoch + self.step_in_epoch) % tc.grid_every == 0
+        if self.step_graph is None:
+            self.opt.zero_grad(set_to_none=True)
+            out = self._body(idx, read_grid=due)
+        else:
+            if due:  # in place: the captured step reads the grid's tensors where they are
                 self.grid.update(self.model, self.amp)
-            keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
-            kept = keep.sum()
-            self.kept.append(kept / len(idx) if not self.count else torch.full((), self.count / len(idx)))
-            self.read.append(self.grid.read / len(idx))
-            if self.count:  # the kept samples left out for the fixed count, as a share of those kept
-                self.cut.append((kept - self.count).clamp(min=0) / kept.clamp(min=1))
-        with self.amp():
-            pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep, self.count)
-        loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
-        self.opt.zero_grad(set_to_none=True)
-        loss.backward()
-        self.opt.step()
+            out = [t.clone() if t is not None else None for t in self.step_graph.replay(idx)]
+        loss, kept, read, cut = out
+        if self.grid is not None:
+            self.kept.append(kept)
+            self.read.append(read)
+            if cut is not None:
+                self.cut.append(cut)
         if self.sched_per_step:
             self.sched.step()
         if self.ema is not None:
             self.ema.update()
-        return loss.detach()
+        return loss
+
+    def _body(self, idx: torch.Tensor, read_grid: bool = False) -> tuple:
+        """One step's device work: sample (reading the grid first with ``read_grid``), render, loss, backward, Adam.
+        Returns (loss, samples per beam through the MLP, read without gradient, the share of kept ones cut) as
+        tensors, with no sync, so ``train.step_graph`` can capture it whole (and reads the grid before a replay)."""
+        tc = self.tc
+        z = sample_depths(len(idx), tc.num_samples, self.near_m, self.far_m, tc.perturb, device=self.device)
+        if read_grid:
+            self.grid.update(self.model, self.amp)
+        o, d, keep = self.origins[idx], self.dirs[idx], None
+        kept = read = cut = None
+        if self.grid is not None:
+            keep = self.grid.keep(sample_points(o, d, z), self.model, self.amp)
+            n_kept = keep.sum()
+            kept = n_kept / len(idx) if not self.count else torch.full((), self.count / len(idx), device=self.device)
+            read = self.grid.read / len(idx)
+            if self.count:  # the kept samples left out for the fixed count, as a share of those kept
+                cut = (n_kept - self.count).clamp(min=0) / n_kept.clamp(min=1)
+        with self.amp():
+            pred, _, p = render_rays(self.net, self.renderer, o, d, z, keep, self.count)
+        loss = range_loss(pred, self.ranges[idx], tc.loss) + tc.lambda_opacity * opacity_regulariser(p)
+        loss.backward()
+        self.opt.step()
+        return loss.detach(), kept, read, cut
 
     @torch.no_grad()
     def recalibrate_batch_norm(self, batches: int) -> None:
@@ -344,7 +381,7 @@ class Trainer:
             "epoch_s": epoch_s,
             "rays_per_s": steps * B / max(epoch_s, 1e-9),
             "train_time_s": self.train_time_s,
-            "lr": self.opt.param_groups[0]["lr"],
+            "lr": float(self.opt.param_groups[0]["lr"]),
             "samples_per_beam": float(torch.stack(self.kept).float().mean()) if self.kept else self.tc.num_samples,
         }
         # the MLP's work: forward + backward (~3x a forward) per sample with gradient, a forward per sample read
