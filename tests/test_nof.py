@@ -433,3 +433,24 @@ def test_a_field_trained_through_its_grid_is_kept_validated_and_loaded_through_i
     tr.best = None
     tr.run_epoch()
     assert not isinstance(load_nof(tmp_path / "nof.pt")[0], MaskedField)
+
+
+def test_the_graph_preset_is_the_kept_step_graph_runs_settings():
+    """train=graph reproduces the step-graph runs README quotes (kept as sg64_e5, sg64_e5_s<k> in results/nof): the
+    same training settings but the name and the seed, and those runs were trained through their grid."""
+    from omegaconf import OmegaConf
+
+    from eval.report.facts import GRAPH_RUNS
+
+    records = json.loads((CONF.parent / "results" / "nof" / "fr079.json").read_text())["records"]
+    kept = [
+        r["config"]["train"]
+        for k, r in records.items()
+        if k.startswith("train/") and re.fullmatch(rf"{GRAPH_RUNS['fr079'][1]}(_s\d+)?", r["config"]["train"]["name"])
+    ]
+    assert len(kept) >= 5 and {t["seed"] for t in kept} >= {42, 1, 2, 3, 4}
+    preset = OmegaConf.to_container(_cfg(["+exp=fr079", "train=graph"]).train)
+    for t in kept:
+        differ = {k for k in set(t) | set(preset) if t.get(k) != preset.get(k)}
+        assert differ <= {"name", "seed"}, {k: (t.get(k), preset.get(k)) for k in differ}
+    assert preset["grid_masks_field"] and preset["step_graph"] and preset["epochs"] == 5

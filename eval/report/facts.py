@@ -48,6 +48,34 @@ def _minute_spans(nof: dict, exp: str, fixed: bool = False) -> dict[str, str]:
     }
 
 
+# the step-graph runs (train=graph, issue 36): the preset's own name and the session's names for the same settings
+GRAPH_RUNS = {"fr079": ("graph", "sg64_e5"), "intel": ("graph_intel", "sg96_e10_intel")}
+
+
+def _graph_spans(nof: dict, exp: str) -> dict[str, str]:
+    """The kept step-graph runs on ``exp`` (train.name in GRAPH_RUNS, or that name + _s<seed>): seeds, medians
+    [min-max] of test MAE, Chamfer (m) and training time (s), and the GPUs they ran on; {} when none is kept."""
+    found = []
+    for (e, preset), (syn, train) in nof.items():
+        if e != exp or not (syn and train):
+            continue
+        if not any(preset == f or re.fullmatch(rf"{f}_s\d+", preset) for f in GRAPH_RUNS.get(exp, ())):
+            continue
+        m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None)
+        if m:
+            found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"], train.get("gpu") or train.get("device")))
+    if not found:
+        return {}
+    mae, cham, secs, gpus = zip(*found)
+    return {
+        "seeds": str(len(found)),
+        "mae": median_span(mae, ".3f"),
+        "chamfer": median_span(cham, ".3f"),
+        "time": median_span(secs, ".1f"),
+        "gpu": ", ".join(sorted(set(gpus))),
+    }
+
+
 def _yaw_of(log: str, weighting: str | None) -> float | None:
     """Heading RMSE of the authors' code (``weighting`` None) or of ours with their motion model on ``log``."""
     if weighting is None:
@@ -174,6 +202,8 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
             out[f"nof_minute_{ds}_{key}"] = value
         for key, value in _minute_spans(nof, ds, fixed=True).items():
             out[f"nof_compiled_{ds}_{key}"] = value
+        for key, value in _graph_spans(nof, ds).items():
+            out[f"nof_graph_{ds}_{key}"] = value
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
