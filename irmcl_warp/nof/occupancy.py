@@ -28,6 +28,11 @@ keeps p above it nearly everywhere, so 97-100 % of the cells stay occupied all r
 every kept fr079 and intel run). The samples kept are then those inside the grid's extent, the rays' bounding box:
 85 per beam on fr079 and 124 on intel with every cell occupied, the counts `minute` trains with. The savings of
 `guided` come from the transmittance cut (``grid_end=field``).
+
+A threshold that prunes (0.01) spoiled the test ranges while evaluation rendered the skipped cells' untrained p. With
+``train.grid_masks_field`` (``MaskedField`` below; preset ``graph``) the grid is part of the field everywhere, and at
+0.01 it keeps 71-80 % of the cells and ~54 samples per beam on fr079 with the same test MAE as every sample
+(twenty-third session).
 """
 
 from __future__ import annotations
