@@ -71,21 +71,25 @@ def test_camera_kernel_matches_twin(rng):
 
 
 def test_pnp_recovers_a_known_pose(rng):
-    """Three random poses near a keyframe. Rendering aliasing moves ORB corners by about a pixel, so one pose
-    has a tail (400 seeds: median 1.6 cm, 99th percentile 5.4 cm, worst 6.9 cm); the bound on each pose is
-    loose and the bound on the median is tight."""
+    """Seven random poses near a keyframe. Rendering aliasing moves ORB corners by about a pixel, so a pose's error
+    has a tail: over 4000 draws, median 1.6 cm, 99th percentile 6.2 cm, worst 8.9 cm, 3.0 % above 5 cm; yaw over 2000
+    draws worst 1.1 deg. The bound on each pose is loose, the bound on the median tight. With three poses the median
+    bound failed when two of them fell in the tail (once in CI: 8.1 and 6.2 cm; about 0.3 % of runs by the rate
+    above); with seven it needs four, about 3e-5."""
     world = _world()
     cam = Camera(world.segments, appearance(world, lookalike_share=0.0), device="cpu")
     pnp = OrbPnP(cam.K, 1.0, cam.T_base_cam)
     key = np.array([4.0, 5.0, 0.0])  # in the corridor, looking along it
     errors = []
-    for _ in range(3):
+    for _ in range(7):
         truth = key + np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.2, 0.2), rng.uniform(-0.1, 0.1)])
         rgb, depth = cam.render(np.stack([key, truth]), Session(noise_std=0.01, seed=int(rng.integers(1000))))
         r = pnp.solve(rgb[1], rgb[0], depth[0], key)
         assert r.pose is not None and r.inliers > 12, f"seed {rng.seed}: {r}"
         errors.append(np.hypot(*(r.pose[:2] - truth[:2])))
-        assert errors[-1] < 0.1 and abs(r.pose[2] - truth[2]) < np.radians(1.5), f"seed {rng.seed}: {r.pose} vs {truth}"
+        assert errors[-1] < 0.12 and abs(r.pose[2] - truth[2]) < np.radians(2.0), (
+            f"seed {rng.seed}: {r.pose} vs {truth}"
+        )
     assert np.median(errors) < 0.05, f"seed {rng.seed}: {errors}"
 
 
