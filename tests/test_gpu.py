@@ -39,7 +39,9 @@ def test_slam_on_cuda_replays_its_seed(tmp_path, monkeypatch):
     assert a["trajectory"]["ate_rmse_m"] < 0.5 * a["trajectory_odometry"]["ate_rmse_m"]
 
 
-@pytest.mark.parametrize("preset", ["fast", "guided", "minute"])
+@pytest.mark.parametrize(
+    "preset", ["fast", "guided", "minute", "graph"]
+)  # graph: added in the 23rd session, not yet run
 def test_short_training_on_cuda_learns_the_walls(tmp_path, monkeypatch, preset):
     import torch
 
