@@ -454,3 +454,37 @@ def test_the_graph_preset_is_the_kept_step_graph_runs_settings():
         differ = {k for k in set(t) | set(preset) if t.get(k) != preset.get(k)}
         assert differ <= {"name", "seed"}, {k: (t.get(k), preset.get(k)) for k in differ}
     assert preset["grid_masks_field"] and preset["step_graph"] and preset["epochs"] == 5
+
+
+@pytest.mark.parametrize(
+    "extra, says",
+    [
+        ([], "a CUDA device"),
+        (["train.fixed_samples=0"], "fixed shapes"),
+        (["train.grid_end=field"], "grid_end none or grid"),
+        (["train.compile=true", "train.compile_mode=reduce-overhead"], "CUDA graphs of its own"),
+        (["train.sampler=uniform", "train.grid_masks_field=false", "train.fixed_samples=0"], "a CUDA device$"),
+    ],
+)
+def test_a_step_graph_that_cannot_be_captured_is_refused_with_what_it_needs(tmp_path, extra, says):
+    """train.step_graph (train=graph) on a CPU, or with a step that reads the host, is an error naming what a
+    captured step needs, before any training (a CPU has no CUDA graphs to capture)."""
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=20", "train=graph", "train.compile=false", *extra])
+    sets = prepare_beams(cfg)
+    with pytest.raises(ValueError, match=f"train.step_graph=true needs .*{says}"):
+        Trainer(
+            NOF(ModelConfig(**cfg.model)),
+            sets,
+            cfg.train,
+            cfg.render,
+            0.02,
+            20.0,
+            torch.device("cpu"),
+            tmp_path,
+            "k",
+            lambda m: {},
+            {},
+        )
