@@ -172,6 +172,7 @@ class TrainConfig:
     fixed_samples: float = (
         0.0  # occupancy sampler: samples per beam through the MLP, fixed (0 = as many as the grid keeps)
     )
+    fixed_samples_share: float = 0.0  # > 0: fixed_samples is this share of the samples per beam the starting grid keeps
     grid_masks_field: bool = False  # occupancy sampler: the field is read through the grid everywhere (validation, nof.pt, NOG): p = 0 in the cells it skips
     checkpoint_every_s: float = 120.0
     seed: int = 42
@@ -503,6 +504,7 @@ RANGES = {
     "train.batch_rays": (1, None),
     "train.num_samples": (2, None),
     "train.fixed_samples": (0, None),
+    "train.fixed_samples_share": (0, None),
     "train.lr": ("> 0", None),
     "train.weight_decay": (0, None),
     "train.steps_per_epoch": (1, None),

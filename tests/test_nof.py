@@ -488,3 +488,56 @@ def test_a_step_graph_that_cannot_be_captured_is_refused_with_what_it_needs(tmp_
             lambda m: {},
             {},
         )
+
+
+def test_a_fixed_count_as_a_share_of_what_the_starting_grid_keeps(tmp_path):
+    """train.fixed_samples_share: the fixed count follows the log's geometry (the samples per beam inside the rays'
+    bounding box, which the starting grid keeps) instead of a number typed per log; the first step, whose grid
+    reading finds the untrained field occupied everywhere, keeps about that many, and every step sends the count."""
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    cfg = _cfg(
+        [
+            "+exp=sim_office",
+            "device=cpu",
+            "sim.duration_s=30",
+            "train=quick",
+            "train.sampler=occupancy",
+            "train.grid_end=none",
+            "train.fixed_samples_share=0.5",
+            "train.batch_rays=128",
+            "train.num_samples=64",
+            "train.epochs=1",
+            "train.steps_per_epoch=6",
+            "train.val_scans=2",
+        ]
+    )
+    sets = prepare_beams(cfg)
+    cpu = torch.device("cpu")
+    torch.manual_seed(0)
+    tr = Trainer(
+        NOF(ModelConfig(**cfg.model)),
+        sets,
+        cfg.train,
+        cfg.render,
+        0.02,
+        20.0,
+        cpu,
+        tmp_path,
+        "k",
+        lambda m: {"mae_m": 1.0, "accuracy_pct": 0.0},
+        {},
+    )
+    start = tr.grid.starting_samples_per_beam(tr.origins, tr.dirs, 64, 0.02, 20.0)
+    assert 5 < start < 64  # the bounding box cuts the far samples of this 20 m bound
+    assert tr.count == int(np.ceil(0.5 * start)) * 128
+    tr.step_in_epoch = 0
+    keep = tr.grid.keep  # the first step's pick, before the fixed count: about what the starting grid keeps
+    seen = []
+    tr.grid.keep = lambda *a, **k: seen.append(keep(*a, **k)) or seen[-1]
+    tr.step(torch.randint(len(tr.ranges), (128,)))
+    assert abs(float(seen[0].sum()) / 128 - start) < 0.1 * start
+    tr.grid.keep = keep
+    tr.run_epoch()
+    assert tr.history[-1]["samples_per_beam"] == tr.count / 128

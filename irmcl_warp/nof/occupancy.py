@@ -122,6 +122,23 @@ class OccupancyGrid:
             T = torch.cumprod(torch.cat([torch.ones_like(p[:, :1]), 1.0 - p[:, :-1]], 1), 1)
         return keep & (T >= self.t_min)
 
+    @torch.no_grad()
+    def starting_samples_per_beam(self, origins, dirs, num_samples: int, near_m: float, far_m: float) -> float:
+        """Samples per beam the grid keeps before its first reading (every cell occupied: those inside the rays'
+        bounding box), over up to 8 batches of 4096 beams drawn by a generator of its own (the run's random draws
+        stay as they were), at the bins' midpoints."""
+        from irmcl_warp.nof.render import sample_depths, sample_points
+
+        gen = torch.Generator().manual_seed(0)
+        every = torch.ones(self.shape, dtype=torch.bool, device=self.device)
+        kept = beams = 0
+        for _ in range(8):
+            idx = torch.randint(len(origins), (min(4096, len(origins)),), generator=gen).to(origins.device)
+            z = sample_depths(len(idx), num_samples, near_m, far_m, perturb=False, device=origins.device)
+            keep = self.keep_fn(sample_points(origins[idx], dirs[idx], z), self.latest, every)
+            kept, beams = kept + int(keep.sum()), beams + len(idx)
+        return kept / beams
+
     def occupied_share(self) -> float:
         return float(self.occupied.float().mean())
 

@@ -120,11 +120,6 @@ class Trainer:
             )
         if tc.fixed_samples > tc.num_samples:
             raise ValueError(f"train.fixed_samples={tc.fixed_samples}: more than the {tc.num_samples} samples per beam")
-        # the training pass may run compiled (for fixed shapes with fixed_samples); the grid's readings (eval mode, no
-        # gradient) use the module as is
-        self.net = torch.compile(self.model, dynamic=not self.count, mode=tc.compile_mode) if tc.compile else self.model
-        # CUDA graphs (reduce-overhead, max-autotune) replay into the same output buffers: each step says it begins
-        self.graphed = tc.compile and tc.compile_mode in ("reduce-overhead", "max-autotune")
         self.grid = OccupancyGrid(o, o + d * r[:, None], tc, device) if tc.sampler == "occupancy" else None
         if self.grid is not None:  # its readings grow with the map's area: say what they cost
             cells = self.grid.values.numel()
@@ -133,6 +128,21 @@ class Trainer:
                 f"read every {tc.grid_every} steps ({cells:,} points, {cells / (tc.batch_rays * tc.num_samples):.0%} "
                 f"of a batch's samples)"
             )
+        if tc.fixed_samples_share > 0:  # the fixed count from this log's geometry, not typed per log
+            if self.grid is None:
+                raise ValueError("train.fixed_samples_share needs train.sampler=occupancy")
+            start = self.grid.starting_samples_per_beam(self.origins, self.dirs, tc.num_samples, near_m, far_m)
+            fixed = min(tc.num_samples, math.ceil(tc.fixed_samples_share * start))
+            self.count = fixed * tc.batch_rays
+            print(
+                f"train.fixed_samples_share={tc.fixed_samples_share:g}: {fixed} samples per beam through the MLP "
+                f"(the starting grid keeps {start:.1f} per beam on this log's rays)"
+            )
+        # the training pass may run compiled (for fixed shapes with fixed_samples); the grid's readings (eval mode, no
+        # gradient) use the module as is
+        self.net = torch.compile(self.model, dynamic=not self.count, mode=tc.compile_mode) if tc.compile else self.model
+        # CUDA graphs (reduce-overhead, max-autotune) replay into the same output buffers: each step says it begins
+        self.graphed = tc.compile and tc.compile_mode in ("reduce-overhead", "max-autotune")
         self.kept, self.read = [], []  # per step of the epoch: samples per beam through the MLP with / without gradient
         self.cut = []  # per step, with train.fixed_samples: the share of the kept samples left out
         if tc.step_graph:  # what a captured step needs (irmcl_warp/nof/step_graph.py)
@@ -402,7 +412,8 @@ class Trainer:
             record["fixed_samples_cut_share"] = cut = float(torch.stack(self.cut).mean())
             if cut > 0.02:
                 print(
-                    f"WARNING: train.fixed_samples={tc.fixed_samples} left out {cut:.1%} of the samples the grid kept in "
+                    f"WARNING: {self.count // B} samples per beam (train.fixed_samples, fixed_samples_share) left out "
+                    f"{cut:.1%} of the samples the grid kept in "
                     f"epoch {self.epoch + 1} (they counted as free space); raise it above the samples per beam the grid "
                     "keeps (train=guided with fixed_samples=0 prints them)"
                 )
