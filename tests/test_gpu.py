@@ -109,11 +109,7 @@ def test_a_wide_global_start_repeats_itself_and_one_stream(monkeypatch):
 def _trainer(tmp_path, *overrides):
     import torch
 
-    from irmcl_warp.config import ModelConfig
-    from irmcl_warp.nof.model import NOF
-    from irmcl_warp.nof.stage import make_validator
-    from irmcl_warp.nof.trainer import Trainer
-    from irmcl_warp.services.data import prepare_beams
+    from tests.test_nof import sim_trainer
 
     cfg = _cfg(
         "+exp=sim_office",
@@ -126,23 +122,8 @@ def _trainer(tmp_path, *overrides):
         "train.fused_adam=true",
         *overrides,
     )
-    sets = prepare_beams(cfg)
-    dev = torch.device("cuda:0")
     torch.manual_seed(0)
-    model = NOF(ModelConfig(**cfg.model))
-    return Trainer(
-        model,
-        sets,
-        cfg.train,
-        cfg.render,
-        0.02,
-        20.0,
-        dev,
-        tmp_path,
-        "k",
-        make_validator(sets["val"], cfg, 0.02, 20.0, dev),
-        {},
-    )
+    return sim_trainer(cfg, tmp_path)
 
 
 def test_a_captured_training_step_does_what_the_launched_one_does(tmp_path, monkeypatch):

@@ -26,6 +26,19 @@ def _cfg(overrides):
         return compose("config", overrides=overrides)
 
 
+def sim_trainer(cfg, out, validate=None, meta=None):
+    """A Trainer of a fresh NOF on the simulator's beams of ``cfg`` (near 0.02 m, far 20 m), on ``cfg.device``,
+    validated on the val split unless ``validate`` is given (also for tests/test_gpu.py)."""
+    from irmcl_warp.nof.stage import make_validator
+    from irmcl_warp.nof.trainer import Trainer
+    from irmcl_warp.services.data import prepare_beams
+
+    sets, dev = prepare_beams(cfg), torch.device(cfg.device)
+    validate = validate or make_validator(sets["val"], cfg, 0.02, 20.0, dev)
+    model = NOF(ModelConfig(**cfg.model))
+    return Trainer(model, sets, cfg.train, cfg.render, 0.02, 20.0, dev, out, "key", validate, meta or {})
+
+
 def test_encoding_matches_its_formula(rng):
     xy = torch.from_numpy(rng.uniform(-20, 20, (5, 2))).float()
     g = PositionalEncoding(10)(xy)
@@ -320,10 +333,6 @@ def test_cosine_schedule_and_weight_average_follow_their_formulas():
 def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path, monkeypatch, sampler):
     """train.bn_recalibrate=K: each batch norm's running mean becomes the mean of its K batch means (a hook
     records them), its count K; the occupancy sampler's batches keep fewer samples than the uniform ones."""
-    from irmcl_warp.nof.stage import make_validator
-    from irmcl_warp.nof.trainer import Trainer
-    from irmcl_warp.services.data import prepare_beams
-
     monkeypatch.chdir(tmp_path)
     cfg = _cfg(
         [
@@ -338,21 +347,7 @@ def test_batch_norm_recalibration_is_the_plain_average_over_its_batches(tmp_path
             "train.val_scans=2",
         ]
     )
-    sets = prepare_beams(cfg)
-    cpu = torch.device("cpu")
-    tr = Trainer(
-        NOF(ModelConfig(**cfg.model)),
-        sets,
-        cfg.train,
-        cfg.render,
-        0.02,
-        20.0,
-        cpu,
-        tmp_path,
-        "key",
-        make_validator(sets["val"], cfg, 0.02, 20.0, cpu),
-        {},
-    )
+    tr = sim_trainer(cfg, tmp_path)
     for _ in range(3):
         tr.step(torch.randint(len(tr.ranges), (64,)))
     bn = tr.model.head[1][1]
@@ -380,10 +375,7 @@ def test_a_field_trained_through_its_grid_is_kept_validated_and_loaded_through_i
     baked from it is 0 there), and the test renders of the loaded field score what validation scored."""
     from irmcl_warp.nof.checkpoint import load_nof
     from irmcl_warp.nof.occupancy import MaskedField
-    from irmcl_warp.nof.stage import make_validator
-    from irmcl_warp.nof.trainer import Trainer
     from irmcl_warp.nog import evaluate_grid
-    from irmcl_warp.services.data import prepare_beams
 
     monkeypatch.chdir(tmp_path)
     cfg = _cfg(
@@ -405,13 +397,9 @@ def test_a_field_trained_through_its_grid_is_kept_validated_and_loaded_through_i
             "render.num_samples=64",
         ]
     )
-    sets = prepare_beams(cfg)
-    cpu = torch.device("cpu")
-    validate = make_validator(sets["val"], cfg, 0.02, 20.0, cpu)
     torch.manual_seed(0)
-    model_cfg = ModelConfig(**cfg.model)
-    meta = {"model_config": dict(model_cfg.__dict__)}
-    tr = Trainer(NOF(model_cfg), sets, cfg.train, cfg.render, 0.02, 20.0, cpu, tmp_path, "k", validate, meta)
+    tr = sim_trainer(cfg, tmp_path, meta={"model_config": dict(ModelConfig(**cfg.model).__dict__)})
+    validate = tr.validate
     tr.run()
     assert tr.history[-1]["grid_occupied_share"] < 0.9  # the grid prunes at this threshold
     saved = torch.load(tmp_path / "nof.pt", weights_only=False)
@@ -475,34 +463,15 @@ def test_the_graph_preset_is_the_kept_step_graph_runs_settings():
 def test_a_step_graph_that_cannot_be_captured_is_refused_with_what_it_needs(tmp_path, extra, says):
     """train.step_graph (train=graph) on a CPU, or with a step that reads the host, is an error naming what a
     captured step needs, before any training (a CPU has no CUDA graphs to capture)."""
-    from irmcl_warp.nof.trainer import Trainer
-    from irmcl_warp.services.data import prepare_beams
-
     cfg = _cfg(["+exp=sim_office", "device=cpu", "sim.duration_s=20", "train=graph", "train.compile=false", *extra])
-    sets = prepare_beams(cfg)
     with pytest.raises(ValueError, match=f"train.step_graph=true needs .*{says}"):
-        Trainer(
-            NOF(ModelConfig(**cfg.model)),
-            sets,
-            cfg.train,
-            cfg.render,
-            0.02,
-            20.0,
-            torch.device("cpu"),
-            tmp_path,
-            "k",
-            lambda m: {},
-            {},
-        )
+        sim_trainer(cfg, tmp_path, validate=lambda m: {})
 
 
 def test_a_fixed_count_as_a_share_of_what_the_starting_grid_keeps(tmp_path):
     """train.fixed_samples_share: the fixed count follows the log's geometry (the samples per beam inside the rays'
     bounding box, which the starting grid keeps) instead of a number typed per log; the first step, whose grid
     reading finds the untrained field occupied everywhere, keeps about that many, and every step sends the count."""
-    from irmcl_warp.nof.trainer import Trainer
-    from irmcl_warp.services.data import prepare_beams
-
     cfg = _cfg(
         [
             "+exp=sim_office",
@@ -519,22 +488,8 @@ def test_a_fixed_count_as_a_share_of_what_the_starting_grid_keeps(tmp_path):
             "train.val_scans=2",
         ]
     )
-    sets = prepare_beams(cfg)
-    cpu = torch.device("cpu")
     torch.manual_seed(0)
-    tr = Trainer(
-        NOF(ModelConfig(**cfg.model)),
-        sets,
-        cfg.train,
-        cfg.render,
-        0.02,
-        20.0,
-        cpu,
-        tmp_path,
-        "k",
-        lambda m: {"mae_m": 1.0, "accuracy_pct": 0.0},
-        {},
-    )
+    tr = sim_trainer(cfg, tmp_path, validate=lambda m: {"mae_m": 1.0, "accuracy_pct": 0.0})
     start = tr.grid.starting_samples_per_beam(tr.origins, tr.dirs, 64, 0.02, 20.0)
     assert 5 < start < 64  # the bounding box cuts the far samples of this 20 m bound
     assert tr.count == int(np.ceil(0.5 * start)) * 128

@@ -46,6 +46,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from irmcl_warp.kernels import RENDER
+from irmcl_warp.nof.render import sample_depths, sample_points
 
 
 @contextlib.contextmanager
@@ -127,8 +128,6 @@ class OccupancyGrid:
         """Samples per beam the grid keeps before its first reading (every cell occupied: those inside the rays'
         bounding box), over up to 8 batches of 4096 beams drawn by a generator of its own (the run's random draws
         stay as they were), at the bins' midpoints."""
-        from irmcl_warp.nof.render import sample_depths, sample_points
-
         gen = torch.Generator().manual_seed(0)
         every = torch.ones(self.shape, dtype=torch.bool, device=self.device)
         kept = beams = 0
