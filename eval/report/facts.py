@@ -37,9 +37,15 @@ def _minute_spans(nof: dict, exp: str, fixed: bool = False) -> dict[str, str]:
         m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None) if wanted else None
         if m:
             found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
+    return _seed_spans(found)
+
+
+def _seed_spans(found: list) -> dict[str, str]:
+    """Seeds, and medians [min-max] of test MAE, Chamfer (m) and training time (s), of (MAE, Chamfer, s, ...) rows;
+    {} for none."""
     if not found:
         return {}
-    mae, cham, secs = zip(*found)
+    mae, cham, secs = list(zip(*found))[:3]
     return {
         "seeds": str(len(found)),
         "mae": median_span(mae, ".3f"),
@@ -66,14 +72,7 @@ def _graph_spans(nof: dict, exp: str) -> dict[str, str]:
             found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"], train.get("gpu") or train.get("device")))
     if not found:
         return {}
-    mae, cham, secs, gpus = zip(*found)
-    return {
-        "seeds": str(len(found)),
-        "mae": median_span(mae, ".3f"),
-        "chamfer": median_span(cham, ".3f"),
-        "time": median_span(secs, ".1f"),
-        "gpu": ", ".join(sorted(set(gpus))),
-    }
+    return {**_seed_spans(found), "gpu": ", ".join(sorted({row[3] for row in found}))}
 
 
 def _yaw_of(log: str, weighting: str | None) -> float | None:
