@@ -88,6 +88,22 @@ def test_the_mlp_benchmark_counts_the_papers_multiply_adds_and_its_floor_drops_o
         assert torch.allclose(floor.eval()(xy), paper(xy), atol=1e-6)
 
 
+def test_the_mlp_roofline_counts_each_layers_least_traffic_and_bounds_the_share_of_peak():
+    """eval.bench mlp's roofline: 6 bytes x (in + out) per linear layer and point (bf16: forward in + out, backward
+    2 x out + 2 x in), summed over the paper's layers, and the share of the peak is FLOP per byte x bandwidth / peak,
+    capped at 1; a narrower network moves fewer bytes."""
+    from eval.bench.mlp import flop_per_step, min_bytes_per_point, roofline_share
+
+    model = NOF(ModelConfig())
+    sizes = [(42, 256)] + [(256, 256)] * 3 + [(298, 256)] + [(256, 256)] * 3 + [(256, 1)]
+    assert min_bytes_per_point(model) == sum(6 * (i + o) for i, o in sizes) == 25086
+    share = roofline_share(model, 989.0, 3.35)
+    assert share == pytest.approx(flop_per_step(model, 1) / 25086 * 3.35 / 989.0)
+    assert 0.38 < share < 0.40  # an H100's: the issue's 30 % needs 77 % of the bandwidth with BN fused away
+    assert roofline_share(model, 989.0, 1000.0) == 1.0  # bound by arithmetic
+    assert min_bytes_per_point(NOF(ModelConfig(width=128))) < min_bytes_per_point(model)
+
+
 def _beams(S=20, B=8, name="unit"):
     ranges = np.full((S, B), 3.0, np.float32)
     return BeamSet(
