@@ -440,19 +440,23 @@ def test_a_field_trained_through_its_grid_is_kept_validated_and_loaded_through_i
 
 
 def test_the_graph_preset_is_the_kept_step_graph_runs_settings():
-    """train=graph reproduces the step-graph runs README quotes (kept as sg64_e5, sg64_e5_s<k> in results/nof): the
-    same training settings but the name and the seed, and those runs were trained through their grid."""
+    """train=graph reproduces the step-graph runs README quotes (kept as sg64_e5[_s<k>] from an H200 and h_g_s<k> from
+    an H100 in results/nof): the same training settings but the name and the seed, and those runs were trained
+    through their grid."""
     from omegaconf import OmegaConf
 
     from eval.report.facts import GRAPH_RUNS
 
     records = json.loads((CONF.parent / "results" / "nof" / "fr079.json").read_text())["records"]
+    names = "|".join(GRAPH_RUNS["fr079"][1:])
     kept = [
         r["config"]["train"]
         for k, r in records.items()
-        if k.startswith("train/") and re.fullmatch(rf"{GRAPH_RUNS['fr079'][1]}(_s\d+)?", r["config"]["train"]["name"])
+        if k.startswith("train/") and re.fullmatch(rf"({names})(_s\d+)?", r["config"]["train"]["name"])
     ]
-    assert len(kept) >= 5 and {t["seed"] for t in kept} >= {42, 1, 2, 3, 4}
+    for name in GRAPH_RUNS["fr079"][1:]:  # each session's runs: five seeds or more
+        seeds = {t["seed"] for t in kept if re.fullmatch(rf"{name}(_s\d+)?", t["name"])}
+        assert len(seeds) >= 5 and seeds >= {42, 1, 2, 3, 4}, (name, seeds)
     from dataclasses import asdict
 
     from irmcl_warp.config import TrainConfig

@@ -352,3 +352,30 @@ def test_the_readme_states_no_figure_the_results_do_not_give():
 
     assert unchecked_figures((REPO / "README.md").read_text()) == []
     assert unchecked_figures("it converged after 2.2 s in 9/10 runs, `mcl.sigma_m=0.5`") == ["2.2 s", "9/10"]
+
+
+def test_the_step_graph_runs_are_summarised_per_card_never_pooled():
+    """eval.report.facts: the train=graph runs' medians are taken per GPU (an H100's and an H200's times are not one
+    population), a run of another name is left out, and the card's short name makes the fact's key."""
+    from eval.report.facts import _graph_spans, gpu_slug
+
+    assert gpu_slug("NVIDIA H100 80GB HBM3") == "h100" and gpu_slug("NVIDIA H200") == "h200"
+    assert gpu_slug("cpu") == "cpu"
+
+    def run(mae, secs, gpu):
+        return {"methods": {"NOF (x)": {"mae_m": mae, "chamfer_m": mae / 2}}}, {"train_time_s": secs, "gpu": gpu}
+
+    nof = {
+        ("fr079", "h_g_s1"): run(0.25, 16.0, "NVIDIA H100 80GB HBM3"),
+        ("fr079", "h_g_s2"): run(0.24, 18.0, "NVIDIA H100 80GB HBM3"),
+        ("fr079", "h_g_s3"): run(0.26, 17.0, "NVIDIA H100 80GB HBM3"),
+        ("fr079", "sg64_e5"): run(0.30, 10.0, "NVIDIA H200"),
+        ("fr079", "h_g4_s1"): run(0.99, 1.0, "NVIDIA H100 80GB HBM3"),  # another recipe's name
+        ("intel", "h_g_s1"): run(0.99, 1.0, "NVIDIA H100 80GB HBM3"),  # not a graph run's name on intel
+    }
+    spans = _graph_spans(nof, "fr079")
+    assert set(spans) == {"h100", "h200"}
+    assert spans["h100"]["seeds"] == "3" and spans["h100"]["time"] == "17.0 [16.0-18.0]"
+    assert spans["h100"]["mae"] == "0.250 [0.240-0.260]"
+    assert spans["h200"]["seeds"] == "1" and spans["h200"]["gpu"] == "NVIDIA H200"
+    assert _graph_spans(nof, "intel") == {}

@@ -54,14 +54,22 @@ def _seed_spans(found: list) -> dict[str, str]:
     }
 
 
-# the step-graph runs (train=graph, issue 36): the preset's own name and the session's names for the same settings
-GRAPH_RUNS = {"fr079": ("graph", "sg64_e5"), "intel": ("graph_intel", "sg96_e10_intel")}
+# the step-graph runs (train=graph, issue 36): the preset's own name and the sessions' names for the same settings
+# (sg64_e5: the twenty-third session's, on an H200; h_g: the twenty-fourth's, on an H100)
+GRAPH_RUNS = {"fr079": ("graph", "sg64_e5", "h_g"), "intel": ("graph_intel", "sg96_e10_intel")}
 
 
-def _graph_spans(nof: dict, exp: str) -> dict[str, str]:
-    """The kept step-graph runs on ``exp`` (train.name in GRAPH_RUNS, or that name + _s<seed>): seeds, medians
-    [min-max] of test MAE, Chamfer (m) and training time (s), and the GPUs they ran on; {} when none is kept."""
-    found = []
+def gpu_slug(name: str) -> str:
+    """A card's short name for a fact's key: "NVIDIA H100 80GB HBM3" -> "h100", "NVIDIA H200" -> "h200"."""
+    m = re.search(r"\b([A-Z]\d{2,4}[A-Za-z]?)\b", name or "")
+    return m.group(1).lower() if m else re.sub(r"[^a-z0-9]+", "_", (name or "unknown").lower()).strip("_")
+
+
+def _graph_spans(nof: dict, exp: str) -> dict[str, dict[str, str]]:
+    """The kept step-graph runs on ``exp`` (train.name in GRAPH_RUNS, or that name + _s<seed>), per card (times from
+    two cards are never pooled): {gpu_slug: seeds, medians [min-max] of test MAE, Chamfer (m) and training time (s),
+    and the card's name}; {} when none is kept."""
+    per_gpu: dict[str, list] = {}
     for (e, preset), (syn, train) in nof.items():
         if e != exp or not (syn and train):
             continue
@@ -69,10 +77,9 @@ def _graph_spans(nof: dict, exp: str) -> dict[str, str]:
             continue
         m = next((v for k, v in syn["methods"].items() if k.startswith("NOF")), None)
         if m:
-            found.append((m["mae_m"], m["chamfer_m"], train["train_time_s"], train.get("gpu") or train.get("device")))
-    if not found:
-        return {}
-    return {**_seed_spans(found), "gpu": ", ".join(sorted({row[3] for row in found}))}
+            gpu = train.get("gpu") or train.get("device")
+            per_gpu.setdefault(gpu, []).append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
+    return {gpu_slug(gpu): {**_seed_spans(found), "gpu": gpu} for gpu, found in per_gpu.items()}
 
 
 def _yaw_of(log: str, weighting: str | None) -> float | None:
@@ -201,8 +208,9 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
             out[f"nof_minute_{ds}_{key}"] = value
         for key, value in _minute_spans(nof, ds, fixed=True).items():
             out[f"nof_compiled_{ds}_{key}"] = value
-        for key, value in _graph_spans(nof, ds).items():
-            out[f"nof_graph_{ds}_{key}"] = value
+        for card, spans in _graph_spans(nof, ds).items():
+            for key, value in spans.items():
+                out[f"nof_graph_{ds}_{card}_{key}"] = value
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
