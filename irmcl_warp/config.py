@@ -233,6 +233,15 @@ class MCLConfig:
     recovery_alpha_slow: float = 0.0  # AMCL's recovery (kidnapping): 0 = off; AMCL suggests 0.001
     recovery_alpha_fast: float = 0.0  # 0 = off; AMCL suggests 0.1
     step_graph: str = "auto"  # a step's launches replayed as one graph: auto (when capturable) | on | off
+    # KLD-sampling (Fox 2003; AMCL's adaptive count): after each resampling the count becomes what keeps the
+    # sample-based posterior's KL error below kld_err with quantile kld_z, for the bins the particles occupy,
+    # between kld_min_particles and mcl.num_particles (kernels/kld.py)
+    kld_sampling: bool = False
+    kld_err: float = 0.01  # AMCL's kld_err (ROS amcl and nav2 default)
+    kld_z: float = 0.99  # AMCL's kld_z: used as the normal quantile itself, as AMCL does (Fox's z_{1-delta})
+    kld_min_particles: int = 500  # nav2 amcl's min_particles
+    kld_cell_m: float = 0.5  # the histogram's cells: AMCL's kd-tree, 0.5 m x 0.5 m x 10 deg
+    kld_cell_deg: float = 10.0
     cpu_threads: Optional[int] = None  # CPU only: motion and the grid models launched as a block of particles per core
     #   (None = the process's cores; 1 = one launch, which a CPU graph may capture); the same bits either way
     seed: int = 0
@@ -546,6 +555,11 @@ RANGES = {
     "mcl.field_max_dist_m": ("> 0", None),
     "mcl.field_occ_threshold": ("> 0", 1),
     "mcl.beam_occ_threshold": ("> 0", 1),
+    "mcl.kld_err": ("> 0", None),
+    "mcl.kld_z": (0, None),
+    "mcl.kld_min_particles": (1, None),
+    "mcl.kld_cell_m": ("> 0", None),
+    "mcl.kld_cell_deg": ("> 0", 360),
     "worlds.runs": (1, None),
     "worlds.run_s": ("> 0", None),
     "worlds.map_drive_m": ("> 0", None),

@@ -45,6 +45,37 @@ def _filter(nog, cfg, log, weighting=None):
     return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, DEVICE)
 
 
+def test_kld_sampling_shrinks_a_converged_set_keeps_tracking_and_a_global_start_gets_every_particle_back():
+    """mcl.kld_sampling: tracking from a loose start, the count falls from 2000 to a smaller level once the set
+    has gathered (never below kld_min_particles, always one of the levels), the estimate stays within the tracking
+    test's bounds, and a global start spreads the full count again; without the setting the count never moves."""
+    from irmcl_warp.kernels.kld import levels
+
+    log, nog = _world_and_map()
+    runs = {}
+    for kld in (False, True):
+        pf = _filter(
+            nog, MCLConfig(num_particles=2000, num_samples=128, seed=3, kld_sampling=kld, kld_min_particles=100), log
+        )
+        pf.init_gaussian(log.ground_truth[0], (0.3, 0.3, 0.1))
+        counts, errors = [], []
+        for k in range(1, len(log)):
+            pose, _ = pf.step(odometry_step(log.odom[k - 1], log.odom[k]), log.ranges_m[k])
+            counts.append(pf.num_particles)
+            errors.append(np.hypot(*(pose[:2] - log.ground_truth[k, :2])))
+        runs[kld] = np.array(counts), np.array(errors), pf
+    counts, errors, pf = runs[True]
+    assert set(counts) <= set(levels(2000, 100)) and counts[-1] < 2000 and counts.min() >= 100, set(counts)
+    assert pf.bins > 0 and np.median(errors[20:]) < 0.15 and errors[20:].max() < 0.5, (np.median(errors), errors.max())
+    assert set(runs[False][0]) == {2000}
+    pf.init_uniform()
+    assert pf.num_particles == 2000
+    pose, _ = pf.step((0.0, 0.05, 0.0), log.ranges_m[1])
+    assert np.all(np.isfinite(pose))
+    with pytest.raises(ValueError, match="kld_min_particles"):
+        _filter(nog, MCLConfig(num_particles=50, num_samples=32, kld_sampling=True, kld_min_particles=100), log)
+
+
 @pytest.mark.parametrize("weighting", ["nog_raymarch", "nog_table", "likelihood_field"])
 def test_pose_tracking_stays_within_a_bound(weighting):
     from irmcl_warp.kernels import WEIGHTING

@@ -371,3 +371,63 @@ def test_particle_blocks_cover_the_particles_once_and_stay_whole_in_a_captured_g
         blocks.run(launch, 100)
     assert calls == [(0, 100)]
     assert ParticleBlocks("cpu", threads=None).threads >= 1
+
+
+def test_occupied_bins_kernel_matches_the_twin_and_leaves_its_marks_clear(rng):
+    """kernels/kld.py OccupiedBins against irmcl_warp/reference/kld.occupied_bins on fresh random sets: particles at
+    random bins' centres (jittered within 0.4 of a cell, so float32 and float64 agree on the bin), some bins shared,
+    some outside the bounds (the edge bins); a second count of another set starts from clear marks."""
+    from irmcl_warp.kernels.kld import OccupiedBins
+    from irmcl_warp.reference.kld import occupied_bins
+
+    bounds = (-3.0, 1.0, float(rng.uniform(5, 20)), float(rng.uniform(8, 15)))
+    cell, deg = float(rng.choice([0.25, 0.5, 1.0])), float(rng.choice([10.0, 22.5, 45.0]))
+    bins = OccupiedBins(bounds, cell, deg, device=DEVICE)
+    nyaw, ny, nx = bins.shape()
+    for n in (int(rng.integers(1, 50)), int(rng.integers(500, 5000))):
+        ix, iy, ia = rng.integers(-2, nx + 2, n), rng.integers(-2, ny + 2, n), rng.integers(0, nyaw, n)
+        jitter = rng.uniform(-0.4, 0.4, (n, 3))
+        p = np.column_stack(
+            [
+                bounds[0] + (ix + 0.5 + jitter[:, 0]) * cell,
+                bounds[1] + (iy + 0.5 + jitter[:, 1]) * cell,
+                -np.pi + (ia + 0.5 + jitter[:, 2]) * (2 * np.pi / nyaw) + 2 * np.pi * rng.integers(-1, 2, n),
+            ]
+        ).astype(np.float32)
+        ours = bins(wp.array(p, dtype=wp.vec3, device=DEVICE))
+        twin = occupied_bins(p, bounds, cell, deg)
+        assert ours == twin and 1 <= twin <= n, f"seed {rng.seed}: {ours} vs {twin}"
+        assert not bins.marks.numpy().any()  # cleared for the next count
+
+
+def test_kld_count_follows_the_chi_square_quantile_and_the_levels_move_with_a_margin(rng):
+    """Fox's count (Wilson-Hilferty) within 1 % of chi2_{k-1}(q) / (2 err) with z the normal quantile of q, for
+    k >= 10; 1 particle for one bin; more bins ask for more particles. next_count grows at once to a level that
+    holds the count, and shrinks only when twice the count fits a smaller level."""
+    from scipy.stats import norm
+
+    from irmcl_warp.kernels.kld import kld_count, levels, next_count
+    from irmcl_warp.reference.kld import kld_count_exact
+
+    err, q = float(rng.uniform(0.005, 0.05)), float(rng.uniform(0.9, 0.999))
+    z = float(norm.ppf(q))
+    for k in rng.integers(10, 20000, 20):
+        assert kld_count(int(k), err, z) == pytest.approx(kld_count_exact(int(k), err, q), rel=0.01)
+    assert kld_count(1, err, z) == 1 and kld_count(50, err, z) < kld_count(500, err, z)
+    with pytest.raises(ValueError, match="err"):
+        kld_count(10, 0.0, z)
+    counts = levels(100_000, 500)
+    assert counts[0] == 500 and counts[-1] == 100_000 and np.all(np.diff(counts) > 0)
+    assert set(counts[1:-1]) == {100_000 >> s for s in range(1, 8)}  # 50k ... 781
+    with pytest.raises(ValueError, match="min particles"):
+        levels(100, 200)
+
+    def bins_for(need):  # the fewest bins whose count reaches ``need``
+        return next(k for k in range(2, 10**6) if kld_count(k, 0.01, 0.99) >= need)
+
+    k = bins_for(3000)
+    assert next_count(781, k, 0.01, 0.99, counts) == 3125  # grows at once to the level holding 3000
+    assert next_count(12500, k, 0.01, 0.99, counts) == 6250  # 2 x 3000 fits 6250: shrinks
+    assert next_count(6250, k, 0.01, 0.99, counts) == 6250  # 2 x 3000 needs 6250: stays
+    assert next_count(3125, k, 0.01, 0.99, counts) == 3125  # 3000 fits: no growth, and no shrink below it
+    assert next_count(500, 10**6, 0.01, 0.99, counts) == 100_000  # capped at the most

@@ -21,6 +21,7 @@ import warp as wp
 
 from irmcl_warp.config import MCLConfig
 from irmcl_warp.kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
+from irmcl_warp.kernels.kld import OccupiedBins, levels, next_count
 from irmcl_warp.kernels.resample import LogMeanLikelihood, ParticleWeights, Resampler, inject_kernel
 
 # mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
@@ -137,6 +138,15 @@ class ParticleFilter:
             lo[1] + (H - 1) * free_space.resolution_m,
         )
         self._allocate(N)
+        self.kld = None  # mcl.kld_sampling: the bins the resampled set occupies, and the counts it moves between
+        if cfg.kld_sampling:
+            if cfg.kld_min_particles > N:
+                raise ValueError(
+                    f"MCL: mcl.kld_min_particles={cfg.kld_min_particles} is more than mcl.num_particles={N}"
+                )
+            self.kld = OccupiedBins(self.bounds, cfg.kld_cell_m, cfg.kld_cell_deg, d)
+            self.kld_levels = levels(N, cfg.kld_min_particles)
+        self.bins = 0  # with KLD-sampling: the bins the last resampled set occupied
         self.angles = wp.array(np.asarray(scan_angles_rad, np.float32)[self.beam_index], dtype=wp.float32, device=d)
         self.inputs = StepInputs(B, d)
         self.measured = self.inputs.measured
@@ -278,7 +288,29 @@ class ParticleFilter:
         wp.synchronize_device(self.device)
         self.particles, self.scratch = self.scratch, self.particles  # the resampled set is the new one
         self._inject(p_inject)  # each particle a random free pose with probability p_inject (Table 8.3)
-        return self._read_estimate(limit, p_inject)  # the estimate (mcl.estimate) and N_eff, read back once
+        pose, neff = self._read_estimate(limit, p_inject)  # the estimate (mcl.estimate) and N_eff, read back once
+        if self.kld is not None and (p_inject > 0 or neff < limit):  # resampled this step:
+            self._adapt_count()  # KLD-sampling's count for the next steps (Fox 2003)
+        return pose, neff
+
+    def _adapt_count(self) -> None:
+        """KLD-sampling (Fox 2003) on the resampled set: the bins it occupies give the count (kernels/kld.py), taken
+        from ``kld_levels`` (grow at once, shrink with a margin of 2). Fox draws particles one by one until their
+        bins' count is met; here the whole resampled set is binned. Where the set holds at least his count, its bins
+        include those his draw would have seen, so the count is not below his; where it must grow, it grows at once
+        and the next resampling counts the larger set again. A new count draws the set again, systematically
+        from the equal-weight resampled one (each particle kept or copied in proportion), into arrays of that
+        size (the step's graph is captured again)."""
+        cfg = self.cfg
+        self.bins = self.kld(self.particles)
+        n = next_count(self.num_particles, self.bins, cfg.kld_err, cfg.kld_z, self.kld_levels)
+        if n == self.num_particles:
+            return
+        poses = self.particles.numpy()
+        pick = np.floor((np.arange(n) + self.rng.uniform()) * (len(poses) / n)).astype(np.int64)
+        self._allocate(n)
+        self.particles.assign(wp.array(poses[np.minimum(pick, len(poses) - 1)], dtype=wp.vec3, device=self.device))
+        self.log_w.zero_()
 
     def _upload(self, odom_step, ranges_m) -> float:
         """The step's inputs into the host buffers (``StepInputs``); returns the resampling threshold on N_eff."""

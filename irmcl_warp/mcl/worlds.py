@@ -254,12 +254,14 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
     n = len(log.stamps)
     est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
     prob, updated, mean_lik = np.full(n, np.nan), np.zeros(n, bool), np.full(n, np.nan)
+    particles = np.zeros(n, np.int64)  # the count each update ran with (mcl.kld_sampling moves it)
     lost_at, pose, p, weighed = [], None, np.nan, False
     rule, last_odom = LostRule(w), log.odom[0]
     angles, T = log.info.angles_rad, log.T_base_laser
     for i in range(n):
         u = odometry_step(last_odom, log.odom[i])
         if (not weighed and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
+            particles[i] = pf.num_particles
             pf.step(u, log.ranges_m[i])
             delta = relative(last_odom[None], log.odom[i][None])[0]
             last_odom, weighed, updated[i] = log.odom[i], True, True
@@ -282,6 +284,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
         "confidence": prob,
         "updated": updated,
         "log_mean_likelihood": mean_lik,
+        "particles": particles,
         "lost_at_s": np.array(lost_at, float),
     }
 
@@ -310,6 +313,8 @@ def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
         "localized_at_end": bool(p_end >= w.confident_above) if not np.isnan(p_end) else None,
         "lost_at_s": trace["lost_at_s"].tolist(),
     }
+    if "particles" in trace and trace["updated"].any():  # the particles an update ran with, on average
+        out["particles_per_update"] = float(trace["particles"][trace["updated"]].mean())
     before = trace["lost_at_s"][trace["lost_at_s"] < (t[cut] if cut is not None else np.inf)]
     right_when = [
         bool(ok[np.searchsorted(t, s) - 1 - int(round(w.lost_after_s / max(np.median(np.diff(t)), 1e-9)))])
@@ -365,6 +370,9 @@ def world_summary(rows: list[dict]) -> dict:
         "false_alarms": int(sum(r["false_alarms"] for r in rows)),
         "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600),
     }
+    per_update = [r["particles_per_update"] for r in rows if r.get("particles_per_update") is not None]
+    if per_update:
+        s["particles_per_update"] = float(np.mean(per_update))
     kid = [r for r in rows if "kidnap_at_s" in r and r["right_before_kidnap"]]
     if kid:
         s["kidnaps"] = len(kid)
