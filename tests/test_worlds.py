@@ -573,3 +573,30 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     assert amcl[0.9]["detected_within_2s"] == 0 and amcl[0.3]["false_alarms"] == amcl[0.9]["false_alarms"] == 0
     assert amcl[0.3]["above"] == 0.3 and "agreement_below" not in amcl[0.3]  # each rule's own settings beside it
     assert choose([amcl[0.3], amcl[0.9]]) is amcl[0.3]
+
+
+def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tmp_path):
+    """eval.analyses.paired_worlds: McNemar's exact test on the drives where only one run ended right (7 against 1:
+    p = 0.0703, the binomial's two-sided tail), the counts of both, and an error naming the problem when the runs
+    localized different drives."""
+    import json
+
+    from eval.analyses.paired_worlds import main, mcnemar_exact
+
+    assert mcnemar_exact(0, 0) == 1.0 and mcnemar_exact(7, 1) == pytest.approx(0.0703125)
+
+    def run(right, particles=None):
+        rows = [{"world": "w-1", "run": k, "right_at_end": r, "success": r, "localized_at_end": r} for k, r in right]
+        return {"runs": rows, "summary": {"num_particles": 100, "particles_per_update": particles}}
+
+    a = [(k, k < 9) for k in range(1, 11)]  # 8 right: 1-8
+    b = [(k, k in (1, 9)) for k in range(1, 11)]  # 2 right: 1 (both), 9 (only B)
+    for name, rows in (("a", a), ("b", b), ("c", a[:5])):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "metrics.json").write_text(json.dumps(run(rows, 50.0)))
+    out = main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "p.json")])
+    o = out["outcomes"]["right_at_end"]
+    assert (o["a"], o["b"], len(o["only_a"]), o["only_b"]) == (8, 2, 7, ["w-1-run9"])
+    assert o["p_mcnemar"] == pytest.approx(0.0703125) and json.loads((tmp_path / "p.json").read_text())["drives"] == 10
+    with pytest.raises(SystemExit, match="different drives"):
+        main([str(tmp_path / "a"), str(tmp_path / "c")])

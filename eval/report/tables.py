@@ -418,6 +418,14 @@ def worlds_table(runs: list) -> str:
             )
             + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
+            + (
+                [
+                    f"KLD-sampling from {r.setting('mcl.kld_min_particles'):,}, "
+                    f"{s['particles_per_update'] / 1000:.1f}k per update on average"
+                ]
+                if r.setting("mcl.kld_sampling")
+                else []
+            )
         )
         label = s["weighting"].replace("_", " ") + (f" ({', '.join(how)})" if how else "")
         rows.append(

@@ -1,0 +1,89 @@
+"""``python -m eval.analyses.paired_worlds <worlds run A> <worlds run B> [--out F.json]``: two runs of the worlds
+stage on the same floors and drives, compared drive by drive (issue 33: "a count compared with another count needs a
+test").
+
+Both runs localize the same drives (world, path seed), so their outcomes are paired: the test is McNemar's exact
+one, a two-sided binomial test on the drives where exactly one of the two ended right (``right_at_end``) or
+localized by the protocol (``success``). Prints, per outcome, both counts, the discordant drives and the p-value, and
+the particles an update ran with on average (``particles_per_update``, with ``mcl.kld_sampling``); writes the same
+as JSON with ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+OUTCOMES = ("right_at_end", "success", "localized_at_end")
+
+
+def mcnemar_exact(only_a: int, only_b: int) -> float:
+    """Two-sided p of McNemar's exact test: the discordant pairs as a binomial draw with p = 1/2."""
+    from scipy.stats import binomtest
+
+    n = only_a + only_b
+    return 1.0 if n == 0 else float(binomtest(only_a, n, 0.5).pvalue)
+
+
+def drives(metrics: dict) -> dict[tuple[str, int], dict]:
+    """(world, run) -> that drive's row of a worlds run's metrics.json."""
+    return {(r["world"], int(r["run"])): r for r in metrics["runs"]}
+
+
+def compare(a: dict, b: dict) -> dict:
+    """The paired comparison of two worlds runs' metrics: an error when they did not localize the same drives."""
+    da, db = drives(a), drives(b)
+    if set(da) != set(db):
+        only = sorted(set(da) ^ set(db))[:5]
+        raise SystemExit(f"paired_worlds: the two runs localized different drives (e.g. {only}): nothing to pair")
+    out = {"drives": len(da), "outcomes": {}}
+    for key in OUTCOMES:
+        ra = {d: bool(r.get(key)) for d, r in da.items()}
+        rb = {d: bool(r.get(key)) for d, r in db.items()}
+        only_a = sorted(d for d in da if ra[d] and not rb[d])
+        only_b = sorted(d for d in da if rb[d] and not ra[d])
+        out["outcomes"][key] = {
+            "a": sum(ra.values()),
+            "b": sum(rb.values()),
+            "only_a": [f"{w}-run{k}" for w, k in only_a],
+            "only_b": [f"{w}-run{k}" for w, k in only_b],
+            "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
+        }
+    for side, m in (("a", a), ("b", b)):
+        out[f"particles_per_update_{side}"] = m["summary"].get("particles_per_update")
+        out[f"num_particles_{side}"] = m["summary"]["num_particles"]
+    return out
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("a", type=Path, help="a worlds run's folder (or its metrics.json)")
+    ap.add_argument("b", type=Path)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    metrics = []
+    for p in (args.a, args.b):
+        f = p / "metrics.json" if p.is_dir() else p
+        if not f.is_file():
+            raise SystemExit(f"paired_worlds: {f} not found (a worlds run's folder or its metrics.json)")
+        metrics.append(json.loads(f.read_text()))
+    out = {"a": str(args.a), "b": str(args.b), **compare(*metrics)}
+    print(f"A = {args.a}\nB = {args.b}\n{out['drives']} drives, paired")
+    print("| outcome | A | B | only A | only B | McNemar exact p |\n|---|---|---|---|---|---|")
+    for key, o in out["outcomes"].items():
+        n = out["drives"]
+        print(
+            f"| {key} | {o['a']}/{n} | {o['b']}/{n} | {len(o['only_a'])} | {len(o['only_b'])} | {o['p_mcnemar']:.3g} |"
+        )
+    for side in ("a", "b"):
+        ppu = out[f"particles_per_update_{side}"]
+        print(f"{side.upper()}: {out[f'num_particles_{side}']:,} particles at most, {ppu or float('nan'):,.0f} per update")
+    if args.out:
+        args.out.write_text(json.dumps(out, indent=1) + "\n")
+        print(f"-> {args.out}")
+    return out
+
+
+if __name__ == "__main__":
+    main()
