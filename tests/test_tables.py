@@ -379,3 +379,28 @@ def test_the_step_graph_runs_are_summarised_per_card_never_pooled():
     assert spans["h100"]["mae"] == "0.250 [0.240-0.260]"
     assert spans["h200"]["seeds"] == "1" and spans["h200"]["gpu"] == "NVIDIA H200"
     assert _graph_spans(nof, "intel") == {}
+
+
+def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
+    """README's KLD-sampling figures come from results/checks/paired_worlds_<name>.json (eval.analyses.paired_worlds):
+    both counts over the drives with McNemar's p, and each side's particles per update in thousands; a comparison not
+    kept gives no fact (and README's marker then fails the generated-documents test)."""
+    import json
+
+    from eval.report.facts import PAIRED_WORLDS, _paired_worlds
+
+    (tmp_path / "checks").mkdir()
+    doc = {
+        "drives": 80,
+        "outcomes": {"right_at_end": {"a": 73, "b": 70, "p_mcnemar": 0.375}},
+        "particles_per_update_a": 12923.8,
+        "particles_per_update_b": 20000.0,
+    }
+    (tmp_path / "checks" / f"paired_worlds_{PAIRED_WORLDS[0]}.json").write_text(json.dumps(doc))
+    got = _paired_worlds(tmp_path)
+    assert set(got) == {PAIRED_WORLDS[0]}
+    assert got[PAIRED_WORLDS[0]] == {
+        "right_at_end": "73/80 against 70/80 (McNemar exact p = 0.38)",
+        "per_update_a": "12.9k",
+        "per_update_b": "20.0k",
+    }

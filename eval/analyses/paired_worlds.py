@@ -78,7 +78,9 @@ def main(argv=None) -> dict:
         )
     for side in ("a", "b"):
         ppu = out[f"particles_per_update_{side}"]
-        print(f"{side.upper()}: {out[f'num_particles_{side}']:,} particles at most, {ppu or float('nan'):,.0f} per update")
+        print(
+            f"{side.upper()}: {out[f'num_particles_{side}']:,} particles at most, {ppu or float('nan'):,.0f} per update"
+        )
     if args.out:
         args.out.write_text(json.dumps(out, indent=1) + "\n")
         print(f"-> {args.out}")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import re
 
 from eval.results.queries import converged, median_span, released_errors, slam_errors, slam_variant
-from eval.results.records import checks, find
+from eval.results.records import RESULTS, checks, find
 
 ROT2X = {"slam.srt": 0.4, "slam.stt": 0.4}  # slam=gmapping_rot2x
 LASER_FRAME = {"slam.frame": "laser"}
@@ -80,6 +80,29 @@ def _graph_spans(nof: dict, exp: str) -> dict[str, dict[str, str]]:
             gpu = train.get("gpu") or train.get("device")
             per_gpu.setdefault(gpu, []).append((m["mae_m"], m["chamfer_m"], train["train_time_s"]))
     return {gpu_slug(gpu): {**_seed_spans(found), "gpu": gpu} for gpu, found in per_gpu.items()}
+
+
+PAIRED_WORLDS = ("kld100k_vs_20k", "kld20k_vs_20k")  # results/checks/paired_worlds_<name>.json
+
+
+def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
+    """The kept drive-by-drive comparisons of two worlds runs (eval.analyses.paired_worlds): per outcome "a/n against
+    b/n (McNemar exact p = ...)", and each side's particles per update."""
+    import json
+
+    out = {}
+    for name in PAIRED_WORLDS:
+        path = results / "checks" / f"paired_worlds_{name}.json"
+        if not path.is_file():
+            continue
+        d, facts = json.loads(path.read_text()), {}
+        n = d["drives"]
+        for key, o in d["outcomes"].items():
+            facts[key] = f"{o['a']}/{n} against {o['b']}/{n} (McNemar exact p = {o['p_mcnemar']:.2g})"
+        for side in ("a", "b"):
+            facts[f"per_update_{side}"] = f"{d[f'particles_per_update_{side}'] / 1000:.1f}k"
+        out[name] = facts
+    return out
 
 
 def _yaw_of(log: str, weighting: str | None) -> float | None:
@@ -211,6 +234,9 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         for card, spans in _graph_spans(nof, ds).items():
             for key, value in spans.items():
                 out[f"nof_graph_{ds}_{card}_{key}"] = value
+    for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
+        for key, value in paired.items():
+            out[f"worlds_{name}_{key}"] = value
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
