@@ -82,7 +82,11 @@ def _graph_spans(nof: dict, exp: str) -> dict[str, dict[str, str]]:
     return {gpu_slug(gpu): {**_seed_spans(found), "gpu": gpu} for gpu, found in per_gpu.items()}
 
 
-PAIRED_WORLDS = ("kld100k_vs_20k", "kld20k_vs_20k")  # results/checks/paired_worlds_<name>.json
+PAIRED_WORLDS = (
+    "kld100k_vs_20k",
+    "kld20k_vs_20k",
+    "kld100k_vs_100k_kidnap",
+)  # results/checks/paired_worlds_<name>.json
 
 
 def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
