@@ -441,6 +441,12 @@ def require(ident: Identity, root=OUTPUTS) -> Path:
 
 
 def _git_sha() -> str:
+    """The commit the code was run from, "-dirty" when tracked files differ from it. ``IRMCL_GIT_SHA``, when set,
+    is taken as is: a copy of a checkout made elsewhere (a lent GPU machine gets the working tree and a stale
+    history; eval/gpu/stamp_source.sh writes the commit the copy was made from)."""
+    given = os.environ.get("IRMCL_GIT_SHA", "").strip()
+    if given:
+        return given
     try:
         sha = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True

@@ -375,3 +375,21 @@ def test_a_full_disk_is_one_line_naming_the_file_and_nothing_half_written(tmp_pa
     stage = tmp_path / "outputs" / "sim_office" / "inspect"
     assert not [p for p in stage.iterdir() if not p.name.startswith(".")]  # no finished run
     assert not list(stage.rglob(".summary.json.*"))  # no temporary file left
+
+
+def test_a_copy_without_its_history_records_the_commit_it_was_made_from(tmp_path, monkeypatch):
+    """A lent GPU machine runs a copy of the working tree with a stale history: IRMCL_GIT_SHA (written here by
+    eval/gpu/stamp_source.sh) is what a run records; without it, this checkout's own HEAD (and -dirty when tracked
+    files differ). The stamp script writes HEAD with the same rule."""
+    monkeypatch.delenv("IRMCL_GIT_SHA", raising=False)
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=runs.REPO, capture_output=True, text=True).stdout.strip()
+    assert runs._git_sha().split("-")[0] == head
+    monkeypatch.setenv("IRMCL_GIT_SHA", "0123abc-dirty")
+    assert runs._git_sha() == "0123abc-dirty"
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(runs.REPO), str(clone)], check=True)
+    subprocess.run(["bash", "eval/gpu/stamp_source.sh"], cwd=clone, check=True, capture_output=True)
+    assert (clone / ".gpu/b/source_env.sh").read_text() == f"export IRMCL_GIT_SHA={head}\n"
+    (clone / "README.md").write_text("edited\n")
+    subprocess.run(["bash", "eval/gpu/stamp_source.sh"], cwd=clone, check=True, capture_output=True)
+    assert (clone / ".gpu/b/source_env.sh").read_text() == f"export IRMCL_GIT_SHA={head}-dirty\n"
