@@ -8,6 +8,8 @@
 # Each part is a slice of `python -m eval.reproduce` (group ablation or pipeline) on cuda:0; the metrics
 # come back in $OUT/gpu-results-<parts>.tgz.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 export IRMCL_DATA=${IRMCL_DATA:-$PWD/gpudata}
 run() { python -m eval.reproduce --rerun-kept --launcher basic --no-tables --hydra-arg device=cuda:0 "$@" 2>&1 \

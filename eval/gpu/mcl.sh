@@ -22,6 +22,8 @@
 # EXPS (default "sim_office fr079 intel mit_csail") and EXTRA (more overrides) narrow a run; results are
 # packed into $OUT/mcl-results.tgz (the machine returns only a few files).
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 EXPS=${EXPS:-"sim_office fr079 intel mit_csail"}
 preset() { case "$1" in fr079|intel) echo paper;; mit_csail) echo fast;; *) echo quick;; esac; }

@@ -5,6 +5,8 @@
 # synthesis for each experiment and preset given, copying the results to $OUT (or ./gpu-out).
 # Usage: bash eval/gpu/nof.sh "<preset>:<exp> ..."   e.g. "fast:fr079 fast:intel paper:intel"
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 if [ -n "${BENCH:-}" ]; then
   python -m eval.bench train --device cuda --batch 1024 4096 --steps 20 --amp --out "$OUT/bench" 2>&1 | tail -14

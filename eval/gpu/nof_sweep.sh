@@ -11,6 +11,8 @@
 # that finished; default 540). Data: the stream caches staged beside the code. Results: $OUT/nof-sweep.tgz
 # (metrics.json, config.yaml, manifest.json of every finished train and synthesis run) and $OUT/logs/<train.name>.log.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT/logs"
 jobs=${LIST:?LIST: a file with one line of overrides per run}
 echo "$(wc -l < "$jobs") runs, ${JOBS:-4} at a time"

@@ -10,6 +10,8 @@
 # Results: $OUT/own_slam_map-<log>.json (the scores) and $OUT/own_slam_map.tgz (the runs' trajectories, metrics and
 # settings, the SLAM runs' maps and poses; not the MCAP replays or animations). Unpack into the repository root.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 N=${N:-100000}

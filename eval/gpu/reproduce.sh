@@ -8,6 +8,8 @@
 # Env: SWEEPS (eval.reproduce's selection), RUNS (what to time, each <GPUs>:<jobs sharing one GPU>; default
 # "1:8 <all>:8"), WARM (overrides of the warm-up job). Results: $OUT/reproduce-<GPUs>gpu-<jobs>.json and .log.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-.}
 export PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader

@@ -7,6 +7,8 @@
 # (paper,gmapping_code), PARTICLES (30), EXTRA (more overrides). Data: the stream caches and the relations
 # files staged by hand (IRMCL_DATA pointing at the relations).
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 EXPS=${EXPS:-"gmapping_intel gmapping_fr079 gmapping_mit_csail"}
 for exp in $EXPS; do

@@ -15,6 +15,8 @@
 # (appended to the archive's name). Data: the logs staged beside the code (eval/gpu/stage_data.sh), IRMCL_DATA
 # pointing at them. Results: $OUT/slam-<what>.tgz.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 what=${1:?main, particles or killian}
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 SEEDS=${SEEDS:-"0 1 2 3 4 5 6 7 8 9"}

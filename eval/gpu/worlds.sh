@@ -13,6 +13,8 @@
 #   tests   the tests this change touched, kernels on cuda:0 (IRMCL_TEST_DEVICE)
 # Results: $OUT/worlds-{tuning,test}.tgz (outputs/worlds/worlds/<run>/, results/worlds/); unpack into the repository root.
 set -uo pipefail
+# the commit this copy of the tree was made from, for the runs' manifests (written here by eval/gpu/stamp_source.sh)
+[ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
 W="python -m irmcl_warp.worlds +exp=worlds mcl.num_particles=100000 device=cuda:0"
