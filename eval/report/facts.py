@@ -86,6 +86,7 @@ PAIRED_WORLDS = (
     "kld100k_vs_20k",
     "kld20k_vs_20k",
     "kld100k_vs_100k_kidnap",
+    "kld100k_vs_100k_gpu",
 )  # results/checks/paired_worlds_<name>.json
 
 
