@@ -313,6 +313,8 @@ def test_the_worlds_stage_records_every_update_and_ends_with_a_verdict(tmp_path,
     )
     r = doc["runs"][0]
     assert r["localized_at_end"] == (r["confidence_at_end"] >= 0.8)
+    assert set(z["particles"][z["updated"]]) == {3000} and not z["particles"][~z["updated"]].any()  # a fixed count
+    assert r["particles_per_update"] == 3000 == doc["summary"]["particles_per_update"]
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert "ended NOT localized" in last and f"{doc['summary']['localized_at_end']} ended confident" in last
     assert doc["summary"]["calibrated"] and doc["summary"]["runs"] == 1
@@ -349,6 +351,12 @@ def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
     s = doc["summary"]
     assert f"| {s['successes']}/2 | {s['right_at_end']}/2 | {s['localized_at_end']}/2 |" in row
     assert "hall-1005" in row and "loop-1004" in row and 0.0 <= s["auroc"] <= 1.0 if s["auroc"] is not None else True
+    assert "KLD" not in row
+    rec.config["mcl"].update(kld_sampling=True, kld_min_particles=500)  # an adaptive count says so, with its mean
+    assert (
+        f"KLD-sampling from 500, {s['particles_per_update'] / 1000:.1f}k per update on average"
+        in (worlds_table([rec]).splitlines()[-1])
+    )
     rec.config["worlds"]["split"] = "tuning"
     assert len(worlds_table([rec]).splitlines()) == 2  # tuning runs are never reported
 
