@@ -404,3 +404,30 @@ def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
         "per_update_a": "12.9k",
         "per_update_b": "20.0k",
     }
+
+
+def test_the_seeds_of_one_recipe_make_one_row_per_card_with_medians_and_spans():
+    """synthesis_table: kept NOF runs named <recipe> and <recipe>_s<seed>, on one card and with as many epochs, make
+    one row (medians [min-max], the seed count); a run of the recipe on another card is a row of its own; a lone
+    <name>_s1 keeps its name; the grids appear once."""
+
+    def pair(mae, secs, gpu, epochs=5):
+        m = {"mae_m": mae, "median_error_m": mae / 4, "accuracy_pct": 90.0, "chamfer_m": mae / 2, "fscore_pct": 97.0}
+        syn = {"dataset": "fr079", "split": "test", "methods": {"NOF (x)": {"kind": "nof", **m}}}
+        syn["methods"]["OGM 5 cm"] = {"kind": "grid", **m}
+        return syn, {"train_time_s": secs, "epochs_done": epochs, "gpu": gpu, "device": "cuda:0"}
+
+    runs = {
+        ("fr079", "x"): pair(0.25, 30.0, "H100"),
+        ("fr079", "x_s1"): pair(0.24, 16.0, "H100"),
+        ("fr079", "x_s2"): pair(0.26, 17.0, "H100"),
+        ("fr079", "x_s3"): pair(0.30, 10.0, "H200"),
+        ("fr079", "lone_s1"): pair(0.28, 12.0, "H100"),
+    }
+    lines = synthesis_table(runs).splitlines()[2:]
+    assert len(lines) == 4, lines  # x on the H100, x on the H200, lone_s1, one grid
+    grouped = next(line for line in lines if "(x, 3 seeds)" in line)
+    assert "| 0.250 [0.240-0.260] |" in grouped and grouped.endswith("| 17 [16-30] s, 5 ep, H100 |")
+    assert any("| NOF (x_s3) | 0.300 |" in line and line.endswith("10 s, 5 ep, H200 |") for line in lines)
+    assert any("| NOF (lone_s1) | 0.280 |" in line for line in lines)
+    assert sum("OGM 5 cm" in line for line in lines) == 1

@@ -4,6 +4,8 @@ by their settings (``localize_cell``, ``slam_variant``, ``off_defaults``), never
 
 from __future__ import annotations
 
+import re
+
 
 import numpy as np
 
@@ -54,24 +56,65 @@ def _order(key):
     return (DATASET_ORDER.index(ds) if ds in DATASET_ORDER else 99, ds, syn["split"])
 
 
+SEEDED = re.compile(r"^(?P<base>.+)_s\d+$")  # a kept NOF run's name with its seed: <recipe>_s<seed>
+
+
+def _recipe(preset: str, presets: set) -> str:
+    """The recipe a kept NOF run belongs to: its name without a trailing ``_s<seed>`` when that leaves a name
+    another run carries or more than one run shares (``h_g_s1``, ``h_g_s42`` -> ``h_g``; ``sg64_e5_s1`` ->
+    ``sg64_e5``, the seed-42 run's own name); otherwise the name itself."""
+    m = SEEDED.match(preset)
+    if not m:
+        return preset
+    base = m.group("base")
+    shared = (
+        base in presets or sum(bool(SEEDED.match(p)) and SEEDED.match(p).group("base") == base for p in presets) > 1
+    )
+    return base if shared else preset
+
+
+def _span(values, fmt: str) -> str:
+    """A median with its [min-max] when there are several values, else the value."""
+    v = sorted(values)
+    if len(v) == 1:
+        return fmt.format(v[0])
+    return f"{fmt.format(float(np.median(v)))} [{fmt.format(v[0])}-{fmt.format(v[-1])}]"
+
+
 def synthesis_table(runs: dict) -> str:
-    """IR-MCL Table I style: one row per method and (dataset, test split); grids once per test split."""
-    rows, seen_grids = [], set()
+    """IR-MCL Table I style: one row per method and (dataset, test split); grids once per test split. The seeds of
+    one NOF recipe (``<name>_s<seed>``, on one card, with as many epochs) make one row: the median of each figure
+    with [min-max], and the number of seeds; times from two cards are never pooled."""
+    rows, seen_grids, groups = [], set(), {}
+    presets = {preset for _, preset in runs}
     for (exp, preset), (syn, train) in sorted(runs.items(), key=lambda kv: (_order((kv[0], kv[1][0])), kv[0][1])):
         for name, m in syn["methods"].items():
             if m["kind"] == "grid":
                 if (syn["dataset"], syn["split"], name) in seen_grids:
                     continue
                 seen_grids.add((syn["dataset"], syn["split"], name))
-                how = "-"
-            else:
-                name = f"NOF ({preset})"  # the folder's name: preset, and the renderer when not Warp
-                how = (
-                    f"{train['train_time_s']:.0f} s, {train['epochs_done']} ep, {train.get('gpu') or train['device']}"
-                    if train
-                    else "?"
-                )
-            rows.append((syn["dataset"], syn["split"], name, m, how))
+                rows.append((syn["dataset"], syn["split"], name, m, "-"))
+                continue
+            card = (train.get("gpu") or train["device"]) if train else None
+            key = (
+                syn["dataset"],
+                syn["split"],
+                _recipe(preset, presets),
+                card,
+                train["epochs_done"] if train else None,
+            )
+            groups.setdefault(key, []).append((preset, m, train))
+    for (ds, split, recipe, card, epochs), members in groups.items():
+        if len(members) == 1:
+            preset, m, train = members[0]
+            name = f"NOF ({preset})"  # the folder's name: preset, and the renderer when not Warp
+            how = f"{train['train_time_s']:.0f} s, {epochs} ep, {card}" if train else "?"
+            rows.append((ds, split, name, {k: _span([m[k]], f) for k, f in FIELDS}, how))
+            continue
+        name = f"NOF ({recipe}, {len(members)} seeds)"
+        cells = {k: _span([m[k] for _, m, _ in members], f) for k, f in FIELDS}
+        how = f"{_span([t['train_time_s'] for _, _, t in members], '{:.0f}')} s, {epochs} ep, {card}"
+        rows.append((ds, split, name, cells, how))
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
     rows.sort(key=lambda r: (ds_rank.get(r[0], 99), r[0], r[1], r[2].startswith("OGM"), r[2]))
     lines = [
@@ -79,11 +122,21 @@ def synthesis_table(runs: dict) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for ds, split, name, m, how in rows:
+        c = m if isinstance(m.get("mae_m"), str) else {k: _span([m[k]], f) for k, f in FIELDS}
         lines.append(
-            f"| {ds} | {split} | {name} | {m['mae_m']:.3f} | {m['median_error_m']:.3f} | {m['accuracy_pct']:.1f} | "
-            f"{m['chamfer_m']:.3f} | {m['fscore_pct']:.1f} | {how} |"
+            f"| {ds} | {split} | {name} | {c['mae_m']} | {c['median_error_m']} | {c['accuracy_pct']} | "
+            f"{c['chamfer_m']} | {c['fscore_pct']} | {how} |"
         )
     return "\n".join(lines)
+
+
+FIELDS = (
+    ("mae_m", "{:.3f}"),
+    ("median_error_m", "{:.3f}"),
+    ("accuracy_pct", "{:.1f}"),
+    ("chamfer_m", "{:.3f}"),
+    ("fscore_pct", "{:.1f}"),
+)
 
 
 def _f(v, fmt="{:.1f}"):
