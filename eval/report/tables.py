@@ -5,6 +5,7 @@ by their settings (``localize_cell``, ``slam_variant``, ``off_defaults``), never
 from __future__ import annotations
 
 import re
+from collections import Counter
 
 
 import numpy as np
@@ -15,6 +16,7 @@ from eval.results.queries import (
     GLOBLOC_METHODS,
     converged,
     localize_cell,
+    median_span,
     reference_variant,
     released_errors,
     slam_errors,
@@ -57,28 +59,27 @@ def _order(key):
 
 
 SEEDED = re.compile(r"^(?P<base>.+)_s\d+$")  # a kept NOF run's name with its seed: <recipe>_s<seed>
+FIELDS = (
+    ("mae_m", ".3f"),
+    ("median_error_m", ".3f"),
+    ("accuracy_pct", ".1f"),
+    ("chamfer_m", ".3f"),
+    ("fscore_pct", ".1f"),
+)
 
 
-def _recipe(preset: str, presets: set) -> str:
-    """The recipe a kept NOF run belongs to: its name without a trailing ``_s<seed>`` when that leaves a name
+def _recipes(presets: set) -> dict[str, str]:
+    """The recipe each kept NOF run belongs to: its name without a trailing ``_s<seed>`` when that leaves a name
     another run carries or more than one run shares (``h_g_s1``, ``h_g_s42`` -> ``h_g``; ``sg64_e5_s1`` ->
     ``sg64_e5``, the seed-42 run's own name); otherwise the name itself."""
-    m = SEEDED.match(preset)
-    if not m:
-        return preset
-    base = m.group("base")
-    shared = (
-        base in presets or sum(bool(SEEDED.match(p)) and SEEDED.match(p).group("base") == base for p in presets) > 1
-    )
-    return base if shared else preset
+    bases = {p: m.group("base") for p in presets if (m := SEEDED.match(p))}
+    shared = Counter(bases.values())
+    return {p: bases[p] if p in bases and (bases[p] in presets or shared[bases[p]] > 1) else p for p in presets}
 
 
-def _span(values, fmt: str) -> str:
-    """A median with its [min-max] when there are several values, else the value."""
-    v = sorted(values)
-    if len(v) == 1:
-        return fmt.format(v[0])
-    return f"{fmt.format(float(np.median(v)))} [{fmt.format(v[0])}-{fmt.format(v[-1])}]"
+def _span(values, spec: str) -> str:
+    """The value, or of several runs' values the median with [min-max] (``median_span``)."""
+    return f"{values[0]:{spec}}" if len(values) == 1 else median_span(values, spec)
 
 
 def synthesis_table(runs: dict) -> str:
@@ -86,57 +87,35 @@ def synthesis_table(runs: dict) -> str:
     one NOF recipe (``<name>_s<seed>``, on one card, with as many epochs) make one row: the median of each figure
     with [min-max], and the number of seeds; times from two cards are never pooled."""
     rows, seen_grids, groups = [], set(), {}
-    presets = {preset for _, preset in runs}
+    recipe = _recipes({preset for _, preset in runs})
     for (exp, preset), (syn, train) in sorted(runs.items(), key=lambda kv: (_order((kv[0], kv[1][0])), kv[0][1])):
         for name, m in syn["methods"].items():
             if m["kind"] == "grid":
                 if (syn["dataset"], syn["split"], name) in seen_grids:
                     continue
                 seen_grids.add((syn["dataset"], syn["split"], name))
-                rows.append((syn["dataset"], syn["split"], name, m, "-"))
+                rows.append((syn["dataset"], syn["split"], name, [m], "-"))
                 continue
             card = (train.get("gpu") or train["device"]) if train else None
-            key = (
-                syn["dataset"],
-                syn["split"],
-                _recipe(preset, presets),
-                card,
-                train["epochs_done"] if train else None,
-            )
+            key = (syn["dataset"], syn["split"], recipe[preset], card, train["epochs_done"] if train else None)
             groups.setdefault(key, []).append((preset, m, train))
-    for (ds, split, recipe, card, epochs), members in groups.items():
-        if len(members) == 1:
-            preset, m, train = members[0]
-            name = f"NOF ({preset})"  # the folder's name: preset, and the renderer when not Warp
-            how = f"{train['train_time_s']:.0f} s, {epochs} ep, {card}" if train else "?"
-            rows.append((ds, split, name, {k: _span([m[k]], f) for k, f in FIELDS}, how))
-            continue
-        name = f"NOF ({recipe}, {len(members)} seeds)"
-        cells = {k: _span([m[k] for _, m, _ in members], f) for k, f in FIELDS}
-        how = f"{_span([t['train_time_s'] for _, _, t in members], '{:.0f}')} s, {epochs} ep, {card}"
-        rows.append((ds, split, name, cells, how))
+    for (ds, split, name, card, epochs), members in groups.items():
+        presets, methods, trains = zip(*members)
+        # one run: the folder's name (preset, and the renderer when not Warp); several: the recipe and its seeds
+        name = f"NOF ({presets[0]})" if len(members) == 1 else f"NOF ({name}, {len(members)} seeds)"
+        secs = [t["train_time_s"] for t in trains if t]
+        how = f"{_span(secs, '.0f')} s, {epochs} ep, {card}" if secs else "?"
+        rows.append((ds, split, name, methods, how))
     ds_rank = {d: i for i, d in enumerate(DATASET_ORDER)}
     rows.sort(key=lambda r: (ds_rank.get(r[0], 99), r[0], r[1], r[2].startswith("OGM"), r[2]))
     lines = [
         "| dataset | test split | method | MAE (m) | median (m) | accuracy (%) | Chamfer (m) | F-score (%) | training |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for ds, split, name, m, how in rows:
-        c = m if isinstance(m.get("mae_m"), str) else {k: _span([m[k]], f) for k, f in FIELDS}
-        lines.append(
-            f"| {ds} | {split} | {name} | {c['mae_m']} | {c['median_error_m']} | {c['accuracy_pct']} | "
-            f"{c['chamfer_m']} | {c['fscore_pct']} | {how} |"
-        )
+    for ds, split, name, methods, how in rows:
+        cells = " | ".join(_span([m[k] for m in methods], spec) for k, spec in FIELDS)
+        lines.append(f"| {ds} | {split} | {name} | {cells} | {how} |")
     return "\n".join(lines)
-
-
-FIELDS = (
-    ("mae_m", "{:.3f}"),
-    ("median_error_m", "{:.3f}"),
-    ("accuracy_pct", "{:.1f}"),
-    ("chamfer_m", "{:.3f}"),
-    ("fscore_pct", "{:.1f}"),
-)
 
 
 def _f(v, fmt="{:.1f}"):
