@@ -172,6 +172,17 @@ def make_top_share(**settings) -> TopShareMean:
     return TopShareMean(**settings)
 
 
+@wp.func
+def pose_bin(p: wp.vec3, lo: wp.vec2, cell: float, nx: int, ny: int, nyaw: int) -> int:
+    """A pose's cell of an (x, y, yaw) histogram, indexed [yaw, y, x]: positions outside clamped into the edge
+    cells, yaw wrapped into [-pi, pi) and cut into ``nyaw`` bins (best_cluster's histogram, KLD-sampling's bins)."""
+    ix = wp.clamp(int(wp.floor((p[0] - lo[0]) / cell)), 0, nx - 1)
+    iy = wp.clamp(int(wp.floor((p[1] - lo[1]) / cell)), 0, ny - 1)
+    a = wp.atan2(wp.sin(p[2]), wp.cos(p[2])) + 3.14159265358979
+    ia = wp.clamp(int(a / (6.28318530717959 / float(nyaw))), 0, nyaw - 1)
+    return (ia * ny + iy) * nx + ix
+
+
 @wp.kernel
 def histogram_kernel(
     particles: wp.array(dtype=wp.vec3),
@@ -185,12 +196,7 @@ def histogram_kernel(
     hist: wp.array(dtype=wp.float32),
 ):
     i = wp.tid()
-    p = particles[i]
-    ix = wp.clamp(int(wp.floor((p[0] - lo[0]) / cell)), 0, nx - 1)
-    iy = wp.clamp(int(wp.floor((p[1] - lo[1]) / cell)), 0, ny - 1)
-    a = wp.atan2(wp.sin(p[2]), wp.cos(p[2])) + 3.14159265358979
-    ia = wp.clamp(int(a / (6.28318530717959 / float(nyaw))), 0, nyaw - 1)
-    wp.atomic_add(hist, (ia * ny + iy) * nx + ix, wp.exp(log_w[i] - top[0]))
+    wp.atomic_add(hist, pose_bin(particles[i], lo, cell, nx, ny, nyaw), wp.exp(log_w[i] - top[0]))
 
 
 @wp.kernel

@@ -10,7 +10,8 @@ occupy ``k`` bins of a coarse (x, y, yaw) histogram:
 ``OccupiedBins`` counts the bins a particle set occupies on the device: a kernel marks each particle's bin (an atomic
 max on a mark per bin; the particle that finds its bin unmarked adds one to the count), a second clears the marks
 the particles set, so the next count starts from zero without touching the whole histogram. The bins are AMCL's
-kd-tree cells (0.5 m, 0.5 m, 10 deg by default) over the map's bounds. Numpy twins: irmcl_warp/reference/kld.py.
+kd-tree cells (0.5 m, 0.5 m, 10 deg by default) over the map's bounds, found as best_cluster's histogram finds them
+(``pose_bin``, kernels/estimate.py). Numpy twins: irmcl_warp/reference/kld.py.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import math
 import numpy as np
 import warp as wp
 
+from irmcl_warp.kernels.estimate import pose_bin
 from irmcl_warp.kernels.registry import pick_device
 
 
@@ -33,22 +35,11 @@ def kld_count(k: int, err: float, z: float) -> int:
     return int(math.ceil((k - 1) / (2.0 * err) * (1.0 - a + math.sqrt(a) * z) ** 3))
 
 
-@wp.func
-def bin_of(p: wp.vec3, lo: wp.vec2, cell: float, yaw_cell: float, nx: int, ny: int, nyaw: int) -> int:
-    """The (x, y, yaw) bin of a pose; positions outside the bounds fall into the edge bins, yaw wraps."""
-    ix = wp.clamp(int(wp.floor((p[0] - lo[0]) / cell)), 0, nx - 1)
-    iy = wp.clamp(int(wp.floor((p[1] - lo[1]) / cell)), 0, ny - 1)
-    a = wp.atan2(wp.sin(p[2]), wp.cos(p[2])) + 3.14159265358979
-    ia = wp.clamp(int(wp.floor(a / yaw_cell)), 0, nyaw - 1)
-    return (ia * ny + iy) * nx + ix
-
-
 @wp.kernel
 def mark_bins_kernel(
     particles: wp.array(dtype=wp.vec3),
     lo: wp.vec2,
     cell: float,
-    yaw_cell: float,
     nx: int,
     ny: int,
     nyaw: int,
@@ -56,7 +47,7 @@ def mark_bins_kernel(
     count: wp.array(dtype=wp.int32),
 ):
     i = wp.tid()
-    b = bin_of(particles[i], lo, cell, yaw_cell, nx, ny, nyaw)
+    b = pose_bin(particles[i], lo, cell, nx, ny, nyaw)
     if wp.atomic_max(marks, b, 1) == 0:  # the first particle in this bin
         wp.atomic_add(count, 0, 1)
 
@@ -66,14 +57,13 @@ def clear_bins_kernel(
     particles: wp.array(dtype=wp.vec3),
     lo: wp.vec2,
     cell: float,
-    yaw_cell: float,
     nx: int,
     ny: int,
     nyaw: int,
     marks: wp.array(dtype=wp.int32),
 ):
     i = wp.tid()
-    marks[bin_of(particles[i], lo, cell, yaw_cell, nx, ny, nyaw)] = 0
+    marks[pose_bin(particles[i], lo, cell, nx, ny, nyaw)] = 0
 
 
 class OccupiedBins:
@@ -87,7 +77,6 @@ class OccupiedBins:
         self.device = pick_device(device)
         self.lo, self.cell = wp.vec2(xmin, ymin), float(cell_m)
         self.nyaw = int(math.ceil(360.0 / yaw_deg))
-        self.yaw_cell = 2.0 * math.pi / self.nyaw
         self.nx = int(math.floor((xmax - xmin) / cell_m)) + 1
         self.ny = int(math.floor((ymax - ymin) / cell_m)) + 1
         self.marks = wp.zeros(self.nyaw * self.ny * self.nx, dtype=wp.int32, device=self.device)
@@ -99,7 +88,7 @@ class OccupiedBins:
 
     def __call__(self, particles: wp.array) -> int:
         n, d = particles.shape[0], self.device
-        args = [particles, self.lo, self.cell, self.yaw_cell, self.nx, self.ny, self.nyaw, self.marks]
+        args = [particles, self.lo, self.cell, self.nx, self.ny, self.nyaw, self.marks]
         self.count.zero_()
         wp.launch(mark_bins_kernel, n, args + [self.count], device=d)
         k = int(self.count.numpy()[0])
