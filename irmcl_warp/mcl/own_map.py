@@ -51,8 +51,6 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
     path = own_map_calibration(m.weighting, m.num_particles)
     preset = OmegaConf.load(CONF_DIR / "mcl" / "amcl.yaml")
     differ = sorted(k for k in preset if k != "num_particles" and m.get(k) != preset[k])
-    if m.get("kld_sampling"):  # a count that moves: not the fixed-count filter the calibration saw
-        differ.append("kld_sampling")
     if path is None or differ:
         why = (
             f"no calibration for {m.weighting} with {m.num_particles} particles"
