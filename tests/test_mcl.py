@@ -311,6 +311,30 @@ def test_kidnapping_outside_the_run_is_a_clear_error(tmp_path, monkeypatch):
     assert not list((tmp_path / "outputs").glob("*/localize-*"))  # a failed stage leaves no empty folder behind
 
 
+def test_a_tracking_start_without_ground_truth_is_a_clear_error(tmp_path, monkeypatch):
+    """A log whose ground truth begins after a tracking run's window (mit_csail's corrected poses start late) names
+    the log, the start and the seconds its ground truth covers, instead of an IndexError."""
+    import dataclasses
+
+    import irmcl_warp.mcl.stage as stage
+
+    monkeypatch.chdir(tmp_path)
+    cfg = _sim_cfg(
+        "mcl.weighting=likelihood_field", "localize.mode=tracking", "localize.run_s=5", "mcl.num_particles=100"
+    )
+    real = stage.load_stream
+
+    def late_truth(cfg):
+        log = real(cfg)
+        truth = log.ground_truth.copy()
+        truth[(log.stamps - log.stamps[0]) < 8.0] = np.nan
+        return dataclasses.replace(log, ground_truth=truth)
+
+    monkeypatch.setattr(stage, "load_stream", late_truth)
+    with pytest.raises(ValueError, match=r"tracking start 0 at 0.0 s has no ground-truth pose .* covers 8\.\d-"):
+        stage.run_localize(cfg)
+
+
 def test_reduce_keeps_the_heaviest_particles_and_their_weights():
     import warp as wp
 

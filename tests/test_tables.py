@@ -431,3 +431,21 @@ def test_the_seeds_of_one_recipe_make_one_row_per_card_with_medians_and_spans():
     assert any("| NOF (x_s3) | 0.300 |" in line and line.endswith("10 s, 5 ep, H200 |") for line in lines)
     assert any("| NOF (lone_s1) | 0.280 |" in line for line in lines)
     assert sum("OGM 5 cm" in line for line in lines) == 1
+
+
+def test_keep_check_files_runs_under_their_log_and_refuses_an_edited_one(tmp_path):
+    """``python -m eval.keep --check STUDY``: each run goes into results/checks/STUDY.json under the log its manifest
+    names; a run whose metrics are not what it wrote stops the call, naming the folder."""
+    from eval.keep import keep_checks
+    from eval.results.records import checks
+
+    gpu, results = tmp_path / "gpu", tmp_path / "results"
+    fr079 = fake_run(gpu, "synthesis", composed(*FR079_FAST), _synthesis(0.3, 0.33))
+    intel = fake_run(gpu, "synthesis", composed("+exp=intel", "train=fast"), _synthesis(0.2, 0.25))
+    keep_checks("demo", [fr079, intel], results)
+    kept = checks("demo", results)
+    assert sorted(r.exp for r in kept) == ["fr079", "intel"]
+    assert {r.exp: r["methods"]["NOF (fast)"]["mae_m"] for r in kept} == {"fr079": 0.3, "intel": 0.2}
+    (intel / "metrics.json").write_text(json.dumps(_synthesis(0.1, 0.25)))  # edited after the run
+    with pytest.raises(SystemExit, match=re.escape(str(intel))):
+        keep_checks("demo", [intel], results)

@@ -791,8 +791,10 @@ step: an approximation, made for issue 18's step goals. Does it cost accuracy? B
 defaults otherwise (Thrun's motion model, sigma 0.5 m), 10 starts per run, 5 seeds, on the H100.
 Command: `python -m irmcl_warp.localize -m +exp=<log> train=fast localize.mode=global|tracking
 mcl.num_particles=100000|10000 mcl.weighting=nog_raymarch,nog_table mcl.seed=0,1,2,3,4` (`eval/gpu/mcl.sh table`
-ran seed 0 first); kept in results/checks/nog_table.json, a record per seed. ms per step: the filter's
-median step, global runs at 5k particles after 20 s (`mcl.reduce_to`).
+ran seed 0 first); kept in results/checks/nog_table.json, a record per seed (`python -m eval.keep --check nog_table
+<run folders>`). ms per step: the filter's median step, global runs at 5k particles after 20 s (`mcl.reduce_to`).
+mit_csail's runs (twenty-fifth session, an H100, the `fast` field trained there in 92 s) ran four at a time on the
+one GPU, so their ms per step are not timings; fr079's and intel's ran one at a time.
 
 {table_table()}
 

@@ -126,7 +126,16 @@ def localize_starts(run: runs.Run) -> Path:
         if loc.mode == "global":
             pf.init_uniform()
         else:
-            first = idx[np.all(np.isfinite(log.ground_truth[idx]), axis=1)][0]
+            known = idx[np.all(np.isfinite(log.ground_truth[idx]), axis=1)]
+            if not len(known):  # a tracking start needs a pose to start from
+                covered = t[np.all(np.isfinite(log.ground_truth), axis=1)]
+                raise ValueError(
+                    f"{log.source}: tracking start {k} at {t0:.1f} s has no ground-truth pose to start from within "
+                    f"its {loc.run_s:g} s (localize.run_s); this log's ground truth covers "
+                    + (f"{covered[0]:.1f}-{covered[-1]:.1f} s" if len(covered) else "no scan")
+                    + ": move localize.start_s or lengthen localize.run_s"
+                )
+            first = known[0]
             pf.init_gaussian(log.ground_truth[first], loc.tracking_std)
         t_run = time.perf_counter()
         # synchronous: every step reads its estimate back; IR-MCL reduces the particles in global runs only
