@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.resample import max_kernel
+from irmcl_warp.kernels.resample import max_kernel, tile_block
 from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device, reduction_threads
 
 
@@ -98,7 +98,58 @@ def top_sums_kernel(
     leave_moments(partials, wp.tid(), acc)
 
 
+TOP_TILE = 1024  # ranks a block sums at once on a GPU (``top_sums_tiled_kernel``)
+
+
+@wp.kernel
+def top_sums_tiled_kernel(
+    order: wp.array(dtype=wp.int32),
+    sorted_keys: wp.array(dtype=wp.float32),
+    log_w: wp.array(dtype=wp.float32),
+    w: wp.array(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    source: int,
+    k: int,
+    partials: wp.array(dtype=vec5),
+):
+    """``top_sums_kernel`` as a tiled launch (a GPU): a thread per rank below k, the block's five sums by a tile
+    reduction into ``partials[b]`` (a fixed order; ``moments_finish_kernel`` adds the blocks). Sources
+    ``FROM_LOG_W`` and ``FROM_W`` only."""
+    b, lane = wp.tid()
+    r = b * wp.block_dim() + lane
+    acc = vec5()
+    if r < k:
+        j = order[r]
+        weight = float(0.0)
+        if source == FROM_LOG_W:
+            weight = wp.exp(log_w[j] + sorted_keys[0])
+        else:
+            weight = w[j]
+        acc = pose_moments(weight, particles[j])
+    block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        partials[b] = block_sums[0]
+
+
+@wp.kernel
+def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.array(dtype=wp.float32)):
+    """One block: the ``count`` blocks' five sums into ``sums``, each thread adding a run of ceil(count / threads)
+    blocks in order and the threads' runs joined by a tile reduction (a fixed order)."""
+    _b, lane = wp.tid()
+    run = (count + wp.block_dim() - 1) // wp.block_dim()
+    lo = wp.min(lane * run, count)
+    acc = vec5()
+    for j in range(lo, wp.min(lo + run, count)):
+        acc += partials[j]
+    total = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        for c in range(5):
+            sums[c] = total[0][c]
+
+
 class TopShareMean:
+    TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
+
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
             raise ValueError(f"top_share: share must lie in (0, 1], got {share}")
@@ -108,6 +159,9 @@ class TopShareMean:
         self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
         self.partial = PartialSums(5, self.device, reduction_threads(self.k, self.device))
+        self.tiled = wp.get_device(self.device).is_cuda if self.TILED is None else bool(self.TILED)
+        self.block = tile_block(TOP_TILE, self.device)
+        self.block_sums = wp.zeros(-(-self.k // self.block), dtype=vec5, device=self.device)  # the tiled sums' blocks
         self.weights = None
         self.nothing = (  # what top_sums_kernel is given for the arrays its source does not read
             wp.empty(0, dtype=wp.float32, device=self.device),
@@ -158,6 +212,15 @@ class TopShareMean:
             source, cos_sin = FROM_W, nothing_cs
         else:
             source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
+        if self.tiled and source != FROM_W_COS_SIN:  # two tiled launches (a GPU)
+            blocks = self.block_sums.shape[0]
+            inputs = [self.values, self.keys, log_w, w, particles, source, self.k, self.block_sums]
+            wp.launch_tiled(
+                top_sums_tiled_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
+            )
+            finish = [self.block_sums, blocks, self.sums]
+            wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
+            return
         inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source, self.k]
         threads = launch_reduction(top_sums_kernel, self.k, inputs, self.device)
         self.partial.finish(threads, self.sums)

@@ -171,6 +171,77 @@ def exp_kernel(
         partials[wp.tid(), c] = acc[c]
 
 
+@wp.kernel
+def weigh_scan_kernel(
+    log_w: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    particles: wp.array(dtype=wp.vec3),
+    centre: wp.vec2,
+    w: wp.array(dtype=wp.float32),
+    cdf: wp.array(dtype=wp.float32),
+    totals: wp.array(dtype=wp.float32),
+    partials: wp.array(dtype=vec8),
+):
+    """``exp_kernel`` and ``block_scan_kernel`` in one tiled pass over SCAN_TILE particles a block (a GPU's step):
+    w = exp(log_w - max) (the same expression: the same bits), the block's inclusive prefix sums of w into ``cdf``
+    and its total into ``totals[b]`` (the same tile scan: the same bits), and the block's eight sums (exp_kernel's)
+    into ``partials[b]`` by a tile reduction (a fixed order; ``weigh_finish_kernel`` adds the blocks)."""
+    b, lane = wp.tid()
+    i = b * wp.block_dim() + lane
+    v = float(0.0)
+    acc = vec8()
+    if i < log_w.shape[0]:
+        v = wp.exp(log_w[i] - top[0])
+        w[i] = v
+        p = particles[i]
+        x = p[0] - centre[0]
+        y = p[1] - centre[1]
+        acc = vec8(v * v, v * x, v * y, v * wp.cos(p[2]), v * wp.sin(p[2]), v, v * x * x, v * y * y)
+    mine = wp.untile(wp.tile_scan_inclusive(wp.tile(v)))
+    if i < log_w.shape[0]:
+        cdf[i] = mine
+    if lane == wp.block_dim() - 1:
+        totals[b] = mine
+    block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        partials[b] = block_sums[0]
+
+
+@wp.kernel
+def weigh_finish_kernel(
+    totals: wp.array(dtype=wp.float32),
+    partials: wp.array(dtype=vec8),
+    count: int,
+    sums: wp.array(dtype=wp.float32),
+):
+    """One block after ``weigh_scan_kernel``: the ``count`` blocks' totals into their running sums, and their eight
+    sums into ``sums``. A thread takes a run of ceil(count / threads) blocks, in order; the runs are joined by a tile
+    scan and a tile reduction (fixed orders). With a block per thread (a GPU, up to SCAN_TILE^2 particles) the
+    running sums are ``totals_tile_scan_kernel``'s to the bit; with one thread (a CPU) they are added in order."""
+    _b, lane = wp.tid()
+    run = (count + wp.block_dim() - 1) // wp.block_dim()
+    lo = wp.min(lane * run, count)
+    hi = wp.min(lo + run, count)
+    own = float(0.0)
+    acc = vec8()
+    for j in range(lo, hi):
+        own += totals[j]
+        acc += partials[j]
+    if run == 1:  # one block a thread: an inclusive tile scan of the totals themselves
+        mine = wp.untile(wp.tile_scan_inclusive(wp.tile(own)))
+        if lo < hi:
+            totals[lo] = mine
+    else:
+        s = wp.untile(wp.tile_scan_exclusive(wp.tile(own)))
+        for j in range(lo, hi):
+            s += totals[j]
+            totals[j] = s
+    total = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        for c in range(8):
+            sums[c] = total[0][c]
+
+
 @wp.func
 def search(cdf: wp.array(dtype=wp.float32), u: float) -> int:
     """Smallest j with cdf[j] > u."""
@@ -277,6 +348,7 @@ class ParticleWeights:
 
     TILED = None  # accumulate in one tiled launch: None = on a GPU (tests set True or False on any device)
     ORDERED_SCAN = None  # the cdf by ordered_scan: None = on a GPU (tests set True or False on any device)
+    FUSED = None  # w, the eight sums and the block scan in one pass (``weigh``): None = on a GPU (tests: any device)
 
     def __init__(self, num_particles: int, device: str = "auto", centre=(0.0, 0.0), keep_cos_sin: bool | None = None):
         self.device = pick_device(device)
@@ -295,6 +367,9 @@ class ParticleWeights:
         self.block = tile_block(TILE, d)  # accumulate's tiled launch
         self.scan_totals = wp.zeros(-(-num_particles // tile_block(SCAN_TILE, d)), dtype=wp.float32, device=d)
         # (ordered_scan's block totals, one per block of the scan)
+        # ``weigh`` in one pass (weigh_scan_kernel): needs the ordered scan's blocks and no cos/sin kept
+        self.fused = (on_gpu if self.FUSED is None else bool(self.FUSED)) and self.ordered and not self.keeps_cos_sin
+        self.block_sums = wp.zeros(self.scan_totals.shape[0], dtype=vec8, device=d)  # weigh_scan_kernel's, a block each
         self._no_keys = wp.zeros(1, dtype=wp.float32, device=d)  # accumulate's keys when there are none to write
         self._no_values = wp.zeros(1, dtype=wp.int32, device=d)
 
@@ -330,7 +405,19 @@ class ParticleWeights:
         self.cumulate()
 
     def weigh(self, log_w: wp.array, particles: wp.array) -> None:
-        """w = exp(log_w - max) and the eight sums (``top`` holds the maximum: ``accumulate`` or ``update``)."""
+        """w = exp(log_w - max) and the eight sums (``top`` holds the maximum: ``accumulate`` or ``update``). Fused
+        (a GPU): two launches, which also scan w in blocks (``cumulate`` then only adds the blocks' offsets) and
+        write the same w and cdf bits as the launches apart; the sums are added in another fixed order (tile
+        reductions), so their last bits differ from ``exp_kernel``'s."""
+        if self.fused:
+            n, d = log_w.shape[0], self.device
+            block = tile_block(SCAN_TILE, d)
+            blocks = -(-n // block)
+            inputs = [log_w, self.top, particles, self.centre, self.w, self.cdf, self.scan_totals, self.block_sums]
+            wp.launch_tiled(weigh_scan_kernel, dim=[blocks], inputs=inputs, block_dim=block, device=d)
+            finish = [self.scan_totals, self.block_sums, blocks, self.sums]
+            wp.launch_tiled(weigh_finish_kernel, dim=[1], inputs=finish, block_dim=block, device=d)
+            return
         threads = launch_reduction(
             exp_kernel,
             log_w.shape[0],
@@ -351,7 +438,15 @@ class ParticleWeights:
     def cumulate(self) -> None:
         """The cumulative weights, for resampling: on a GPU by ``ordered_scan`` (the same bits on every run), on a CPU
         by Warp's array_scan (a loop in order)."""
-        if self.ordered:
+        if self.fused:  # the blocks scanned by ``weigh``
+            n = self.w.shape[0]
+            wp.launch(
+                add_block_offsets_kernel,
+                n,
+                [self.cdf, self.scan_totals, tile_block(SCAN_TILE, self.device)],
+                device=self.device,
+            )
+        elif self.ordered:
             ordered_scan(self.w, self.cdf, self.scan_totals, self.device)
         else:
             wp.utils.array_scan(self.w, self.cdf, inclusive=True)

@@ -279,6 +279,78 @@ def test_the_ordered_scan_is_the_cumulative_sum_and_repeats_itself_bit_for_bit(r
         ordered_scan(wd, cdf, wp.zeros(0, dtype=wp.float32, device=DEVICE), DEVICE)
 
 
+def test_the_fused_weighing_matches_the_twins_and_keeps_the_scans_bits(rng, monkeypatch):
+    """ParticleWeights.weigh in one pass (weigh_scan_kernel + weigh_finish_kernel, a GPU's step) against the launches
+    apart (exp_kernel, then ordered_scan): the same w and cdf to the bit; the eight sums, N_eff, the mean and the
+    spread those of the numpy twins; the same bits on every call. Sizes around the scan's block and above 1024
+    blocks (more blocks than the finishing block has threads, on a GPU)."""
+    from irmcl_warp.kernels.resample import SCAN_TILE
+
+    monkeypatch.setattr(ParticleWeights, "ORDERED_SCAN", True)
+    sizes = (1, SCAN_TILE - 1, SCAN_TILE + 1, int(rng.integers(3 * SCAN_TILE, 40 * SCAN_TILE)))
+    if wp.get_device(DEVICE).is_cuda:
+        sizes += (SCAN_TILE * SCAN_TILE + int(rng.integers(1, 5 * SCAN_TILE)),)
+    for n in sizes:
+        log_w = rng.normal(0, 2, n).astype(np.float32)
+        particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(
+            np.float32
+        )
+        pw, lw = wp.array(particles, dtype=wp.vec3, device=DEVICE), wp.array(log_w, dtype=wp.float32, device=DEVICE)
+        done = {}
+        for fused in (False, True):
+            monkeypatch.setattr(ParticleWeights, "FUSED", fused)
+            weights = ParticleWeights(n, device=DEVICE, keep_cos_sin=False, centre=(0.5, -0.5))
+            assert weights.fused == fused
+            runs = []
+            for _ in range(2):
+                weights.update(lw, pw)
+                runs.append((weights.w.numpy().copy(), weights.cdf.numpy().copy(), weights.sums.numpy().copy()))
+            assert all(np.array_equal(a, b) for a, b in zip(*runs)), f"n {n}, fused {fused} on {DEVICE}"
+            done[fused] = (runs[0], weights.summary())
+        (w_f, cdf_f, sums_f), (pose, neff, spread) = done[True]
+        (w_a, cdf_a, sums_a), _ = done[False]
+        assert np.array_equal(w_f, w_a) and np.array_equal(cdf_f, cdf_a), f"n {n}, seed {rng.seed}"
+        assert np.allclose(sums_f, sums_a, rtol=1e-4, atol=1e-3), f"n {n}, seed {rng.seed}"
+        assert neff == pytest.approx(effective_sample_size(log_w), rel=1e-3), f"n {n}, seed {rng.seed}"
+        assert np.allclose(pose[:2], weighted_mean(particles.astype(np.float64), log_w)[:2], atol=1e-3)
+        assert spread == pytest.approx(weighted_spread(particles, log_w), rel=1e-2, abs=2e-3), f"n {n}, seed {rng.seed}"
+
+
+def test_the_tiled_top_share_sums_match_the_twin_and_repeat_themselves(rng, monkeypatch):
+    """TopShareMean's sums by tiled launches (a GPU's) against the strided reduction and the numpy twin: the same
+    estimate within float32 rounding, from the log-weights and from the weights given, the same bits on every call;
+    k around the tile size and above 1024 tiles on a GPU."""
+    from irmcl_warp.kernels import ESTIMATE
+    from irmcl_warp.kernels.estimate import TOP_TILE, TopShareMean
+    from irmcl_warp.reference.estimate import top_share_mean
+
+    sizes = [2, TOP_TILE + 3, int(rng.integers(5 * TOP_TILE, 30 * TOP_TILE))]
+    if wp.get_device(DEVICE).is_cuda:
+        sizes.append(int(1.25 * TOP_TILE * TOP_TILE) + int(rng.integers(1, 5000)))
+    for n in sizes:
+        log_w = rng.normal(0, 2, n).astype(np.float32)
+        particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(
+            np.float32
+        )
+        pw, lw = wp.array(particles, dtype=wp.vec3, device=DEVICE), wp.array(log_w, dtype=wp.float32, device=DEVICE)
+        w = wp.array(np.exp(log_w - log_w.max()).astype(np.float32), dtype=wp.float32, device=DEVICE)
+        got = {}
+        for tiled in (False, True):
+            monkeypatch.setattr(TopShareMean, "TILED", tiled)
+            est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
+            assert est.tiled == tiled
+            first = est(pw, lw)
+            sums = est.sums.numpy().copy()
+            assert np.array_equal(sums, (est(pw, lw), est.sums.numpy())[1]), f"n {n} on {DEVICE}"
+            est.sum(pw, lw, w)  # the weights given (a GPU filter's way): the same weights, the same estimate
+            assert np.allclose(est.sums.numpy(), sums, rtol=1e-5, atol=1e-4), f"n {n}, seed {rng.seed}"
+            got[tiled] = first
+        twin = top_share_mean(particles, log_w, 0.8)
+        for tiled, ours in got.items():
+            assert np.allclose(ours[:2], twin[:2], atol=2e-3), f"n {n}, tiled {tiled}, seed {rng.seed}"
+            assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"n {n}, tiled {tiled}, seed {rng.seed}"
+
+
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):
     n = 300
     log_w, particles, pw, weights = _weights(rng, n)
