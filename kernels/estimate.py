@@ -107,14 +107,14 @@ def top_sums_tiled_kernel(
     sorted_keys: wp.array(dtype=wp.float32),
     log_w: wp.array(dtype=wp.float32),
     w: wp.array(dtype=wp.float32),
+    cos_sin: wp.array(dtype=wp.vec2),
     particles: wp.array(dtype=wp.vec3),
     source: int,
     k: int,
     partials: wp.array(dtype=vec5),
 ):
     """``top_sums_kernel`` as a tiled launch (a GPU): a thread per rank below k, the block's five sums by a tile
-    reduction into ``partials[b]`` (a fixed order; ``moments_finish_kernel`` adds the blocks). Sources
-    ``FROM_LOG_W`` and ``FROM_W`` only."""
+    reduction into ``partials[b]`` (a fixed order; ``moments_finish_kernel`` adds the blocks)."""
     b, lane = wp.tid()
     r = b * wp.block_dim() + lane
     acc = vec5()
@@ -125,7 +125,11 @@ def top_sums_tiled_kernel(
             weight = wp.exp(log_w[j] + sorted_keys[0])
         else:
             weight = w[j]
-        acc = pose_moments(weight, particles[j])
+        if source == FROM_W_COS_SIN:
+            cs = cos_sin[j]
+            acc = moments_of(weight, particles[j], cs[0], cs[1])
+        else:
+            acc = pose_moments(weight, particles[j])
     block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
     if lane == 0:
         partials[b] = block_sums[0]
@@ -212,9 +216,9 @@ class TopShareMean:
             source, cos_sin = FROM_W, nothing_cs
         else:
             source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
-        if self.tiled and source != FROM_W_COS_SIN:  # two tiled launches (a GPU)
+        if self.tiled:  # two tiled launches (a GPU)
             blocks = self.block_sums.shape[0]
-            inputs = [self.values, self.keys, log_w, w, particles, source, self.k, self.block_sums]
+            inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
             wp.launch_tiled(
                 top_sums_tiled_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
             )
