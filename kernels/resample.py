@@ -215,9 +215,10 @@ def weigh_finish_kernel(
     sums: wp.array(dtype=wp.float32),
 ):
     """One block after ``weigh_scan_kernel``: the ``count`` blocks' totals into their running sums, and their eight
-    sums into ``sums``. A thread takes a run of ceil(count / threads) blocks, in order; the runs are joined by a tile
-    scan and a tile reduction (fixed orders). With a block per thread (a GPU, up to SCAN_TILE^2 particles) the
-    running sums are ``totals_tile_scan_kernel``'s to the bit; with one thread (a CPU) they are added in order."""
+    sums into ``sums``. The running sums are ``ordered_scan``'s to the bit: one tile scan while each thread holds at
+    most one block (a GPU, up to SCAN_TILE^2 particles), else one thread adding them in order (runs joined by a tile
+    scan were tried: their float rounding let the cdf step down at a join). For the eight sums a thread adds a run
+    of ceil(count / threads) blocks in order and the runs are joined by a tile reduction (a fixed order)."""
     _b, lane = wp.tid()
     run = (count + wp.block_dim() - 1) // wp.block_dim()
     lo = wp.min(lane * run, count)
@@ -231,9 +232,9 @@ def weigh_finish_kernel(
         mine = wp.untile(wp.tile_scan_inclusive(wp.tile(own)))
         if lo < hi:
             totals[lo] = mine
-    else:
-        s = wp.untile(wp.tile_scan_exclusive(wp.tile(own)))
-        for j in range(lo, hi):
+    elif lane == 0:  # more blocks than threads: one thread adds them in order (``totals_scan_kernel``, to the bit)
+        s = float(0.0)
+        for j in range(count):
             s += totals[j]
             totals[j] = s
     total = wp.tile_sum(wp.tile(acc, preserve_type=True))
