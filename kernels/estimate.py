@@ -63,6 +63,30 @@ def leave_moments(partials: wp.array2d(dtype=wp.float32), t: int, acc: vec5):
 FROM_LOG_W, FROM_W, FROM_W_COS_SIN = wp.constant(0), wp.constant(1), wp.constant(2)
 
 
+@wp.func
+def rank_moments(
+    order: wp.array(dtype=wp.int32),
+    sorted_keys: wp.array(dtype=wp.float32),
+    log_w: wp.array(dtype=wp.float32),
+    w: wp.array(dtype=wp.float32),
+    cos_sin: wp.array(dtype=wp.vec2),
+    particles: wp.array(dtype=wp.vec3),
+    source: int,
+    r: int,
+) -> vec5:
+    """The five pose moments of the particle at rank r, its weight and yaw read as ``source`` says (top_sums_kernel)."""
+    j = order[r]
+    weight = float(0.0)
+    if source == FROM_LOG_W:
+        weight = wp.exp(log_w[j] + sorted_keys[0])
+    else:
+        weight = w[j]
+    if source == FROM_W_COS_SIN:
+        cs = cos_sin[j]
+        return moments_of(weight, particles[j], cs[0], cs[1])
+    return pose_moments(weight, particles[j])
+
+
 @wp.kernel
 def top_sums_kernel(
     order: wp.array(dtype=wp.int32),
@@ -84,17 +108,7 @@ def top_sums_kernel(
     may be empty."""
     acc = vec5()
     for r in range(wp.tid(), k, stride):
-        j = order[r]
-        weight = float(0.0)
-        if source == FROM_LOG_W:
-            weight = wp.exp(log_w[j] + sorted_keys[0])
-        else:
-            weight = w[j]
-        if source == FROM_W_COS_SIN:
-            cs = cos_sin[j]
-            acc += moments_of(weight, particles[j], cs[0], cs[1])
-        else:
-            acc += pose_moments(weight, particles[j])
+        acc += rank_moments(order, sorted_keys, log_w, w, cos_sin, particles, source, r)
     leave_moments(partials, wp.tid(), acc)
 
 
@@ -119,17 +133,7 @@ def top_sums_tiled_kernel(
     r = b * wp.block_dim() + lane
     acc = vec5()
     if r < k:
-        j = order[r]
-        weight = float(0.0)
-        if source == FROM_LOG_W:
-            weight = wp.exp(log_w[j] + sorted_keys[0])
-        else:
-            weight = w[j]
-        if source == FROM_W_COS_SIN:
-            cs = cos_sin[j]
-            acc = moments_of(weight, particles[j], cs[0], cs[1])
-        else:
-            acc = pose_moments(weight, particles[j])
+        acc = rank_moments(order, sorted_keys, log_w, w, cos_sin, particles, source, r)
     block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
     if lane == 0:
         partials[b] = block_sums[0]
