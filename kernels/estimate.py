@@ -1,8 +1,11 @@
 """Pose estimates from a weighted particle set (both return [x, y, yaw], circular mean for yaw):
 
 * ``ESTIMATE["top_share"]``: IR-MCL's estimate, the weighted mean of the particles with the highest
-  weights (80 % of them). The particles are ranked by Warp's radix sort of their log-weights; the sums
-  are partial sums over the first K ranks, added in a fixed order (PartialSums).
+  weights (80 % of them; ties by index, as a stable sort orders them). On a CPU the particles are ranked by
+  Warp's radix sort of their log-weights and the sums are partial sums over the first K ranks, added in a
+  fixed order (PartialSums). On a GPU no sort: a radix select finds the K-th heaviest particle (the
+  "threshold") in a few histogram passes of 11 bits over the log-weights' bits and then the indices, and
+  one tiled pass sums the particles at or above it (``TopShareMean.SELECT``).
 * ``ESTIMATE["best_cluster"]``: the weighted mean of the heaviest cluster, in the spirit of AMCL (which
   reports the mean of its heaviest kd-tree cluster): weights are binned on a coarse (x, y, yaw) histogram
   (``cell_m``, ``yaw_bins``), each bin's mass is summed with its 26 neighbours (yaw wraps), and the
@@ -81,6 +84,15 @@ def rank_moments(
         weight = wp.exp(log_w[j] + sorted_keys[0])
     else:
         weight = w[j]
+    return particle_moments(j, weight, cos_sin, particles, source)
+
+
+@wp.func
+def particle_moments(
+    j: int, weight: float, cos_sin: wp.array(dtype=wp.vec2), particles: wp.array(dtype=wp.vec3), source: int
+) -> vec5:
+    """The five pose moments of particle j with its weight, its yaw's (cos, sin) read from ``cos_sin``
+    (``FROM_W_COS_SIN``) or computed."""
     if source == FROM_W_COS_SIN:
         cs = cos_sin[j]
         return moments_of(weight, particles[j], cs[0], cs[1])
@@ -155,26 +167,236 @@ def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.a
             sums[c] = total[0][c]
 
 
+# The top share by a radix select (a GPU's way; ``TopShareMean.SELECT``). The particles' order is (key, index), key
+# ascending from the heaviest log-weight (``heavy_first``): the order of a stable sort of -log w. The K-th pair of
+# that order, the threshold, is found digit by digit, SELECT_BITS at a time: first the key's 32 bits, then the index's
+# bits (which break ties, as the sort's stability does). Pass j counts, per digit, the particles whose bits above
+# its digit equal the threshold's bits found so far (``select_histogram_kernel``); its histogram names the next
+# digit: the one where the count of particles before the threshold crosses K (``pick_digit``). A particle is in the
+# top share when its (key, index) is at or before the threshold (``select_sums_kernel``).
+SELECT_TILE = 1024  # particles a block of the selection's launches covers
+SELECT_BITS = 11  # bits a histogram pass resolves: 2048 bins, 8 KB of shared memory
+SELECT_BINS = 1 << SELECT_BITS
+KEY_DIGIT, INDEX_DIGIT = wp.constant(0), wp.constant(1)
+
+
+def select_passes(num_particles: int) -> list[tuple[int, int, int]]:
+    """(field, shift, width) of each histogram pass: the key's 32 bits from the top, then the index's."""
+    passes = []
+    for field, bits in ((0, 32), (1, max(1, (num_particles - 1).bit_length()))):
+        top = bits
+        while top > 0:
+            shift = max(0, top - SELECT_BITS)
+            passes.append((field, shift, top - shift))
+            top = shift
+    return passes
+
+
+@wp.func
+def heavy_first(log_w: float) -> wp.uint32:
+    """A key whose ascending order is the descending order of the log-weight (the float's bits, negatives as they
+    are, non-negatives with their 31 low bits flipped); -0 counts as +0, as the comparison of a sort does."""
+    x = log_w
+    if x == 0.0:
+        x = 0.0
+    bits = wp.cast(x, wp.uint32)
+    if (bits >> wp.uint32(31)) != wp.uint32(0):
+        return bits
+    return bits ^ wp.uint32(0x7FFFFFFF)
+
+
+@wp.func
+def before_rank(cum: int, rank: int) -> int:
+    """1 where a digit's cumulative count lies below the rank sought (their sum is the digit that holds it)."""
+    if cum < rank:
+        return 1
+    return 0
+
+
+@wp.func
+def count_before(cum: int, rank: int) -> int:
+    """The cumulative count where it lies below the rank (their maximum: the particles before the digit)."""
+    if cum < rank:
+        return cum
+    return 0
+
+
+@wp.func
+def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.vec2i:
+    """(digit, particles in the digits before it) for the particle of rank ``rank`` (1 = first) among those a pass
+    counted in ``hist`` row ``row``; every thread of the block gets the pair (tile reductions leave their result
+    in thread 0, passed on through shared memory)."""
+    counts = wp.tile_load(hist, shape=SELECT_BINS, offset=row * SELECT_BINS)
+    cum = wp.tile_scan_inclusive(counts)
+    digit = wp.tile_sum(wp.tile_map(before_rank, cum, rank))
+    before = wp.tile_max(wp.tile_map(count_before, cum, rank))
+    shared = wp.tile_zeros(shape=2, dtype=int, storage="shared")
+    wp.tile_scatter_masked(shared, 0, digit[0], lane == 0)
+    wp.tile_scatter_masked(shared, 1, before[0], lane == 0)
+    return wp.vec2i(shared[0], shared[1])
+
+
+@wp.func
+def threshold_after(
+    hist: wp.array(dtype=int),
+    state_key: wp.array(dtype=wp.uint32),
+    state_int: wp.array(dtype=int),
+    j: int,
+    field: int,
+    shift: int,
+    lane: int,
+):
+    """The threshold's key and index bits found before pass j, and the rank still sought, from pass j-1's state and
+    histogram (pass j-1 resolved ``field``'s digit at ``shift``)."""
+    key = state_key[j - 1]
+    index = state_int[2 * (j - 1)]
+    rank = state_int[2 * (j - 1) + 1]
+    picked = pick_digit(hist, j - 1, rank, lane)
+    if field == KEY_DIGIT:
+        key = key | (wp.uint32(picked[0]) << wp.uint32(shift))
+    else:
+        index = index | (picked[0] << shift)
+    return key, index, rank - picked[1]
+
+
+@wp.func
+def keep_threshold(
+    state_key: wp.array(dtype=wp.uint32), state_int: wp.array(dtype=int), j: int, key: wp.uint32, index: int, rank: int
+):
+    """Row j of the selection's state (written once, by one thread: the next pass reads it)."""
+    state_key[j] = key
+    state_int[2 * j] = index
+    state_int[2 * j + 1] = rank
+
+
+@wp.kernel
+def select_histogram_kernel(
+    keys: wp.array(dtype=wp.float32),
+    hist: wp.array(dtype=int),
+    state_key: wp.array(dtype=wp.uint32),
+    state_int: wp.array(dtype=int),
+    j: int,
+    prev_field: int,
+    prev_shift: int,
+    field: int,
+    shift: int,
+    digit_mask: int,
+    key_mask: wp.uint32,
+    index_mask: int,
+):
+    """Pass j of the radix select over ``keys`` = -log w: the threshold's bits so far (pass j-1's pick; block 0 keeps them in row j of the
+    state), then the count per digit of this block's particles that agree with them above the digit (``key_mask``,
+    ``index_mask``: the bits already found), in shared memory, added into ``hist`` row j (integers: any order
+    gives the same counts)."""
+    b, lane = wp.tid()
+    key = state_key[0]
+    index = int(0)
+    rank = int(0)
+    if j > 0:
+        key, index, rank = threshold_after(hist, state_key, state_int, j, prev_field, prev_shift, lane)
+        if b == 0 and lane == 0:
+            keep_threshold(state_key, state_int, j, key, index, rank)
+    bins = wp.tile_zeros(shape=SELECT_BINS, dtype=int, storage="shared")
+    for t in range(SELECT_TILE // wp.block_dim()):
+        i = b * SELECT_TILE + t * wp.block_dim() + lane
+        counted = False
+        digit = int(0)
+        if i < keys.shape[0]:
+            k = heavy_first(-keys[i])
+            if (k & key_mask) == (key & key_mask) and (i & index_mask) == (index & index_mask):
+                counted = True
+                if field == KEY_DIGIT:
+                    digit = int((k >> wp.uint32(shift)) & wp.uint32(digit_mask))
+                else:
+                    digit = (i >> shift) & digit_mask
+        wp.tile_scatter_add(bins, digit, 1, counted)
+    for t in range(SELECT_BINS // wp.block_dim()):
+        d = t * wp.block_dim() + lane
+        c = bins[d]
+        if c != 0:
+            wp.atomic_add(hist, j * SELECT_BINS + d, c)
+
+
+@wp.kernel
+def select_sums_kernel(
+    keys: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    w: wp.array(dtype=wp.float32),
+    cos_sin: wp.array(dtype=wp.vec2),
+    particles: wp.array(dtype=wp.vec3),
+    source: int,
+    hist: wp.array(dtype=int),
+    state_key: wp.array(dtype=wp.uint32),
+    state_int: wp.array(dtype=int),
+    last: int,
+    prev_field: int,
+    prev_shift: int,
+    partials: wp.array(dtype=vec5),
+):
+    """The threshold (the last pass's pick; block 0 keeps it in row ``last`` of the state), then this block's five
+    sums over its particles at or before it by a tile reduction into ``partials[b]`` (``moments_finish_kernel``
+    adds the blocks). ``keys`` hold -log w (a copy: the filter's stream may reset the log-weights meanwhile); a
+    weight is w[j] or exp(log w - top[0]) (``FROM_LOG_W``: ``top`` holds the largest)."""
+    b, lane = wp.tid()
+    key, index, rank = threshold_after(hist, state_key, state_int, last, prev_field, prev_shift, lane)
+    if b == 0 and lane == 0:
+        keep_threshold(state_key, state_int, last, key, index, rank)
+    neg_top = float(0.0)
+    if source == FROM_LOG_W:
+        neg_top = -top[0]
+    acc = vec5()
+    for t in range(SELECT_TILE // wp.block_dim()):
+        i = b * SELECT_TILE + t * wp.block_dim() + lane
+        if i < keys.shape[0]:
+            k = heavy_first(-keys[i])
+            if k < key or (k == key and i <= index):
+                weight = float(0.0)
+                if source == FROM_LOG_W:
+                    weight = wp.exp(-keys[i] + neg_top)  # -keys[i] is log w: exp(log w - max)'s bits
+                else:
+                    weight = w[i]
+                acc += particle_moments(i, weight, cos_sin, particles, source)
+    block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        partials[b] = block_sums[0]
+
+
 class TopShareMean:
     TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
+    SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
 
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
             raise ValueError(f"top_share: share must lie in (0, 1], got {share}")
         self.device, self.n = pick_device(device), num_particles
         self.k = max(1, int(np.ceil(share * num_particles)))
-        self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N
-        self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
+        on_gpu = wp.get_device(self.device).is_cuda
+        self.selects = on_gpu if self.SELECT is None else bool(self.SELECT)
+        self.tiled = (on_gpu if self.TILED is None else bool(self.TILED)) and not self.selects
         self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
-        self.partial = PartialSums(5, self.device, reduction_threads(self.k, self.device))
-        self.tiled = wp.get_device(self.device).is_cuda if self.TILED is None else bool(self.TILED)
-        self.block = tile_block(TOP_TILE, self.device)
-        self.block_sums = wp.zeros(-(-self.k // self.block), dtype=vec5, device=self.device)  # the tiled sums' blocks
         self.weights = None
-        self.nothing = (  # what top_sums_kernel is given for the arrays its source does not read
+        self.nothing = (  # what a sums kernel is given for the arrays its source does not read
             wp.empty(0, dtype=wp.float32, device=self.device),
             wp.empty(0, dtype=wp.vec2, device=self.device),
         )
+        if self.selects:
+            self.passes = select_passes(num_particles)
+            self.hist = wp.zeros(len(self.passes) * SELECT_BINS, dtype=int, device=self.device)
+            self.state_key = wp.zeros(len(self.passes) + 1, dtype=wp.uint32, device=self.device)
+            first = np.zeros(2 * (len(self.passes) + 1), np.int32)
+            first[1] = self.k  # before the first pass: no bit found, rank K sought
+            self.state_int = wp.array(first, dtype=int, device=self.device)
+            self.top = wp.zeros(1, dtype=wp.float32, device=self.device)  # the largest log-weight (``rank``)
+            self.keys = wp.zeros(num_particles, dtype=wp.float32, device=self.device)  # -log w, a copy
+            self.values = wp.zeros(num_particles, dtype=wp.int32, device=self.device)  # (accumulate writes them)
+            self.block = tile_block(SELECT_TILE, self.device)
+            self.block_sums = wp.zeros(-(-num_particles // SELECT_TILE), dtype=vec5, device=self.device)
+            return
+        self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N
+        self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
+        self.partial = PartialSums(5, self.device, reduction_threads(self.k, self.device))
+        self.block = tile_block(TOP_TILE, self.device)
+        self.block_sums = wp.zeros(-(-self.k // self.block), dtype=vec5, device=self.device)  # the tiled sums' blocks
 
     def share_weights(self, weights) -> None:
         """Read each particle's weight and (cos, sin) of its yaw from ``weights`` (a ParticleWeights updated
@@ -195,24 +417,58 @@ class TopShareMean:
     def launch(self, particles: wp.array, log_w: wp.array) -> None:
         """Rank and sum on the device, nothing read back (the filter reads once per step)."""
         self.rank(log_w)
-        self.sort()
+        self.order()
         self.sum(particles, log_w)
 
     def rank_buffers(self) -> tuple[wp.array, wp.array]:
-        """(keys, values) to sort: ``rank`` fills them, or a GPU filter's ParticleWeights.accumulate."""
+        """(keys, values) to sort or select from: ``rank`` fills them, or a GPU filter's ParticleWeights.accumulate
+        (the keys are a copy of -log w that the filter's stream does not touch while the estimate's runs)."""
         return self.keys, self.values
 
     def rank(self, log_w: wp.array) -> None:
-        """The sort keys -log w and the indices."""
+        """The keys -log w and the indices; when selecting, also the largest log-weight (for ``sum`` without w)."""
         wp.launch(rank_keys_kernel, self.n, [log_w, self.keys, self.values], device=self.device)
+        if self.selects:
+            self.top.fill_(-3.0e38)
+            launch_reduction(max_kernel, self.n, [log_w, self.top], self.device)
 
-    def sort(self) -> None:
-        """The particles by weight, heaviest first (Warp's radix sort; ties keep their index order)."""
-        wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
+    def order(self) -> None:
+        """The particles by weight, heaviest first (Warp's radix sort of the keys ``rank`` wrote; ties keep their
+        index order), or the selection's histogram passes over those keys."""
+        if not self.selects:
+            wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
+            return
+        self.hist.zero_()
+        for j, (field, shift, width) in enumerate(self.passes):
+            prev_field, prev_shift = self.passes[j - 1][:2] if j else (0, 0)
+            key_mask, index_mask = self._known_bits(j)
+            inputs = [self.keys, self.hist, self.state_key, self.state_int, j, prev_field, prev_shift, field, shift]
+            inputs += [(1 << width) - 1, key_mask, index_mask]
+            blocks = -(-self.n // SELECT_TILE)
+            wp.launch_tiled(
+                select_histogram_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
+            )
+
+    def _known_bits(self, j: int) -> tuple[int, int]:
+        """Masks of the key's and the index's bits the passes before pass j have found."""
+        key_mask = index_mask = 0
+        for field, shift, width in self.passes[:j]:
+            bits = ((1 << width) - 1) << shift
+            if field == 0:
+                key_mask |= bits
+            else:
+                index_mask |= bits
+        return key_mask, index_mask
+
+    def threshold(self) -> tuple[int, int]:
+        """(key, index) of the K-th particle after a selection's ``sum`` (tests)."""
+        last = len(self.passes)
+        return int(self.state_key.numpy()[last]), int(self.state_int.numpy()[2 * last])
 
     def sum(self, particles: wp.array, log_w: wp.array, w: wp.array | None = None) -> None:
         """The five sums over the first k ranks: from ``share_weights``' weights and yaws (a CPU), from ``w`` (the
-        weights exp(log w - max), ready), or from the log-weights and the sorted keys."""
+        weights exp(log w - max), ready), or from the log-weights and the largest (the sorted keys' first, or
+        ``rank``'s maximum when selecting)."""
         nothing_f, nothing_cs = self.nothing
         if self.weights is not None:
             source, w, cos_sin = FROM_W_COS_SIN, self.weights.w, self.weights.cos_sin
@@ -220,13 +476,21 @@ class TopShareMean:
             source, cos_sin = FROM_W, nothing_cs
         else:
             source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
+        blocks = self.block_sums.shape[0]
+        finish = [self.block_sums, blocks, self.sums]
+        if self.selects:  # the threshold, then a tiled pass over every particle
+            last = len(self.passes)
+            prev_field, prev_shift = self.passes[-1][:2]
+            inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key, self.state_int]
+            inputs += [last, prev_field, prev_shift, self.block_sums]
+            wp.launch_tiled(select_sums_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device)
+            wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
+            return
         if self.tiled:  # two tiled launches (a GPU)
-            blocks = self.block_sums.shape[0]
             inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
             wp.launch_tiled(
                 top_sums_tiled_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
             )
-            finish = [self.block_sums, blocks, self.sums]
             wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
             return
         inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source, self.k]

@@ -186,7 +186,7 @@ def test_top_share_reading_the_weights_gives_the_bits_it_computes_itself(rng):
     assert np.array_equal(alone.sums.numpy(), shared.sums.numpy()), f"seed {rng.seed}"
     given_w = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)  # a GPU filter's way: w given
     given_w.rank(lw)
-    given_w.sort()
+    given_w.order()
     given_w.sum(pw, lw, weights.w)
     assert np.array_equal(alone.sums.numpy(), given_w.sums.numpy()), f"seed {rng.seed}"
     with pytest.raises(ValueError, match="built for"):
@@ -338,6 +338,7 @@ def test_the_tiled_top_share_sums_match_the_twin_and_repeat_themselves(rng, monk
         got = {}
         for tiled in (False, True):
             monkeypatch.setattr(TopShareMean, "TILED", tiled)
+            monkeypatch.setattr(TopShareMean, "SELECT", False)  # the sort's sums (a selection: its own test)
             est = ESTIMATE.build("top_share", num_particles=n, share=0.8, device=DEVICE)
             assert est.tiled == tiled
             first = est(pw, lw)
@@ -350,6 +351,46 @@ def test_the_tiled_top_share_sums_match_the_twin_and_repeat_themselves(rng, monk
         for tiled, ours in got.items():
             assert np.allclose(ours[:2], twin[:2], atol=2e-3), f"n {n}, tiled {tiled}, seed {rng.seed}"
             assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"n {n}, tiled {tiled}, seed {rng.seed}"
+
+
+@pytest.mark.parametrize("kind", ["spread", "ties"])
+def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind):
+    """TopShareMean.SELECT (a GPU's way: a radix select, no sort): the threshold it finds is the K-th particle of a
+    stable sort of -log w (ties by index, -0 as +0), and the estimate is the numpy twin's, from the log-weights and
+    from w given (numpy's exp: within rounding), the same bits on every call. Sizes around the tile and (on a GPU) above 1024 tiles, shares from
+    0.05 to 1; "ties": log-weights drawn from five values, so that equal weights straddle the threshold."""
+    from irmcl_warp.kernels import ESTIMATE
+    from irmcl_warp.kernels.estimate import SELECT_TILE, TopShareMean, select_passes
+    from irmcl_warp.reference.estimate import top_share_mean
+
+    monkeypatch.setattr(TopShareMean, "SELECT", True)
+    assert select_passes(100_000) == [(0, 21, 11), (0, 10, 11), (0, 0, 10), (1, 6, 11), (1, 0, 6)]
+    sizes = [1, 2, SELECT_TILE - 1, SELECT_TILE + 3, int(rng.integers(3 * SELECT_TILE, 40 * SELECT_TILE))]
+    if wp.get_device(DEVICE).is_cuda:
+        sizes.append(1025 * SELECT_TILE + int(rng.integers(1, 5000)))
+    for n in sizes:
+        share = float(rng.choice([0.05, 0.5, 0.8, 1.0]))
+        if kind == "ties":
+            log_w = rng.choice(np.array([-3.0, -1.0, 0.0, -0.0, 2.5], np.float32), n)
+        else:
+            log_w = rng.normal(0, 2, n).astype(np.float32)
+        particles = np.stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-np.pi, np.pi, n)], -1).astype(
+            np.float32
+        )
+        pw, lw = wp.array(particles, dtype=wp.vec3, device=DEVICE), wp.array(log_w, dtype=wp.float32, device=DEVICE)
+        est = ESTIMATE.build("top_share", num_particles=n, share=share, device=DEVICE)
+        assert est.selects
+        ours = est(pw, lw)
+        sums = est.sums.numpy().copy()
+        kth = int(np.argsort(-log_w, kind="stable")[est.k - 1])
+        assert est.threshold()[1] == kth, f"n {n}, share {share}, {kind}, seed {rng.seed}"
+        assert np.array_equal(sums, (est(pw, lw), est.sums.numpy())[1]), f"n {n} on {DEVICE}"
+        w = wp.array(np.exp(log_w - log_w.max()).astype(np.float32), dtype=wp.float32, device=DEVICE)
+        est.sum(pw, lw, w)  # w given (a GPU filter's way): numpy's exp, so the same sums within rounding
+        assert np.allclose(est.sums.numpy(), sums, rtol=1e-5, atol=1e-4), f"n {n}, seed {rng.seed}"
+        twin = top_share_mean(particles, log_w, share)
+        assert np.allclose(ours[:2], twin[:2], atol=2e-3), f"n {n}, share {share}, {kind}, seed {rng.seed}"
+        assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"n {n}, share {share}, seed {rng.seed}"
 
 
 def test_resampling_decision_on_the_device_copies_when_neff_is_high(rng):

@@ -349,8 +349,8 @@ class ParticleFilter:
     def _normalise(self) -> None:
         """``log_lik`` into the log-weights (tempered by ``mcl.temper``), their normalisation and N_eff, the cumulative
         weights and the estimator's sums. On a GPU with the top-share estimate, the launch that accumulates the
-        log-weights also writes the estimate's sort keys, and the estimate sums the weights ``w`` already computed;
-        its sort and sums run on a second stream (``_side_stream``) beside the weights' sums, the scan and the
+        log-weights also writes the estimate's keys, and the estimate sums the weights ``w`` already computed; its
+        sort (a selection: ``TopShareMean.SELECT``) and sums run on a second stream (``_side_stream``) beside the weights' sums, the scan and the
         resampling, joined in ``_copy_sums``. Nothing on the filter's stream writes what the estimate reads (the
         keys, ``w``, the particles: resampling writes the scratch buffer) before the join, and no reduction depends
         on the order in which the streams run, so the bits are those of one stream (tested on cuda:0,
@@ -361,10 +361,10 @@ class ParticleFilter:
         weights.accumulate(self.log_w, self.log_lik, float(self.cfg.temper), ranks)
         side = self._side_stream() if ranks is not None else None
         self._forked = side is not None
-        if side is not None:  # sorted on the side while the weights are computed
+        if side is not None:  # sorted (or selected) on the side while the weights are computed
             side.wait_event(wp.get_stream(self.device).record_event(self._ranked))
             with wp.ScopedStream(side, sync_enter=False):
-                estimator.sort()
+                estimator.order()
         weights.weigh(self.log_w, self.particles)
         if side is not None:  # summed on the side while the weights are scanned and the particles resampled
             side.wait_event(wp.get_stream(self.device).record_event(self._weighed))
@@ -376,7 +376,7 @@ class ParticleFilter:
         if ranks is None:
             estimator.launch(self.particles, self.log_w)
         else:  # ranked by the accumulate launch
-            estimator.sort()
+            estimator.order()
             estimator.sum(self.particles, self.log_w, weights.w)
 
     def _side_stream(self):
