@@ -172,12 +172,15 @@ def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.a
 # that order, the threshold, is found digit by digit, SELECT_BITS at a time: first the key's 32 bits, then the index's
 # bits (which break ties, as the sort's stability does). Pass j counts, per digit, the particles whose bits above
 # its digit equal the threshold's bits found so far (``select_histogram_kernel``); its histogram names the next
-# digit: the one where the count of particles before the threshold crosses K (``pick_digit``). A particle is in the
-# top share when its (key, index) is at or before the threshold (``select_sums_kernel``).
-SELECT_TILE = 1024  # particles a block of the selection's launches covers
+# digit: the one where the count of particles before the threshold crosses K (``pick_digit``). Once every particle
+# of the picked digit is inside the top share, the threshold's lower bits are all ones and the remaining passes
+# count nothing ("done": no tie straddles the threshold, the usual case). A particle is in the top share when its
+# (key, index) is at or before the threshold (``select_sums_kernel``).
+SELECT_TILE = 1024  # threads of a block of the selection's launches on a GPU
 SELECT_BITS = 11  # bits a histogram pass resolves: 2048 bins, 8 KB of shared memory
 SELECT_BINS = 1 << SELECT_BITS
 KEY_DIGIT, INDEX_DIGIT = wp.constant(0), wp.constant(1)
+ALL_INDICES = 0x7FFFFFFF  # an index threshold that takes every tied particle
 
 
 def select_passes(num_particles: int) -> list[tuple[int, int, int]]:
@@ -195,7 +198,8 @@ def select_passes(num_particles: int) -> list[tuple[int, int, int]]:
 @wp.func
 def heavy_first(log_w: float) -> wp.uint32:
     """A key whose ascending order is the descending order of the log-weight (the float's bits, negatives as they
-    are, non-negatives with their 31 low bits flipped); -0 counts as +0, as the comparison of a sort does."""
+    are, non-negatives with their 31 low bits flipped); -0 counts as +0, as the comparison of a sort does.
+    Numpy twin: irmcl_warp/reference/estimate.py ``heavy_first_keys``."""
     x = log_w
     if x == 0.0:
         x = 0.0
@@ -222,10 +226,10 @@ def count_before(cum: int, rank: int) -> int:
 
 
 @wp.func
-def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.vec2i:
-    """(digit, particles in the digits before it) for the particle of rank ``rank`` (1 = first) among those a pass
-    counted in ``hist`` row ``row``; every thread of the block gets the pair (tile reductions leave their result
-    in thread 0, passed on through shared memory)."""
+def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.vec3i:
+    """(digit, particles in the digits before it, particles in it) for the particle of rank ``rank`` (1 = first)
+    among those a pass counted in ``hist`` row ``row``; every thread of the block gets them (tile reductions leave
+    their result in thread 0, passed on through shared memory)."""
     counts = wp.tile_load(hist, shape=SELECT_BINS, offset=row * SELECT_BINS)
     cum = wp.tile_scan_inclusive(counts)
     digit = wp.tile_sum(wp.tile_map(before_rank, cum, rank))
@@ -233,7 +237,8 @@ def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.
     shared = wp.tile_zeros(shape=2, dtype=int, storage="shared")
     wp.tile_scatter_masked(shared, 0, digit[0], lane == 0)
     wp.tile_scatter_masked(shared, 1, before[0], lane == 0)
-    return wp.vec2i(shared[0], shared[1])
+    d = shared[0]
+    return wp.vec3i(d, shared[1], hist[row * SELECT_BINS + d])
 
 
 @wp.func
@@ -246,27 +251,45 @@ def threshold_after(
     shift: int,
     lane: int,
 ):
-    """The threshold's key and index bits found before pass j, and the rank still sought, from pass j-1's state and
-    histogram (pass j-1 resolved ``field``'s digit at ``shift``)."""
+    """The threshold's key and index bits found before pass j, the rank still sought and whether the threshold is
+    complete ("done"), from pass j-1's state and histogram (pass j-1 resolved ``field``'s digit at ``shift``)."""
     key = state_key[j - 1]
-    index = state_int[2 * (j - 1)]
-    rank = state_int[2 * (j - 1) + 1]
-    picked = pick_digit(hist, j - 1, rank, lane)
-    if field == KEY_DIGIT:
-        key = key | (wp.uint32(picked[0]) << wp.uint32(shift))
-    else:
-        index = index | (picked[0] << shift)
-    return key, index, rank - picked[1]
+    index = state_int[3 * (j - 1)]
+    rank = state_int[3 * (j - 1) + 1]
+    done = state_int[3 * (j - 1) + 2]
+    if done == 0:  # the same in every thread: a cooperative pick
+        picked = pick_digit(hist, j - 1, rank, lane)
+        low = (1 << shift) - 1
+        if field == KEY_DIGIT:
+            key = key | (wp.uint32(picked[0]) << wp.uint32(shift))
+        else:
+            index = index | (picked[0] << shift)
+        rank = rank - picked[1]
+        if rank == picked[2]:  # the whole digit is in: every bit below it is one
+            done = 1
+            if field == KEY_DIGIT:
+                key = key | wp.uint32(low)
+                index = ALL_INDICES
+            else:
+                index = index | low
+    return key, index, rank, done
 
 
 @wp.func
 def keep_threshold(
-    state_key: wp.array(dtype=wp.uint32), state_int: wp.array(dtype=int), j: int, key: wp.uint32, index: int, rank: int
+    state_key: wp.array(dtype=wp.uint32),
+    state_int: wp.array(dtype=int),
+    j: int,
+    key: wp.uint32,
+    index: int,
+    rank: int,
+    done: int,
 ):
     """Row j of the selection's state (written once, by one thread: the next pass reads it)."""
     state_key[j] = key
-    state_int[2 * j] = index
-    state_int[2 * j + 1] = rank
+    state_int[3 * j] = index
+    state_int[3 * j + 1] = rank
+    state_int[3 * j + 2] = done
 
 
 @wp.kernel
@@ -275,6 +298,7 @@ def select_histogram_kernel(
     hist: wp.array(dtype=int),
     state_key: wp.array(dtype=wp.uint32),
     state_int: wp.array(dtype=int),
+    span: int,
     j: int,
     prev_field: int,
     prev_shift: int,
@@ -284,37 +308,46 @@ def select_histogram_kernel(
     key_mask: wp.uint32,
     index_mask: int,
 ):
-    """Pass j of the radix select over ``keys`` = -log w: the threshold's bits so far (pass j-1's pick; block 0 keeps them in row j of the
-    state), then the count per digit of this block's particles that agree with them above the digit (``key_mask``,
-    ``index_mask``: the bits already found), in shared memory, added into ``hist`` row j (integers: any order
-    gives the same counts)."""
+    """Pass j of the radix select over ``keys`` = -log w, ``span`` particles a block: the threshold's bits so far
+    (pass j-1's pick; block 0 keeps them in row j of the state), then the count per digit of the block's particles
+    that agree with them above the digit (``key_mask``, ``index_mask``: the bits already found), in shared memory,
+    added into ``hist`` row j (integers: any order gives the same counts). A thread adds a run of equal digits at
+    once (the first passes see few digits: fewer atomic adds on the same bin)."""
     b, lane = wp.tid()
     key = state_key[0]
     index = int(0)
     rank = int(0)
+    done = int(0)
     if j > 0:
-        key, index, rank = threshold_after(hist, state_key, state_int, j, prev_field, prev_shift, lane)
+        key, index, rank, done = threshold_after(hist, state_key, state_int, j, prev_field, prev_shift, lane)
         if b == 0 and lane == 0:
-            keep_threshold(state_key, state_int, j, key, index, rank)
-    bins = wp.tile_zeros(shape=SELECT_BINS, dtype=int, storage="shared")
-    for t in range(SELECT_TILE // wp.block_dim()):
-        i = b * SELECT_TILE + t * wp.block_dim() + lane
-        counted = False
-        digit = int(0)
-        if i < keys.shape[0]:
-            k = heavy_first(-keys[i])
-            if (k & key_mask) == (key & key_mask) and (i & index_mask) == (index & index_mask):
-                counted = True
-                if field == KEY_DIGIT:
-                    digit = int((k >> wp.uint32(shift)) & wp.uint32(digit_mask))
-                else:
-                    digit = (i >> shift) & digit_mask
-        wp.tile_scatter_add(bins, digit, 1, counted)
-    for t in range(SELECT_BINS // wp.block_dim()):
-        d = t * wp.block_dim() + lane
-        c = bins[d]
-        if c != 0:
-            wp.atomic_add(hist, j * SELECT_BINS + d, c)
+            keep_threshold(state_key, state_int, j, key, index, rank, done)
+    if done == 0:
+        bins = wp.tile_zeros(shape=SELECT_BINS, dtype=int, storage="shared")
+        run_digit = int(-1)
+        run = int(0)
+        for t in range(span // wp.block_dim()):
+            i = b * span + t * wp.block_dim() + lane
+            digit = int(-1)
+            if i < keys.shape[0]:
+                k = heavy_first(-keys[i])
+                if (k & key_mask) == (key & key_mask) and (i & index_mask) == (index & index_mask):
+                    if field == KEY_DIGIT:
+                        digit = int((k >> wp.uint32(shift)) & wp.uint32(digit_mask))
+                    else:
+                        digit = (i >> shift) & digit_mask
+            wp.tile_scatter_add(bins, wp.max(run_digit, 0), run, run > 0 and digit != run_digit)
+            if digit != run_digit:
+                run_digit = digit
+                run = 0
+            if digit >= 0:
+                run += 1
+        wp.tile_scatter_add(bins, wp.max(run_digit, 0), run, run > 0)
+        for t in range(SELECT_BINS // wp.block_dim()):
+            d = t * wp.block_dim() + lane
+            c = bins[d]
+            if c != 0:
+                wp.atomic_add(hist, j * SELECT_BINS + d, c)
 
 
 @wp.kernel
@@ -328,25 +361,26 @@ def select_sums_kernel(
     hist: wp.array(dtype=int),
     state_key: wp.array(dtype=wp.uint32),
     state_int: wp.array(dtype=int),
+    span: int,
     last: int,
     prev_field: int,
     prev_shift: int,
     partials: wp.array(dtype=vec5),
 ):
-    """The threshold (the last pass's pick; block 0 keeps it in row ``last`` of the state), then this block's five
-    sums over its particles at or before it by a tile reduction into ``partials[b]`` (``moments_finish_kernel``
+    """The threshold (the last pass's pick; block 0 keeps it in row ``last`` of the state), then the five sums over
+    the block's ``span`` particles at or before it by a tile reduction into ``partials[b]`` (``moments_finish_kernel``
     adds the blocks). ``keys`` hold -log w (a copy: the filter's stream may reset the log-weights meanwhile); a
     weight is w[j] or exp(log w - top[0]) (``FROM_LOG_W``: ``top`` holds the largest)."""
     b, lane = wp.tid()
-    key, index, rank = threshold_after(hist, state_key, state_int, last, prev_field, prev_shift, lane)
+    key, index, rank, done = threshold_after(hist, state_key, state_int, last, prev_field, prev_shift, lane)
     if b == 0 and lane == 0:
-        keep_threshold(state_key, state_int, last, key, index, rank)
+        keep_threshold(state_key, state_int, last, key, index, rank, done)
     neg_top = float(0.0)
     if source == FROM_LOG_W:
         neg_top = -top[0]
     acc = vec5()
-    for t in range(SELECT_TILE // wp.block_dim()):
-        i = b * SELECT_TILE + t * wp.block_dim() + lane
+    for t in range(span // wp.block_dim()):
+        i = b * span + t * wp.block_dim() + lane
         if i < keys.shape[0]:
             k = heavy_first(-keys[i])
             if k < key or (k == key and i <= index):
@@ -364,6 +398,7 @@ def select_sums_kernel(
 class TopShareMean:
     TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
     SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
+    SELECT_PER_THREAD = 4  # particles a thread of the selection covers (a block: SELECT_TILE times as many)
 
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -383,14 +418,15 @@ class TopShareMean:
             self.passes = select_passes(num_particles)
             self.hist = wp.zeros(len(self.passes) * SELECT_BINS, dtype=int, device=self.device)
             self.state_key = wp.zeros(len(self.passes) + 1, dtype=wp.uint32, device=self.device)
-            first = np.zeros(2 * (len(self.passes) + 1), np.int32)
-            first[1] = self.k  # before the first pass: no bit found, rank K sought
+            first = np.zeros(3 * (len(self.passes) + 1), np.int32)
+            first[1] = self.k  # before the first pass: no bit found, rank K sought, not done
             self.state_int = wp.array(first, dtype=int, device=self.device)
             self.top = wp.zeros(1, dtype=wp.float32, device=self.device)  # the largest log-weight (``rank``)
             self.keys = wp.zeros(num_particles, dtype=wp.float32, device=self.device)  # -log w, a copy
             self.values = wp.zeros(num_particles, dtype=wp.int32, device=self.device)  # (accumulate writes them)
             self.block = tile_block(SELECT_TILE, self.device)
-            self.block_sums = wp.zeros(-(-num_particles // SELECT_TILE), dtype=vec5, device=self.device)
+            self.span = SELECT_TILE * max(1, int(self.SELECT_PER_THREAD))  # particles a block covers
+            self.block_sums = wp.zeros(-(-num_particles // self.span), dtype=vec5, device=self.device)
             return
         self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N
         self.values = wp.zeros(2 * num_particles, dtype=wp.int32, device=self.device)
@@ -442,9 +478,9 @@ class TopShareMean:
         for j, (field, shift, width) in enumerate(self.passes):
             prev_field, prev_shift = self.passes[j - 1][:2] if j else (0, 0)
             key_mask, index_mask = self._known_bits(j)
-            inputs = [self.keys, self.hist, self.state_key, self.state_int, j, prev_field, prev_shift, field, shift]
-            inputs += [(1 << width) - 1, key_mask, index_mask]
-            blocks = -(-self.n // SELECT_TILE)
+            inputs = [self.keys, self.hist, self.state_key, self.state_int, self.span, j, prev_field, prev_shift]
+            inputs += [field, shift, (1 << width) - 1, key_mask, index_mask]
+            blocks = self.block_sums.shape[0]
             wp.launch_tiled(
                 select_histogram_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
             )
@@ -461,9 +497,9 @@ class TopShareMean:
         return key_mask, index_mask
 
     def threshold(self) -> tuple[int, int]:
-        """(key, index) of the K-th particle after a selection's ``sum`` (tests)."""
+        """(key, index) after a selection's ``sum``: the particles at or before it are the top share (tests)."""
         last = len(self.passes)
-        return int(self.state_key.numpy()[last]), int(self.state_int.numpy()[2 * last])
+        return int(self.state_key.numpy()[last]), int(self.state_int.numpy()[3 * last])
 
     def sum(self, particles: wp.array, log_w: wp.array, w: wp.array | None = None) -> None:
         """The five sums over the first k ranks: from ``share_weights``' weights and yaws (a CPU), from ``w`` (the
@@ -482,7 +518,7 @@ class TopShareMean:
             last = len(self.passes)
             prev_field, prev_shift = self.passes[-1][:2]
             inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key, self.state_int]
-            inputs += [last, prev_field, prev_shift, self.block_sums]
+            inputs += [self.span, last, prev_field, prev_shift, self.block_sums]
             wp.launch_tiled(select_sums_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device)
             wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
             return

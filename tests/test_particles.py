@@ -355,19 +355,21 @@ def test_the_tiled_top_share_sums_match_the_twin_and_repeat_themselves(rng, monk
 
 @pytest.mark.parametrize("kind", ["spread", "ties"])
 def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind):
-    """TopShareMean.SELECT (a GPU's way: a radix select, no sort): the threshold it finds is the K-th particle of a
-    stable sort of -log w (ties by index, -0 as +0), and the estimate is the numpy twin's, from the log-weights and
+    """TopShareMean.SELECT (a GPU's way: a radix select, no sort): the particles at or before the threshold it finds
+    are the first K of a stable sort of -log w (ties by index, -0 as +0), and the estimate is the numpy twin's, from the log-weights and
     from w given (numpy's exp: within rounding), the same bits on every call. Sizes around the tile and (on a GPU) above 1024 tiles, shares from
     0.05 to 1; "ties": log-weights drawn from five values, so that equal weights straddle the threshold."""
     from irmcl_warp.kernels import ESTIMATE
     from irmcl_warp.kernels.estimate import SELECT_TILE, TopShareMean, select_passes
-    from irmcl_warp.reference.estimate import top_share_mean
+    from irmcl_warp.reference.estimate import heavy_first_keys, top_share_mean
 
     monkeypatch.setattr(TopShareMean, "SELECT", True)
     assert select_passes(100_000) == [(0, 21, 11), (0, 10, 11), (0, 0, 10), (1, 6, 11), (1, 0, 6)]
-    sizes = [1, 2, SELECT_TILE - 1, SELECT_TILE + 3, int(rng.integers(3 * SELECT_TILE, 40 * SELECT_TILE))]
+    monkeypatch.setattr(TopShareMean, "SELECT_PER_THREAD", int(rng.choice([1, 4])))
+    span = SELECT_TILE * TopShareMean.SELECT_PER_THREAD
+    sizes = [1, 2, span - 1, span + 3, int(rng.integers(3 * span, 40 * span))]
     if wp.get_device(DEVICE).is_cuda:
-        sizes.append(1025 * SELECT_TILE + int(rng.integers(1, 5000)))
+        sizes.append(1025 * span + int(rng.integers(1, 5000)))
     for n in sizes:
         share = float(rng.choice([0.05, 0.5, 0.8, 1.0]))
         if kind == "ties":
@@ -382,8 +384,13 @@ def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind):
         assert est.selects
         ours = est(pw, lw)
         sums = est.sums.numpy().copy()
-        kth = int(np.argsort(-log_w, kind="stable")[est.k - 1])
-        assert est.threshold()[1] == kth, f"n {n}, share {share}, {kind}, seed {rng.seed}"
+        top = np.zeros(n, bool)
+        top[np.argsort(-log_w, kind="stable")[: est.k]] = True  # the sort's top share
+        key, index = est.threshold()
+        keys = heavy_first_keys(log_w)
+        assert (np.argsort(keys, kind="stable") == np.argsort(-log_w, kind="stable")).all()  # the keys' order
+        picked = (keys < key) | ((keys == key) & (np.arange(n) <= index))
+        assert np.array_equal(picked, top), f"n {n}, share {share}, {kind}, seed {rng.seed}"
         assert np.array_equal(sums, (est(pw, lw), est.sums.numpy())[1]), f"n {n} on {DEVICE}"
         w = wp.array(np.exp(log_w - log_w.max()).astype(np.float32), dtype=wp.float32, device=DEVICE)
         est.sum(pw, lw, w)  # w given (a GPU filter's way): numpy's exp, so the same sums within rounding

@@ -1,8 +1,8 @@
-"""``python -m eval.bench train|mlp|mcl|slam|globloc|sweeps ...``: see each module's docstring."""
+"""``python -m eval.bench train|mlp|mcl|estimate|slam|globloc|sweeps ...``: see each module's docstring."""
 
 import argparse
 
-from eval.bench import globloc, mcl, mlp, slam, sweeps, train
+from eval.bench import estimate, globloc, mcl, mlp, slam, sweeps, train
 from irmcl_warp.services.cli import guard
 
 
@@ -12,6 +12,7 @@ def main(argv=None):
     train.add_parser(sub)
     mlp.add_parser(sub)
     mcl.add_parser(sub)
+    estimate.add_parser(sub)
     slam.add_parser(sub)
     globloc.add_parser(sub)
     sweeps.add_parser(sub)
@@ -24,6 +25,7 @@ def main(argv=None):
         {
             "mlp": mlp.run_mlp_bench,
             "mcl": mcl.run_mcl_bench,
+            "estimate": estimate.run_estimate_bench,
             "slam": slam.run_slam_bench,
             "globloc": globloc.run_globloc_bench,
             "sweeps": sweeps.run_sweeps_bench,

@@ -16,6 +16,14 @@ def top_share_mean(particles, log_w, share: float = 0.8) -> np.ndarray:
     )
 
 
+def heavy_first_keys(log_w) -> np.ndarray:
+    """Twin of kernels/estimate.py ``heavy_first``: uint32 keys whose ascending order is log w's descending order
+    (-0 as +0)."""
+    x = np.asarray(log_w, np.float32) + np.float32(0.0)  # -0 + 0 = +0
+    bits = x.view(np.uint32)
+    return np.where(bits >> 31, bits, bits ^ np.uint32(0x7FFFFFFF)).astype(np.uint32)
+
+
 def best_cluster_mean(particles, log_w, bounds, cell_m: float = 0.5, yaw_bins: int = 8) -> np.ndarray:
     """Bin the weights on an (x, y, yaw) histogram, take the bin whose 3x3x3 neighbourhood (yaw wraps) is
     heaviest, and average the particles within 1.5 cells / 1.5 yaw bins of its centre."""
