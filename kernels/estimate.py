@@ -183,6 +183,17 @@ KEY_DIGIT, INDEX_DIGIT = wp.constant(0), wp.constant(1)
 ALL_INDICES = 0x7FFFFFFF  # an index threshold that takes every tied particle
 
 
+SELECT_BLOCKS = 128  # blocks the selection's launches aim at: about one per SM of an H100 (132)
+
+
+def select_per_thread(num_particles: int) -> int:
+    """Particles a thread of the selection covers: enough that about SELECT_BLOCKS blocks cover them all. On an H100
+    (``python -m eval.bench estimate``, twenty-sixth session) one a thread was fastest at 100k particles (98 blocks)
+    and eight at 1M (123 blocks); more blocks repeat the per-block work (each block picks the digit from the whole
+    histogram), fewer leave SMs idle."""
+    return max(1, -(-num_particles // (SELECT_TILE * SELECT_BLOCKS)))
+
+
 def select_passes(num_particles: int) -> list[tuple[int, int, int]]:
     """(field, shift, width) of each histogram pass: the key's 32 bits from the top, then the index's."""
     passes = []
@@ -398,7 +409,7 @@ def select_sums_kernel(
 class TopShareMean:
     TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
     SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
-    SELECT_PER_THREAD = 4  # particles a thread of the selection covers (a block: SELECT_TILE times as many)
+    SELECT_PER_THREAD = None  # particles a thread of the selection covers; None: ``select_per_thread(n)``
 
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -425,7 +436,8 @@ class TopShareMean:
             self.keys = wp.zeros(num_particles, dtype=wp.float32, device=self.device)  # -log w, a copy
             self.values = wp.zeros(num_particles, dtype=wp.int32, device=self.device)  # (accumulate writes them)
             self.block = tile_block(SELECT_TILE, self.device)
-            self.span = SELECT_TILE * max(1, int(self.SELECT_PER_THREAD))  # particles a block covers
+            per_thread = self.SELECT_PER_THREAD or select_per_thread(num_particles)
+            self.span = SELECT_TILE * max(1, int(per_thread))  # particles a block covers
             self.block_sums = wp.zeros(-(-num_particles // self.span), dtype=vec5, device=self.device)
             return
         self.keys = wp.zeros(2 * num_particles, dtype=wp.float32, device=self.device)  # radix sort needs 2N

@@ -360,11 +360,12 @@ def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind):
     from w given (numpy's exp: within rounding), the same bits on every call. Sizes around the tile and (on a GPU) above 1024 tiles, shares from
     0.05 to 1; "ties": log-weights drawn from five values, so that equal weights straddle the threshold."""
     from irmcl_warp.kernels import ESTIMATE
-    from irmcl_warp.kernels.estimate import SELECT_TILE, TopShareMean, select_passes
+    from irmcl_warp.kernels.estimate import SELECT_TILE, TopShareMean, select_passes, select_per_thread
     from irmcl_warp.reference.estimate import heavy_first_keys, top_share_mean
 
     monkeypatch.setattr(TopShareMean, "SELECT", True)
     assert select_passes(100_000) == [(0, 21, 11), (0, 10, 11), (0, 0, 10), (1, 6, 11), (1, 0, 6)]
+    assert (select_per_thread(100_000), select_per_thread(1_000_000)) == (1, 8)  # ~128 blocks of 1024 threads
     monkeypatch.setattr(TopShareMean, "SELECT_PER_THREAD", int(rng.choice([1, 4])))
     span = SELECT_TILE * TopShareMean.SELECT_PER_THREAD
     sizes = [1, 2, span - 1, span + 3, int(rng.integers(3 * span, 40 * span))]

@@ -1,6 +1,6 @@
 """``python -m eval.bench estimate``: IR-MCL's top-share estimate alone (``TopShareMean``: the top 80 % of the
-particles by weight, then their weighted mean), by Warp's radix sort against the radix select with several
-particles per thread, side by side in one run. Each way is timed as the filter runs it (the keys written, then
+particles by weight, then their weighted mean), by Warp's radix sort against the radix select (``select``: as many
+particles a thread as ``select_per_thread`` chooses; ``select<P>``: P), side by side in one run. Each way is timed as the filter runs it (the keys written, then
 ``order`` and ``sum`` from the weights w), captured once as a CUDA graph on a GPU and replayed. Two weight sets:
 ``spread`` (log-weights as a scan's sum of beam log-likelihoods gives them: normal, sd 5) and ``ties`` (a resampled
 set: every value shared by about ten particles). Every way must give the same top share: the estimate of each is
@@ -31,9 +31,12 @@ def weight_set(kind: str, n: int, rng) -> np.ndarray:
 
 
 def method_settings(method: str) -> dict:
-    """``sort`` or ``select<P>`` (P particles a thread) as TopShareMean's class settings."""
+    """``sort``, ``select`` (the particles a thread by ``select_per_thread``) or ``select<P>`` (P particles a thread)
+    as TopShareMean's class settings."""
     if method == "sort":
         return {"SELECT": False, "TILED": None}
+    if method == "select":
+        return {"SELECT": True, "SELECT_PER_THREAD": None}
     if method.startswith("select") and method[6:].isdigit():
         return {"SELECT": True, "SELECT_PER_THREAD": int(method[6:])}
     raise ValueError(f"eval.bench estimate: unknown method {method!r}: sort or select<particles a thread>")
@@ -112,7 +115,7 @@ def add_parser(sub) -> None:
     t.add_argument("--device", default=None)
     t.add_argument("--particles", type=int, nargs="+", default=[100_000, 1_000_000])
     t.add_argument("--weights", nargs="+", default=["spread", "ties"], choices=["spread", "ties"])
-    t.add_argument("--methods", nargs="+", default=["sort", "select1", "select4", "select8"])
+    t.add_argument("--methods", nargs="+", default=["sort", "select", "select1", "select4", "select8"])
     t.add_argument("--steps", type=int, default=50)
     t.add_argument("--repeats", type=int, default=5)
     t.add_argument("--out", default="outputs/bench")
