@@ -60,6 +60,31 @@ def test_a_twin_floors_walls_repeat_after_a_half_turn():
     assert np.allclose(floors.distance_to_segments(probe, walls), floors.distance_to_segments(probe, turned))
 
 
+def test_the_mapping_drive_passes_every_roadmap_node_and_its_map_holds_every_drive():
+    """worlds.map_drive=cover: the mapping drive passes every node of its roadmap's largest part, and every test
+    drive of a twin floor stays on cells its map knows. The random 400 m drive of the maps before left rooms out
+    that drives entered (twin-1002 drive 7: 38 % of it), and the stage says so for such a drive."""
+    from irmcl_warp.mcl.worlds import query_log, unmapped_share, world_map
+    from scipy.sparse.csgraph import connected_components
+
+    world = floors.build("twin-1002")
+    points = floors.coverage_drive(world, np.random.default_rng(0))
+    nodes, links = floors.roadmap(world, np.random.default_rng(0), 0.3, num_nodes=600)  # the drive's own roadmap
+    _, label = connected_components(links, directed=False)
+    part = nodes[label == np.bincount(label).argmax()]
+    assert len(part) > 0.9 * len(nodes)
+    assert all(np.any(np.all(points == p, axis=1)) for p in part)  # every node of the part is a waypoint
+    cfg = compose_config(["+exp=worlds", "worlds.split=twin-1002", f"device={DEVICE}"])
+    log, _ = query_log(world, cfg, 7, DEVICE)
+    assert unmapped_share(world_map(world, cfg, DEVICE), log.ground_truth) == 0.0
+    before = compose_config(["+exp=worlds", "worlds.map_drive=random", f"device={DEVICE}"])
+    assert unmapped_share(world_map(world, before, DEVICE), log.ground_truth) > 0.3
+    from irmcl_warp.config import ConfigError, validate
+
+    with pytest.raises(ConfigError, match="map_drive='spiral': expected one of cover, random"):
+        validate(compose_config(["+exp=worlds", "worlds.map_drive=spiral"]))
+
+
 def test_a_loop_drive_never_enters_the_closed_core():
     world = floors.build("loop-1001")
     ((x0, y0, x1, y1),) = world.solid
@@ -271,6 +296,7 @@ def _worlds_cfg(*extra):
             "worlds.split=hall-5",
             "worlds.runs=1",
             "worlds.run_s=12",
+            "worlds.map_drive=random",  # a short map (the stage's tests; the floors' coverage drive has its own)
             "worlds.map_drive_m=60",
             "mcl.num_particles=3000",
             f"device={DEVICE}",
@@ -324,6 +350,19 @@ def test_the_worlds_stage_records_every_update_and_ends_with_a_verdict(tmp_path,
     assert run_worlds(_worlds_cfg(f"worlds.calibration={cal}")) != out
 
 
+def test_a_drive_that_leaves_the_map_is_a_loud_warning(tmp_path, monkeypatch, capsys):
+    """A map of a 5 m drive knows little of the floor: the drive localized in it leaves its known cells, which the
+    run records per drive, counts in its summary and says as a warning and on its last line."""
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(UserWarning, match="hall-5 run 1: .* outside the map's known cells"):
+        out = run_worlds(_worlds_cfg("worlds.map_drive_m=5", "worlds.run_s=6"))
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["runs"][0]["truth_unmapped_share"] > 0.01 and doc["summary"]["drives_leaving_map"] == 1
+    assert "WARNING: 1 drives left the map's known cells" in capsys.readouterr().out.strip().splitlines()[-1]
+
+
 def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
     from eval.report.tables import worlds_table
     from irmcl_warp import runs
@@ -352,6 +391,9 @@ def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
     assert f"| {s['successes']}/2 | {s['right_at_end']}/2 | {s['localized_at_end']}/2 |" in row
     assert "hall-1005" in row and "loop-1004" in row and 0.0 <= s["auroc"] <= 1.0 if s["auroc"] is not None else True
     assert "KLD" not in row
+    assert "map of a random 400 m drive" in row  # a record before worlds.map_drive: a random drive's map
+    rec.config["worlds"]["map_drive"] = "cover"
+    assert "random" not in worlds_table([rec]).splitlines()[-1]
     rec.config["mcl"].update(kld_sampling=True, kld_min_particles=500)  # an adaptive count says so, with its mean
     assert (
         f"KLD-sampling from 500, {s['particles_per_update'] / 1000:.1f}k per update on average"

@@ -1,8 +1,8 @@
 """The worlds stage: ``python -m irmcl_warp.worlds +exp=worlds [worlds.split=tuning|test] [mcl.*=...]``
 
 Global localization where nobody tuned (issue 33). For each world of ``worlds.split`` (irmcl_warp/sim/floors.py):
-a mapping drive (path seed 0, ``worlds.map_drive_m`` long) makes the map (log-odds of its scans at their true
-poses, as a robot's mapping run would), then ``worlds.runs`` other drives (seeds 1..runs) are localized in it
+a mapping drive (path seed 0, past every node of the floor's roadmap: ``worlds.map_drive``) makes the map (log-odds
+of its scans at their true poses, as a robot's mapping run would), then ``worlds.runs`` other drives (seeds 1..runs) are localized in it
 from their first scan for ``worlds.run_s`` seconds, with the ``mcl`` settings given. With ``worlds.kidnap_at_s``
 the robot is carried, that far into a run, to where another drive is (the odometry does not see it).
 
@@ -16,11 +16,14 @@ confidence, declares the robot localized at ``worlds.confident_above`` and lost 
 Writes outputs/<exp>/worlds/<split>-<weighting>-<particles>-<id>/: per world and run ``<world>-run<k>.npz``
 (stamps, estimate, truth, features, confidence, updated, the log mean likelihood of each update's scan) and
 ``.tum``; metrics.json (per run: the protocol's
-success, the verdict at the end, lost events, false alarms, kidnap detection; per world and overall counts).
+success, the verdict at the end, lost events, false alarms, kidnap detection, the share of the drive spent outside
+the map's known cells; per world and overall counts). A drive that leaves the map is a loud warning: where the map
+knows nothing, "right" cannot be judged by it (a room the map lacks looks like its mapped twin).
 """
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -79,9 +82,14 @@ def calibration_of(cfg) -> Confidence | None:
 
 
 def world_map(world, cfg, device):
-    """The occupancy grid of the world's mapping drive (true poses), at mcl.map_resolution_m."""
-    length = cfg.worlds.map_drive_m
-    log = drive_log(world, cfg.sim, floors.drive(world, np.random.default_rng(0), length), 0, device=device)
+    """The occupancy grid of the world's mapping drive (path seed 0, true poses), at mcl.map_resolution_m: a drive
+    past every roadmap node (``worlds.map_drive=cover``) or a random one ``worlds.map_drive_m`` long."""
+    rng = np.random.default_rng(0)
+    if cfg.worlds.get("map_drive", "cover") == "cover":
+        waypoints = floors.coverage_drive(world, rng)
+    else:
+        waypoints = floors.drive(world, rng, cfg.worlds.map_drive_m)
+    log = drive_log(world, cfg.sim, waypoints, 0, device=device)
     T_map_laser = compose(log.ground_truth, log.T_base_laser)
     return integrate_scans(
         T_map_laser,
@@ -172,6 +180,13 @@ def localize_worlds(run: runs.Run) -> Path:
             np.savez_compressed(out / f"{name}-run{k}.npz", stamps=log.stamps, truth=log.ground_truth, **trace)
             write_tum(out / f"{name}-run{k}.tum", log.stamps, trace["estimate"])
             result = score_run(log, trace, cut, cfg.worlds)
+            result["truth_unmapped_share"] = unmapped_share(grid, log.ground_truth)
+            if result["truth_unmapped_share"] > UNMAPPED_WARN:
+                warnings.warn(
+                    f"worlds: {name} run {k}: {100 * result['truth_unmapped_share']:.0f} % of the drive lies outside "
+                    "the map's known cells; whether it ends right says little about the localizer there",
+                    stacklevel=1,
+                )
             results.append({"world": name, "run": k, **result})
             judged.append(judged_updates(log, trace))
             bar.update()
@@ -195,6 +210,19 @@ def localize_worlds(run: runs.Run) -> Path:
     path = run.finish({"summary": summary, "per_world": per_world, "runs": rows, "settings": settings}, device)
     print(verdict_line(summary, cfg.worlds) + f" -> {path}")
     return path
+
+
+UNMAPPED_WARN = 0.01  # a drive with more of its poses outside the map's known cells is reported loudly
+
+
+def unmapped_share(grid, poses: np.ndarray) -> float:
+    """The share of ``poses`` [n, >=2] (the drive's truth) on cells the map does not know (or off the map)."""
+    ij = np.floor((np.asarray(poses)[:, :2] - np.asarray(grid.origin_xy)) / grid.resolution_m).astype(int)
+    h, w = grid.known.shape
+    inside = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < w) & (ij[:, 1] < h)
+    known = np.zeros(len(ij), bool)
+    known[inside] = grid.known[ij[inside, 1], ij[inside, 0]]
+    return float(1.0 - known.mean()) if len(ij) else 0.0
 
 
 def search_grid(grid, spacing_m: float = 0.5, headings: int = 16) -> np.ndarray:
@@ -370,6 +398,9 @@ def world_summary(rows: list[dict]) -> dict:
         "false_alarms": int(sum(r["false_alarms"] for r in rows)),
         "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600),
     }
+    unmapped = [r["truth_unmapped_share"] for r in rows if "truth_unmapped_share" in r]
+    if unmapped:
+        s["drives_leaving_map"] = int(sum(u > UNMAPPED_WARN for u in unmapped))
     per_update = [r["particles_per_update"] for r in rows if r.get("particles_per_update") is not None]
     if per_update:
         s["particles_per_update"] = float(np.mean(per_update))
@@ -401,6 +432,8 @@ def verdict_line(summary: dict, w) -> str:
         )
     else:
         line += "; no confidence calibration for this weighting: no run is declared localized"
+    if summary.get("drives_leaving_map"):
+        line += f"; WARNING: {summary['drives_leaving_map']} drives left the map's known cells"
     return line
 
 
