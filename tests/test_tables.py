@@ -262,6 +262,9 @@ def test_records_kept_before_a_setting_existed_read_at_its_default():
     old = complete({"sim": {"max_range_m": 8.0}, "mapping": {"max_range_m": 30.0, "l_occ": 0.9}})
     assert old["sim"]["range_max_m"] == 8.0 and "max_range_m" not in old["sim"]  # renamed, value kept
     assert "max_range_m" not in old["mapping"] and old["mapping"]["l_occ"] == 0.9  # removed; others kept
+    # a setting whose default is a new behaviour: a record from before holds what it did, a newer one its own value
+    assert complete({"worlds": {"split": "test"}})["worlds"]["map_drive"] == "random"
+    assert complete({"worlds": {"map_drive": "cover"}})["worlds"]["map_drive"] == "cover"
 
 
 # --- the claims registry ----------------------------------------------------------------------------------------
@@ -383,8 +386,8 @@ def test_the_step_graph_runs_are_summarised_per_card_never_pooled():
 
 def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
     """README's KLD-sampling figures come from results/checks/paired_worlds_<name>.json (eval.analyses.paired_worlds):
-    both counts over the drives with McNemar's p, and each side's particles per update in thousands; a comparison not
-    kept gives no fact (and README's marker then fails the generated-documents test)."""
+    both counts over the drives with McNemar's p, the drives only one side got right, and each side's particles per
+    update in thousands; a comparison not kept gives no fact (and README's marker then fails the generated-documents test)."""
     import json
 
     from eval.report.facts import PAIRED_WORLDS, _paired_worlds
@@ -392,7 +395,15 @@ def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
     (tmp_path / "checks").mkdir()
     doc = {
         "drives": 80,
-        "outcomes": {"right_at_end": {"a": 73, "b": 70, "p_mcnemar": 0.375}},
+        "outcomes": {
+            "right_at_end": {
+                "a": 73,
+                "b": 70,
+                "p_mcnemar": 0.375,
+                "only_a": ["hall-1-run2", "loop-1-run1"],
+                "only_b": [],
+            }
+        },
         "particles_per_update_a": 12923.8,
         "particles_per_update_b": 20000.0,
     }
@@ -401,6 +412,8 @@ def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
     assert set(got) == {PAIRED_WORLDS[0]}
     assert got[PAIRED_WORLDS[0]] == {
         "right_at_end": "73/80 against 70/80 (McNemar exact p = 0.38)",
+        "right_at_end_only_a": "hall-1-run2, loop-1-run1",  # the discordant drives by name
+        "right_at_end_only_b": "none",
         "per_update_a": "12.9k",
         "per_update_b": "20.0k",
     }

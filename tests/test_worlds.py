@@ -650,3 +650,16 @@ def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tm
     assert o["p_mcnemar"] == pytest.approx(0.0703125) and json.loads((tmp_path / "p.json").read_text())["drives"] == 10
     with pytest.raises(SystemExit, match="different drives"):
         main([str(tmp_path / "a"), str(tmp_path / "c")])
+
+
+def test_the_unmapped_analysis_names_the_drives_that_leave_a_random_drives_map():
+    """eval.analyses.unmapped on twin-1002's first three drives: drive 2 enters a room the random 400 m drive never
+    mapped (its scans then fit the mapped twin room), and no drive leaves the coverage drive's map."""
+    from eval.analyses.unmapped import unmapped
+
+    res = unmapped("twin-1002", 3, DEVICE)
+    assert set(res["shares"]) == {"random", "cover"}
+    random_shares, cover_shares = res["shares"]["random"]["twin-1002"], res["shares"]["cover"]["twin-1002"]
+    assert len(random_shares) == len(cover_shares) == 3 and all(0.0 <= s <= 1.0 for s in random_shares)
+    assert "twin-1002-run2" in res["leaving"]["random"] and random_shares[1] > 0.1
+    assert res["leaving"]["cover"] == [] and max(cover_shares) == 0.0

@@ -87,6 +87,8 @@ PAIRED_WORLDS = (
     "kld20k_vs_20k",
     "kld100k_vs_100k_kidnap",
     "kld100k_vs_100k_gpu",
+    "map_cover_vs_random_gpu",
+    "map_cover_vs_random_cpu",
 )  # results/checks/paired_worlds_<name>.json
 
 
@@ -104,6 +106,8 @@ def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
         n = d["drives"]
         for key, o in d["outcomes"].items():
             facts[key] = f"{o['a']}/{n} against {o['b']}/{n} (McNemar exact p = {o['p_mcnemar']:.2g})"
+            for side in ("a", "b"):  # the drives only one side got right, by name
+                facts[f"{key}_only_{side}"] = ", ".join(o[f"only_{side}"]) or "none"
         for side in ("a", "b"):
             facts[f"per_update_{side}"] = f"{d[f'particles_per_update_{side}'] / 1000:.1f}k"
         out[name] = facts
@@ -239,6 +243,15 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         for card, spans in _graph_spans(nof, ds).items():
             for key, value in spans.items():
                 out[f"nof_graph_{ds}_{card}_{key}"] = value
+    unmapped = RESULTS / "checks" / "worlds_unmapped_test.json"  # eval.analyses.unmapped: drives off their map
+    if unmapped.is_file():
+        import json
+
+        u = json.loads(unmapped.read_text())
+        n = len(u["shares"]["random"]) * u["runs"]
+        for how, names in u["leaving"].items():
+            out[f"worlds_unmapped_{how}_count"] = f"{len(names)} of the {n} test drives"
+            out[f"worlds_unmapped_{how}_drives"] = ", ".join(names) or "none"
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value

@@ -8,8 +8,9 @@ experiment and id. Two places hold them:
 * ``results/<group>/<exp>.json``: the runs kept in the repository (``python -m eval.keep RUN_DIR...``),
   compactly: per record its stage, id, label, settings and metrics, continued in ``<exp>.2.json``, ... past
   ``MAX_FILE_BYTES``. Records kept before a setting existed hold it at its schema default, the value every
-  new setting was introduced with (so the runs that predate it ran that way); a setting renamed since is read
-  under its new name (``RENAMED``), one removed since is dropped (``REMOVED``).
+  new setting was introduced with (so the runs that predate it ran that way), unless the setting came with a
+  new behaviour as its default: then they hold the value that names what they did (``BEFORE``); a setting
+  renamed since is read under its new name (``RENAMED``), one removed since is dropped (``REMOVED``).
 
 ``load`` merges both (a run of yours replaces a kept one of the same settings); ``find`` picks records by
 settings (``find("localize", "fr079", among=recs, mcl__weighting="nog_raymarch")``); ``off_defaults`` says
@@ -63,6 +64,9 @@ DEFAULTS = _schema_defaults()
 RENAMED = {"sim.max_range_m": "sim.range_max_m"}  # the simulated lidar's largest reading, not a far bound
 # settings removed since: mapping.max_range_m was a second far bound (inspect now uses data.far_m)
 REMOVED = ("mapping.max_range_m",)
+# settings whose default is a new behaviour: what a record from before the setting did (twenty-sixth session: the
+# worlds' maps from a drive past every roadmap node; the runs before mapped each floor with a random 400 m drive)
+BEFORE = {"worlds.map_drive": "random"}
 
 
 def complete(config: dict) -> dict:
@@ -78,6 +82,10 @@ def complete(config: dict) -> dict:
         section, key = gone.split(".", 1)
         if isinstance(out.get(section), dict):
             out[section].pop(key, None)
+    for dotted, value in BEFORE.items():
+        section, key = dotted.split(".", 1)
+        if isinstance(out.get(section), dict):
+            out[section].setdefault(key, value)
     for section, values in out.items():
         if isinstance(values, dict) and section in DEFAULTS:
             for key, default in DEFAULTS[section].items():
