@@ -217,7 +217,7 @@ UNMAPPED_WARN = 0.01  # a drive with more of its poses outside the map's known c
 
 def unmapped_share(grid, poses: np.ndarray) -> float:
     """The share of ``poses`` [n, >=2] (the drive's truth) on cells the map does not know (or off the map)."""
-    ij = np.floor((np.asarray(poses)[:, :2] - np.asarray(grid.origin_xy)) / grid.resolution_m).astype(int)
+    ij = grid.cell_of(np.asarray(poses)[:, :2])
     h, w = grid.known.shape
     inside = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < w) & (ij[:, 1] < h)
     known = np.zeros(len(ij), bool)

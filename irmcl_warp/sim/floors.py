@@ -178,24 +178,35 @@ def roadmap(world: World, rng, clearance_m: float = 0.3, num_nodes: int = 300, l
     return nodes, csr_matrix(links)
 
 
-def drive(world: World, rng, length_m: float, clearance_m: float = 0.3) -> np.ndarray:
-    """Waypoints [k, 2] of a drive ``length_m`` long: from a random node of the largest connected part of the
-    roadmap to random goals in it, each by the shortest path (so the robot crosses the building rather than
-    circling one spot)."""
-    nodes, links = roadmap(world, rng, clearance_m)
+def _largest_part(world: World, rng, clearance_m: float, num_nodes: int = 300):
+    """A roadmap of the world (``roadmap``) and the nodes of its largest connected part: (nodes, links, part)."""
+    nodes, links = roadmap(world, rng, clearance_m, num_nodes=num_nodes)
     _, label = connected_components(links, directed=False)
     part = np.flatnonzero(label == np.bincount(label).argmax())
     if len(part) < 2:
         raise ValueError("the world's roadmap has no link: no drive possible")
+    return nodes, links, part
+
+
+def _steps(pred: np.ndarray, at: int, goal: int) -> list[int]:
+    """The nodes after ``at`` on the shortest path to ``goal``, in order (``pred``: dijkstra's predecessors)."""
+    path = [goal]
+    while path[-1] != at:
+        path.append(int(pred[path[-1]]))
+    return path[-2::-1]
+
+
+def drive(world: World, rng, length_m: float, clearance_m: float = 0.3) -> np.ndarray:
+    """Waypoints [k, 2] of a drive ``length_m`` long: from a random node of the largest connected part of the
+    roadmap to random goals in it, each by the shortest path (so the robot crosses the building rather than
+    circling one spot)."""
+    nodes, links, part = _largest_part(world, rng, clearance_m)
     at = int(rng.choice(part))
     points, travelled = [nodes[at]], 0.0
     while travelled < length_m:
         goal = int(rng.choice(part[part != at]))
         _, pred = dijkstra(links, indices=at, return_predecessors=True)
-        path = [goal]
-        while path[-1] != at:
-            path.append(int(pred[path[-1]]))
-        for i in path[-2::-1]:
+        for i in _steps(pred, at, goal):
             travelled += float(np.hypot(*(nodes[i] - points[-1])))
             points.append(nodes[i])
             if travelled >= length_m:
@@ -209,11 +220,7 @@ def coverage_drive(world: World, rng, clearance_m: float = 0.3, num_nodes: int =
     random node, always on to the nearest node not yet passed (by the shortest path), so that a map of its scans
     covers every room a drive can enter. (A random drive of fixed length left whole rooms unmapped, and so did a
     roadmap of 300 nodes, whose links missed some doors: twin-1002's had two rooms apart from the rest.)"""
-    nodes, links = roadmap(world, rng, clearance_m, num_nodes=num_nodes)
-    _, label = connected_components(links, directed=False)
-    part = np.flatnonzero(label == np.bincount(label).argmax())
-    if len(part) < 2:
-        raise ValueError("the world's roadmap has no link: no drive possible")
+    nodes, links, part = _largest_part(world, rng, clearance_m, num_nodes)
     at = int(rng.choice(part))
     passed = np.zeros(len(nodes), bool)
     passed[at] = True
@@ -222,10 +229,7 @@ def coverage_drive(world: World, rng, clearance_m: float = 0.3, num_nodes: int =
         dist, pred = dijkstra(links, indices=at, return_predecessors=True)
         left = part[~passed[part]]
         goal = int(left[np.argmin(dist[left])])
-        path = [goal]
-        while path[-1] != at:
-            path.append(int(pred[path[-1]]))
-        for i in path[-2::-1]:
+        for i in _steps(pred, at, goal):
             points.append(nodes[i])
             passed[i] = True
         at = goal
