@@ -206,6 +206,21 @@ def select_passes(num_particles: int) -> list[tuple[int, int, int]]:
     return passes
 
 
+def select_pass_settings(passes: list[tuple[int, int, int]]) -> list[tuple[int, ...]]:
+    """``select_histogram_kernel``'s settings of each pass after its index j: the previous pass's field and shift,
+    this pass's field, shift and digit mask, and the masks of the key's and the index's bits found before it."""
+    out, key_mask, index_mask = [], 0, 0
+    for j, (field, shift, width) in enumerate(passes):
+        prev_field, prev_shift = passes[j - 1][:2] if j else (0, 0)
+        out.append((prev_field, prev_shift, field, shift, (1 << width) - 1, key_mask, index_mask))
+        bits = ((1 << width) - 1) << shift
+        if field == 0:
+            key_mask |= bits
+        else:
+            index_mask |= bits
+    return out
+
+
 @wp.func
 def heavy_first(log_w: float) -> wp.uint32:
     """A key whose ascending order is the descending order of the log-weight (the float's bits, negatives as they
@@ -427,6 +442,7 @@ class TopShareMean:
         )
         if self.selects:
             self.passes = select_passes(num_particles)
+            self.pass_settings = select_pass_settings(self.passes)
             self.hist = wp.zeros(len(self.passes) * SELECT_BINS, dtype=int, device=self.device)
             self.state_key = wp.zeros(len(self.passes) + 1, dtype=wp.uint32, device=self.device)
             first = np.zeros(3 * (len(self.passes) + 1), np.int32)
@@ -487,26 +503,12 @@ class TopShareMean:
             wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
             return
         self.hist.zero_()
-        for j, (field, shift, width) in enumerate(self.passes):
-            prev_field, prev_shift = self.passes[j - 1][:2] if j else (0, 0)
-            key_mask, index_mask = self._known_bits(j)
-            inputs = [self.keys, self.hist, self.state_key, self.state_int, self.span, j, prev_field, prev_shift]
-            inputs += [field, shift, (1 << width) - 1, key_mask, index_mask]
-            blocks = self.block_sums.shape[0]
+        blocks = self.block_sums.shape[0]
+        for j, settings in enumerate(self.pass_settings):
+            inputs = [self.keys, self.hist, self.state_key, self.state_int, self.span, j, *settings]
             wp.launch_tiled(
                 select_histogram_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
             )
-
-    def _known_bits(self, j: int) -> tuple[int, int]:
-        """Masks of the key's and the index's bits the passes before pass j have found."""
-        key_mask = index_mask = 0
-        for field, shift, width in self.passes[:j]:
-            bits = ((1 << width) - 1) << shift
-            if field == 0:
-                key_mask |= bits
-            else:
-                index_mask |= bits
-        return key_mask, index_mask
 
     def threshold(self) -> tuple[int, int]:
         """(key, index) after a selection's ``sum``: the particles at or before it are the top share (tests)."""
@@ -524,21 +526,19 @@ class TopShareMean:
             source, cos_sin = FROM_W, nothing_cs
         else:
             source, w, cos_sin = FROM_LOG_W, nothing_f, nothing_cs
-        blocks = self.block_sums.shape[0]
-        finish = [self.block_sums, blocks, self.sums]
-        if self.selects:  # the threshold, then a tiled pass over every particle
-            last = len(self.passes)
-            prev_field, prev_shift = self.passes[-1][:2]
-            inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key, self.state_int]
-            inputs += [self.span, last, prev_field, prev_shift, self.block_sums]
-            wp.launch_tiled(select_sums_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device)
-            wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
-            return
-        if self.tiled:  # two tiled launches (a GPU)
-            inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
-            wp.launch_tiled(
-                top_sums_tiled_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
-            )
+        if self.selects or self.tiled:  # the blocks' sums by one tiled launch, then one block adds them
+            blocks = self.block_sums.shape[0]
+            if self.selects:  # the threshold, then a pass over every particle
+                last = len(self.passes)
+                prev_field, prev_shift = self.passes[-1][:2]
+                kernel = select_sums_kernel
+                inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key]
+                inputs += [self.state_int, self.span, last, prev_field, prev_shift, self.block_sums]
+            else:  # the first k ranks of the sort
+                kernel = top_sums_tiled_kernel
+                inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
+            wp.launch_tiled(kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device)
+            finish = [self.block_sums, blocks, self.sums]
             wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
             return
         inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source, self.k]
