@@ -31,9 +31,11 @@ from irmcl_warp.sim import floors
 def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict]:
     """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
     worlds of ``side`` (tuning | test)."""
-    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set(), "particles": set()}
+    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set(), "particles": set(), "tracker": set()}
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
+        w = doc.get("settings", {}).get("worlds", {})
+        prov["tracker"].add((bool(w.get("refine_rivals", False)), int(w.get("search_rivals_every", 0))))
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
                 raise ValueError(
@@ -42,6 +44,11 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
                 )
             z = np.load(Path(d) / f"{r['world']}-run{r['run']}.npz")
             upd = z["updated"] & np.all(np.isfinite(z["features"]), 1) & np.all(np.isfinite(z["estimate"]), 1)
+            if z["features"].shape[1] != len(FEATURES):
+                raise ValueError(
+                    f"{d}: {r['world']} run {r['run']} recorded {z['features'].shape[1]} features, this code "
+                    f"computes {len(FEATURES)} ({', '.join(FEATURES)}): run the stage again"
+                )
             X.append(z["features"][upd])
             y.append(right(z["estimate"][upd], z["truth"][upd]))
             prov["worlds"].add(r["world"])
@@ -55,7 +62,14 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
             f"runs of several particle counts ({sorted(map(str, prov['particles']))}): the features "
             "depend on the count (a larger cloud keeps a wider spread); one calibration is for one"
         )
+    if len(prov["tracker"]) != 1:
+        raise ValueError(
+            f"runs that tracked rivals differently ((refine_rivals, search_rivals_every): {sorted(prov['tracker'])}): "
+            "their features differ; one calibration is for one"
+        )
+    refine, every = prov["tracker"].pop()
     prov = {
+        "tracker": {"refine_rivals": refine, "search_every": every},
         "runs": prov["runs"],
         "worlds": sorted(prov["worlds"]),
         "weighting": prov["weighting"].pop(),
@@ -73,6 +87,7 @@ def fit(args) -> Path:
         "tuning_worlds": prov["worlds"],
         "weighting": prov["weighting"],
         "num_particles": prov["particles"],
+        "tracker": prov["tracker"],
         "updates": int(len(y)),
         "right_share": float(y.mean()),
         "tuning_auroc": auroc(model(X), y),
@@ -90,6 +105,10 @@ def judge(args) -> dict:
     X, y, prov = samples(args.runs, "test")
     cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
     model = Confidence.load(cal)
+    if model.tracker != prov["tracker"]:
+        raise ValueError(
+            f"{cal} was fitted on runs that tracked rivals as {model.tracker}, these runs did as {prov['tracker']}"
+        )
     p = model(X)
     doc = {
         "weighting": prov["weighting"],

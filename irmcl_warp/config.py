@@ -370,7 +370,8 @@ class WorldsConfig:
     map_drive_m: float = 400.0  # map_drive=random: its length (the map: log-odds of its scans at their true poses)
     kidnap_at_s: float = 0.0  # > 0: that far into each run, the robot is carried to another drive's place
     calibration: Optional[str] = None  # the confidence's calibration (JSON of eval.confidence fit); None: the one
-    # shipped for mcl.weighting (irmcl_warp/mcl/calibration/<weighting>.json), else features only
+    # shipped for mcl.weighting (irmcl_warp/mcl/calibration/<weighting>.json), else features only; "off": features
+    # only (the tuning runs a calibration of new features is fitted on)
     confident_above: float = 0.8  # a run ends "localized" only with its confidence at or above this
     lost_below: float = 0.2  # once localized, a confidence below this for lost_after_s ...
     lost_after_s: float = 1.0  # ... means lost: the filter starts again from a uniform spread and says so (1 s
@@ -383,6 +384,10 @@ class WorldsConfig:
     # FeatureTracker; False: moved by the odometry only)
     search_rivals_every: int = 0  # > 0: every this many updates, search the map's free space (0.5 m, 22.5 deg grid)
     # for places the scan fits as well as the estimate's, and keep them as rivals (0: rivals are former modes only)
+    rival_seed_below: float = 0.0  # > 0: when a rival has explained the scans this much better than the estimate
+    # (FeatureTracker's evidence, in scan shares summed over updates, <= -this), give rival_seed_share of the
+    # particles its place and let the filter's weights judge (0: off, as runs before it; mcl/worlds.py)
+    rival_seed_share: float = 0.5
 
 
 @dataclass
@@ -574,6 +579,8 @@ RANGES = {
     "worlds.lost_agreement_below": (0, 1),
     "worlds.lost_agreement_updates": (1, None),
     "worlds.search_rivals_every": (0, None),
+    "worlds.rival_seed_below": (0, None),
+    "worlds.rival_seed_share": ("> 0", 1),
     "localize.num_starts": (1, None),
     "localize.run_s": ("> 0", None),
     "localize.kidnap_at_s": (0, None),

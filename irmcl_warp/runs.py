@@ -251,6 +251,8 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
             value = _get(settings, key)
         except KeyError:
             continue
+        if key == "worlds.calibration" and value == "off":  # features only: no file read
+            continue
         if not value and key == "worlds.calibration":  # none given: the one shipped for the weighting, if any
             value = shipped_calibration(_get(settings, "mcl.weighting"))
         if value:

@@ -305,13 +305,15 @@ def _worlds_cfg(*extra):
     )
 
 
-def _fake_calibration(path):
-    """A calibration that trusts the scan's agreement alone (for the stage's bookkeeping, not a fitted one)."""
+def _fake_calibration(path, refine_rivals=True, search_every=5):
+    """A calibration that trusts the scan's agreement alone (for the stage's bookkeeping, not a fitted one), as
+    if fitted on runs tracking rivals as +exp=worlds does."""
     coef = np.zeros(len(FEATURES))
     coef[FEATURES.index("agreement")] = 6.0
     path.write_text(
         json.dumps(
             {
+                "tracker": {"refine_rivals": refine_rivals, "search_every": search_every},
                 "features": list(FEATURES),
                 "coef": coef.tolist(),
                 "intercept": 0.0,
@@ -407,7 +409,7 @@ def test_the_stage_searches_for_rivals_when_asked(tmp_path, monkeypatch):
     from irmcl_warp.mcl.worlds import run_worlds
 
     monkeypatch.chdir(tmp_path)
-    cal = _fake_calibration(tmp_path / "cal.json")
+    cal = _fake_calibration(tmp_path / "cal.json", search_every=2)
     out = run_worlds(
         _worlds_cfg(
             f"worlds.calibration={cal}",
@@ -508,10 +510,151 @@ def test_a_rival_place_is_remembered_until_the_scans_rule_it_out():
     assert f[FEATURES.index("rival_margin")] == 1.0 and len(tracker.rivals) == 0
 
 
+def test_a_calibration_refuses_runs_that_track_rivals_otherwise(tmp_path, monkeypatch):
+    from irmcl_warp.mcl.worlds import run_worlds
+
+    monkeypatch.chdir(tmp_path)
+    cal = _fake_calibration(tmp_path / "cal.json", refine_rivals=False, search_every=0)
+    with pytest.raises(ValueError, match="tracked rivals as"):
+        run_worlds(_worlds_cfg(f"worlds.calibration={cal}"))  # +exp=worlds: searched every 5, refined
+
+
+class _TwoPlaces:
+    """The scan's agreement: ``a`` at places x < 5 (where the set is), ``b`` elsewhere (the rival)."""
+
+    def __init__(self, a, b):
+        self.a, self.b = a, b
+
+    def __call__(self, pose, *_):
+        return self.a if pose[0] < 5 else self.b
+
+    def many(self, poses, *_):
+        return np.array([self(p) for p in poses])
+
+
+def _set_on_a_rival_at_b(tracker):
+    """One update with most weight at A (x = 2) and a mode at B (x = 8): B becomes a rival. Returns A's cloud."""
+    rng = np.random.default_rng()
+    a, b = np.array([2.0, 2.0, 0.0]), np.array([8.0, 2.0, np.pi])
+    both = np.vstack([a + rng.normal(0, 0.05, (500, 3)), b + rng.normal(0, 0.05, (500, 3))])
+    tracker(both, np.r_[np.full(500, 0.5), np.zeros(500)], None, None, None)
+    assert len(tracker.rivals) == 1
+    return a + rng.normal(0, 0.05, (1000, 3))
+
+
+def test_a_rival_that_explains_the_scans_better_gathers_evidence_against_the_estimate():
+    """The set sits on A, B fits every scan 0.3 better: each update adds -0.3 to B's evidence, the feature reads
+    it (bounded at -EVIDENCE_CAP), best_rival names B, and forget_evidence starts it again."""
+    from irmcl_warp.mcl.confidence import EVIDENCE_CAP, FeatureTracker
+
+    tracker = FeatureTracker(_TwoPlaces(0.6, 0.9), recent=3)
+    only_a = _set_on_a_rival_at_b(tracker)
+    ev = FEATURES.index("rival_evidence")
+    for k in range(2, 6):
+        f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+        assert f[ev] == pytest.approx(-0.3 * k)
+    pose, evidence = tracker.best_rival()
+    assert pose[0] == pytest.approx(8.0, abs=0.1) and evidence == pytest.approx(-1.5)
+    for _ in range(10):
+        f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+    assert f[ev] == -EVIDENCE_CAP and tracker.best_rival()[1] < -EVIDENCE_CAP  # the feature is bounded, not the sum
+    tracker.forget_evidence()
+    f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+    assert f[ev] == pytest.approx(-0.3)
+
+
+def test_a_rival_slightly_worse_at_every_scan_is_ruled_out_once_its_evidence_adds_up():
+    """B fits each scan 0.1 worse than A: within rule_out of the recent agreement, so only the evidence summed
+    over updates rules it out, at EVIDENCE_CAP (3.0: the 30th update); without a rival the feature reads the cap."""
+    from irmcl_warp.mcl.confidence import EVIDENCE_CAP, FeatureTracker
+
+    tracker = FeatureTracker(_TwoPlaces(0.9, 0.8), recent=3)
+    only_a = _set_on_a_rival_at_b(tracker)
+    ev = FEATURES.index("rival_evidence")
+    for _ in range(27):
+        f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+    assert len(tracker.rivals) == 1 and f[ev] == pytest.approx(2.8)
+    for _ in range(3):
+        f, _ = tracker(only_a, np.zeros(1000), None, None, None)
+    assert len(tracker.rivals) == 0 and f[ev] == EVIDENCE_CAP and tracker.best_rival() is None
+
+
+def test_seeding_a_rival_gives_it_its_share_of_the_particles_with_equal_weights():
+    from irmcl_warp.mcl.worlds import SEED_STD, seed_at
+
+    pf = _filter(weighting="likelihood_field")
+    pf.init_uniform()
+    rival = np.array([12.0, 7.0, 1.0])
+    log_w = np.full(pf.num_particles, -50.0)
+    log_w[:10] = 0.0  # the set's weight lies on ten particles
+    pf.log_w.assign(log_w.astype(np.float32))
+    before = pf.particles.numpy()[:10].copy()
+    seed_at(pf, rival, 0.25)
+    p, w = pf.particles.numpy(), pf.log_w.numpy()
+    assert len(p) == 2000 and not w.any()
+    near = np.hypot(*(p[:, :2] - rival[:2]).T) < 5 * SEED_STD[0]
+    assert near.sum() == 500 and np.abs(np.angle(np.exp(1j * (p[near, 2] - 1.0)))).max() < 5 * SEED_STD[2]
+    kept = p[~near]
+    assert all(np.any(np.all(np.isclose(before, q, atol=1e-6), 1)) for q in kept)  # drawn by weight: the ten
+
+
+def test_the_stage_seeds_a_rival_once_its_evidence_passes_the_setting_and_says_when():
+    """follow_with_confidence with a tracker whose rival gathers -0.5 a update: seeded at the third update
+    (-1.5 <= -1.2), its evidence forgotten, again three updates later; the times are in the trace."""
+    from types import SimpleNamespace
+
+    from irmcl_warp.mcl.worlds import follow_with_confidence
+
+    class Tracker:
+        evidence = 0.0
+
+        def __call__(self, particles, *_):
+            self.evidence -= 0.5
+            return np.zeros(len(FEATURES)), SimpleNamespace(poses=np.array([[2.0, 2.0, 0.0]]))
+
+        def best_rival(self):
+            return np.array([12.0, 7.0, 0.0]), self.evidence
+
+        def forget_evidence(self):
+            self.evidence = 0.0
+
+    log = _standing_then_driving_log(n=50)
+    m = MCLConfig(update_min_trans_m=0.04, first_update="motion")
+    pf = _filter(weighting="likelihood_field", update_min_trans_m=0.04, first_update="motion")
+    pf.init_uniform()
+    w = SimpleNamespace(
+        **dict(confident_above=0.8, lost_below=0.2, lost_after_s=1.0, lost_agreement_below=0.0),
+        **dict(lost_agreement_updates=2, relocalize=False, rival_seed_below=1.2, rival_seed_share=0.5),
+    )
+    trace = follow_with_confidence(pf, log, m, w, Tracker(), None)
+    t_updates = (log.stamps - log.stamps[0])[trace["updated"]]
+    assert trace["rival_seeded_at_s"] == pytest.approx(t_updates[2::3][: len(trace["rival_seeded_at_s"])])
+    assert len(trace["rival_seeded_at_s"]) == len(t_updates) // 3 >= 3
+    near = np.hypot(*(pf.particles.numpy()[:, :2] - [12.0, 7.0]).T) < 1.0
+    assert near.mean() >= 0.3  # the last seeding's half, moved by the updates since
+
+
+def test_a_calibration_of_fewer_features_reads_its_own_columns(tmp_path):
+    from irmcl_warp.mcl.confidence import Confidence
+
+    older = [f for f in FEATURES if f != "rival_evidence"]
+    path = tmp_path / "old.json"
+    coef = [3.0 if f == "agreement" else 0.0 for f in older]
+    path.write_text(
+        json.dumps({"features": older, "coef": coef, "intercept": 0.0, "mean": [0.0] * 8, "scale": [1.0] * 8})
+    )
+    row = np.zeros(len(FEATURES))
+    row[FEATURES.index("agreement")], row[FEATURES.index("rival_evidence")] = 0.5, -100.0
+    assert Confidence.load(path)(row) == pytest.approx(1 / (1 + np.exp(-1.5)))
+    path.write_text(path.read_text().replace('"top_weight"', '"no_such_feature"'))
+    with pytest.raises(ValueError, match="no_such_feature"):
+        Confidence.load(path)
+
+
 def test_the_search_finds_a_twin_floors_look_alike_place():
     """On a floor whose walls repeat after a half turn, the place the scan fits as well as the truth is the truth
     turned about the floor's centre (the furniture aside); the search over the free space finds it."""
-    from irmcl_warp.mcl.worlds import search_grid
+    from irmcl_warp.mcl.confidence import search_grid
     from irmcl_warp.mapping import integrate_scans
     from irmcl_warp.geometry import compose
 

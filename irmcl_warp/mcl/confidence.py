@@ -8,7 +8,9 @@ confidence built on them (issue 33).
   wall of the map (its distance transform). Near 1 where the scan fits the map at that pose.
 * ``FEATURES``: what the robot has at each update: the heaviest mode's weight, the second's, the scan's agreement
   at the heaviest mode and at the second, that agreement over the last updates, its margin over the best rival
-  place the set once held (``FeatureTracker``), how many updates the filter has made and the spread. ``Confidence``: a logistic model of these (fitted by ``fit_logistic`` on the tuning worlds'
+  place the set once held (``FeatureTracker``), how many updates the filter has made, the spread, and the evidence
+  summed since a rival appeared: how much better the estimate has explained the scans than its best rival (negative
+  while a rival explains them better: the set dropped the right place and cannot come back by itself). ``Confidence``: a logistic model of these (fitted by ``fit_logistic`` on the tuning worlds'
   runs, eval.confidence) giving a number meant as the probability that the estimate lies within
   ``RIGHT_M`` / ``RIGHT_DEG`` of the truth.
 * ``auroc``, ``reliability``: how well a confidence separates right from wrong, and how well it is calibrated.
@@ -41,7 +43,10 @@ FEATURES = (
     "rival_margin",
     "log_updates",
     "log_spread",
+    "rival_evidence",
 )
+EVIDENCE_CAP = 3.0  # rival_evidence is read within +-this, and this without a rival: a rival the estimate has
+# out-explained by this much (in scan shares summed over updates) is ruled out
 
 
 @dataclass
@@ -177,6 +182,19 @@ class ScanAgreement:
         return cand[best], float(score[best])
 
 
+def search_grid(grid, spacing_m: float = 0.5, headings: int = 16) -> np.ndarray:
+    """Poses [k, 3] on the map's known free cells every ``spacing_m``, each at ``headings`` headings: where the
+    confidence looks for look-alike places."""
+    step = max(1, int(round(spacing_m / grid.resolution_m)))
+    free = grid.known & (grid.probability < 0.35)
+    free[np.arange(free.shape[0]) % step != 0] = False
+    free[:, np.arange(free.shape[1]) % step != 0] = False
+    iy, ix = np.nonzero(free)
+    xy = np.column_stack([ix, iy]) * grid.resolution_m + np.asarray(grid.origin_xy) + grid.resolution_m / 2
+    yaw = np.linspace(-np.pi, np.pi, headings, endpoint=False)
+    return np.column_stack([np.repeat(xy, headings, 0), np.tile(yaw, len(xy))])
+
+
 class FeatureTracker:
     """The confidence's features at each filter update, with what they remember across updates:
 
@@ -191,7 +209,12 @@ class FeatureTracker:
       drift and a mode's rough mean pose would otherwise rule a true place out. With ``search_every`` = k > 0,
       every k-th update also searches ``search_poses`` (a coarse grid of the map's free space) for places the
       scan fits as well as the estimate's, and keeps them as rivals (``ScanAgreement.search``): a look-alike place
-      the particle set never held, or dropped before it became a mode."""
+      the particle set never held, or dropped before it became a mode.
+
+    Each rival also carries its evidence: the heaviest mode's agreement less the rival's, summed over the updates
+    since it appeared (with ``refine_rivals`` the heaviest mode's agreement is also its best near it, as the rival's
+    is, so that neither is favoured). ``rival_evidence`` is the smallest over the rivals (EVIDENCE_CAP without
+    one; a rival whose evidence reaches EVIDENCE_CAP is dropped); ``best_rival()`` the pose whose evidence it is."""
 
     def __init__(
         self,
@@ -216,6 +239,7 @@ class FeatureTracker:
         self.history = deque(maxlen=self.recent)
         self.rivals = np.zeros((0, 3))
         self.rival_history = np.zeros((0, self.recent))  # NaN-padded recent agreements, newest last
+        self.rival_evidence = np.zeros(0)  # the heaviest mode's agreement less the rival's, summed since it appeared
         self.updates = 0
 
     def __call__(
@@ -231,7 +255,7 @@ class FeatureTracker:
         second = self.agreement(m.poses[1], *scan) if len(m.weights) > 1 else 0.0
         self.history.append(top)
         recent_top = float(np.mean(self.history))
-        rival_margin = self._rivals(m, odom_delta, scan, recent_top)
+        rival_margin, evidence = self._rivals(m, odom_delta, scan, recent_top, top)
         f = np.array(
             [
                 m.weights[0],
@@ -242,11 +266,24 @@ class FeatureTracker:
                 rival_margin,
                 np.log1p(self.updates),
                 np.log(spread(particles, log_w) + 0.01),
+                evidence,
             ]
         )
         return f, m
 
-    def _rivals(self, m: Modes, odom_delta, scan, recent_top: float) -> float:
+    def best_rival(self) -> tuple[np.ndarray, float] | None:
+        """(the pose of the rival with the least evidence against it, that evidence), or None without a rival."""
+        if not len(self.rivals):
+            return None
+        i = int(np.argmin(self.rival_evidence))
+        return self.rivals[i].copy(), float(self.rival_evidence[i])
+
+    def forget_evidence(self) -> None:
+        """Start every rival's evidence again from 0 (after the particle set was given a rival's place: the
+        filter's own weights judge it from there)."""
+        self.rival_evidence[:] = 0.0
+
+    def _rivals(self, m: Modes, odom_delta, scan, recent_top: float, top: float) -> tuple[float, float]:
         if len(self.rivals):  # moved as the robot moved
             self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
         found = []
@@ -264,20 +301,26 @@ class FeatureTracker:
             if len(self.rivals) < self.max_rivals:
                 self.rivals = np.vstack([self.rivals, pose])
                 self.rival_history = np.vstack([self.rival_history, np.full(self.recent, np.nan)])
+                self.rival_evidence = np.append(self.rival_evidence, 0.0)
         if not len(self.rivals):
-            return 1.0
+            return 1.0, EVIDENCE_CAP
         if self.refine_rivals:
             refined = [self.agreement.refine(p, *scan) for p in self.rivals]
             self.rivals = np.array([p for p, _ in refined])
             scores = np.array([a for _, a in refined])
+            top = self.agreement.refine(m.poses[0], *scan)[1]  # the estimate's best near it, as the rivals' are
         else:
             scores = self.agreement.many(self.rivals, *scan)
+        self.rival_evidence = self.rival_evidence + (top - scores)
         near_top = np.hypot(*(self.rivals[:, :2] - m.poses[0, :2]).T) < self.rival_apart_m  # the set came to it
         self.rival_history = np.column_stack([self.rival_history[:, 1:], scores])
         recent = np.nansum(self.rival_history, 1) / np.maximum(np.isfinite(self.rival_history).sum(1), 1)
-        keep = ~near_top & (recent > recent_top - self.rule_out)
+        keep = ~near_top & (recent > recent_top - self.rule_out) & (self.rival_evidence < EVIDENCE_CAP)
         self.rivals, self.rival_history = self.rivals[keep], self.rival_history[keep]
-        return float(recent_top - recent[keep].max()) if keep.any() else 1.0
+        self.rival_evidence = self.rival_evidence[keep]
+        if not keep.any():
+            return 1.0, EVIDENCE_CAP
+        return float(recent_top - recent[keep].max()), float(max(self.rival_evidence.min(), -EVIDENCE_CAP))
 
 
 def compose_rows(poses: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -305,9 +348,16 @@ class Confidence:
     nearest end, so the model is never extrapolated. (The simulated tuning drives make at most ~135 updates; a
     real log makes thousands, and a 100k model fitted without bounds read ``log_updates`` 4-5 standard deviations
     past its data and called every long right run unsure: 0.12 at the end of MIT Killian, 0.6 on intel.)
-    Calibrations fitted before the bounds were kept have none and are read as they were."""
+    Calibrations fitted before the bounds were kept have none and are read as they were.
 
-    def __init__(self, coef, intercept: float, mean, scale, meta: dict | None = None, lo=None, hi=None):
+    ``tracker``: how the runs it was fitted on tracked their rivals (``FeatureTracker``'s ``refine_rivals`` and
+    ``search_every``): features made otherwise are not the ones it was fitted on."""
+
+    def __init__(
+        self, coef, intercept: float, mean, scale, meta: dict | None = None, lo=None, hi=None, features=FEATURES
+    ):
+        self.features = tuple(features)  # the names of the features it reads, a subset of FEATURES in that order
+        self.columns = np.array([FEATURES.index(f) for f in self.features], int)
         self.coef, self.intercept = np.asarray(coef, float), float(intercept)
         self.mean, self.scale = np.asarray(mean, float), np.asarray(scale, float)
         self.lo = None if lo is None else np.asarray(lo, float)
@@ -315,30 +365,46 @@ class Confidence:
         self.meta = meta or {}
 
     def __call__(self, features: np.ndarray) -> np.ndarray:
-        f = np.asarray(features, float)
+        """``features``: rows of all FEATURES (a calibration fitted on fewer reads its own columns)."""
+        f = np.asarray(features, float)[..., self.columns]
         if self.lo is not None:
             f = np.clip(f, self.lo, self.hi)
         z = (f - self.mean) / self.scale @ self.coef + self.intercept
         return 1.0 / (1.0 + np.exp(-z))
+
+    @property
+    def tracker(self) -> dict:
+        """{"refine_rivals", "search_every"} of the runs it was fitted on (calibrations older than the setting: none)."""
+        return {"refine_rivals": False, "search_every": 0, **self.meta.get("tracker", {})}
 
     @classmethod
     def load(cls, path) -> "Confidence":
         path = Path(path)
         try:
             doc = json.loads(path.read_text())
-            if tuple(doc["features"]) != FEATURES:
+            unknown = [f for f in doc["features"] if f not in FEATURES]
+            if unknown:
                 raise ValueError(
-                    f"features {doc['features']}, this code computes {list(FEATURES)}: fit it again "
+                    f"features {unknown} are not among those this code computes ({list(FEATURES)}): fit it again "
                     "(python -m eval.confidence fit)"
                 )
-            return cls(doc["coef"], doc["intercept"], doc["mean"], doc["scale"], doc, doc.get("lo"), doc.get("hi"))
+            return cls(
+                doc["coef"],
+                doc["intercept"],
+                doc["mean"],
+                doc["scale"],
+                doc,
+                doc.get("lo"),
+                doc.get("hi"),
+                doc["features"],
+            )
         except (OSError, KeyError, json.JSONDecodeError) as e:
             raise ValueError(f"{path}: not a confidence calibration ({e})") from None
 
     def to_json(self) -> dict:
         return {
             **self.meta,
-            "features": list(FEATURES),
+            "features": list(self.features),
             "coef": self.coef.tolist(),
             "intercept": self.intercept,
             "mean": self.mean.tolist(),

@@ -29,7 +29,7 @@ from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.mcap_run import write_run_mcap
 from irmcl_warp.io.plausibility import check_odometry
 from irmcl_warp.mapping.mapio import load_map, occupancy_data
-from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement
+from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement, search_grid
 from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
 from irmcl_warp import runs
@@ -60,7 +60,14 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
         return None, f"no confidence: {why}"
     occupancy = np.where(grid.known, grid.probability, 0.0)
     agreement = ScanAgreement(occupancy, grid.origin_xy, grid.resolution_m, m.field_occ_threshold)
-    judge = Judge(FeatureTracker(agreement), Confidence.load(path), log.info.angles_rad, log.T_base_laser)
+    conf = Confidence.load(path)
+    tracker = FeatureTracker(  # tracking rivals as the runs it was fitted on did
+        agreement,
+        refine_rivals=conf.tracker["refine_rivals"],
+        search_poses=search_grid(grid) if conf.tracker["search_every"] > 0 else None,
+        search_every=conf.tracker["search_every"],
+    )
+    judge = Judge(tracker, conf, log.info.angles_rad, log.T_base_laser)
     return judge, f"confidence calibrated by {path.name}"
 
 

@@ -11,7 +11,11 @@ scan's agreement with the map: irmcl_warp/mcl/confidence.py); with a calibration
 confidence, declares the robot localized at ``worlds.confident_above`` and lost when the confidence stays below
 ``worlds.lost_below`` for ``worlds.lost_after_s``, or the scan's agreement at the estimate below
 ``worlds.lost_agreement_below`` for ``worlds.lost_agreement_updates`` updates (``LostRule``; then, with
-``worlds.relocalize``, starts again from a uniform spread and says so). The estimate is the heaviest mode's pose.
+``worlds.relocalize``, starts again from a uniform spread and says so). With ``worlds.rival_seed_below`` a rival
+place that has explained the scans that much better than the estimate (the confidence's evidence) is given
+``worlds.rival_seed_share`` of the particles (``seed_at``): resampling drops a look-alike place's particles before
+the scans can tell the two apart, and a set without particles there cannot come back to it by itself. The estimate
+is the heaviest mode's pose.
 
 Writes outputs/<exp>/worlds/<split>-<weighting>-<particles>-<id>/: per world and run ``<world>-run<k>.npz``
 (stamps, estimate, truth, features, confidence, updated, the log mean likelihood of each update's scan) and
@@ -40,7 +44,9 @@ from irmcl_warp.mcl.confidence import (
     FeatureTracker,
     ScanAgreement,
     auroc,
+    normalised,
     reliability,
+    search_grid,
     right,
     shipped,
 )
@@ -77,8 +83,19 @@ def run_worlds(cfg) -> Path:
 
 
 def calibration_of(cfg) -> Confidence | None:
+    if cfg.worlds.calibration == "off":  # features only (tuning runs for a calibration of new features)
+        return None
     path = cfg.worlds.calibration or shipped(cfg.mcl.weighting)
-    return Confidence.load(path) if path else None
+    if not path:
+        return None
+    conf = Confidence.load(path)
+    mine = {"refine_rivals": bool(cfg.worlds.refine_rivals), "search_every": int(cfg.worlds.search_rivals_every)}
+    if conf.tracker != mine:
+        raise ValueError(
+            f"{path} was fitted on runs that tracked rivals as {conf.tracker}; this run tracks them as {mine} "
+            "(worlds.refine_rivals, worlds.search_rivals_every): its features would not be the ones it was fitted on"
+        )
+    return conf
 
 
 def world_map(world, cfg, device):
@@ -225,19 +242,6 @@ def unmapped_share(grid, poses: np.ndarray) -> float:
     return float(1.0 - known.mean()) if len(ij) else 0.0
 
 
-def search_grid(grid, spacing_m: float = 0.5, headings: int = 16) -> np.ndarray:
-    """Poses [k, 3] on the map's known free cells every ``spacing_m``, each at ``headings`` headings: where the
-    confidence looks for look-alike places."""
-    step = max(1, int(round(spacing_m / grid.resolution_m)))
-    free = grid.known & (grid.probability < 0.35)
-    free[np.arange(free.shape[0]) % step != 0] = False
-    free[:, np.arange(free.shape[1]) % step != 0] = False
-    iy, ix = np.nonzero(free)
-    xy = np.column_stack([ix, iy]) * grid.resolution_m + np.asarray(grid.origin_xy) + grid.resolution_m / 2
-    yaw = np.linspace(-np.pi, np.pi, headings, endpoint=False)
-    return np.column_stack([np.repeat(xy, headings, 0), np.tile(yaw, len(xy))])
-
-
 class LostRule:
     """When a localized robot counts as lost (issue 33), update by update: ``rule(t, confidence, agreement)`` is True
     at the update where it is declared lost. Localized: the confidence reached ``confident_above``. Lost: either the
@@ -283,7 +287,7 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
     est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
     prob, updated, mean_lik = np.full(n, np.nan), np.zeros(n, bool), np.full(n, np.nan)
     particles = np.zeros(n, np.int64)  # the count each update ran with (mcl.kld_sampling moves it)
-    lost_at, pose, p, weighed = [], None, np.nan, False
+    lost_at, seeded_at, pose, p, weighed = [], [], None, np.nan, False
     rule, last_odom = LostRule(w), log.odom[0]
     angles, T = log.info.angles_rad, log.T_base_laser
     for i in range(n):
@@ -296,6 +300,11 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
             f, md = tracker(pf.particles.numpy(), pf.log_w.numpy(), log.ranges_m[i], angles, T, delta)
             feats[i], pose = f, md.poses[0]
             mean_lik[i] = pf.log_mean_likelihood(pf.log_lik)  # what AMCL's w_slow / w_fast average (lost_rules)
+            rival = tracker.best_rival() if getattr(w, "rival_seed_below", 0.0) > 0 else None
+            if rival is not None and rival[1] <= -w.rival_seed_below:
+                seed_at(pf, rival[0], w.rival_seed_share)
+                tracker.forget_evidence()
+                seeded_at.append(float(log.stamps[i] - log.stamps[0]))
             if conf is not None:
                 p = float(conf(f))
                 if rule(log.stamps[i], p, f[AGREEMENT]):
@@ -314,7 +323,28 @@ def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, con
         "log_mean_likelihood": mean_lik,
         "particles": particles,
         "lost_at_s": np.array(lost_at, float),
+        "rival_seeded_at_s": np.array(seeded_at, float),
     }
+
+
+SEED_STD = (0.2, 0.2, 0.05)  # m, m, rad: the particles given a rival's place, about its pose (ScanAgreement.refine's
+# reach per update is 0.2 m and 0.1 rad)
+
+
+def seed_at(pf, pose, share: float) -> None:
+    """Give ``share`` of the filter's particles the place ``pose`` (normal about it, SEED_STD), the rest drawn from
+    the current set by weight; equal weights after, so the next scans decide. Particles off the map sit at ``pose``."""
+    n = pf.num_particles
+    k = int(round(share * n))
+    w = normalised(pf.log_w.numpy())
+    kept = pf.particles.numpy()[pf.rng.choice(n, n - k, p=w)]
+    new = np.asarray(pose, float) + pf.rng.normal(0.0, 1.0, (k, 3)) * np.asarray(SEED_STD)
+    H, W = pf.free_space.shape
+    cells = pf.free_space.node_of(new[:, :2])
+    off = np.any((cells < 0) | (cells >= np.array([W, H])), 1)
+    new[off] = pose
+    new[:, 2] = np.angle(np.exp(1j * new[:, 2]))
+    pf.set_particles(np.vstack([kept, new]))
 
 
 def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
@@ -340,6 +370,7 @@ def score_run(log: LaserLog, trace: dict, cut: int | None, w) -> dict:
         "confidence_at_end": None if np.isnan(p_end) else p_end,
         "localized_at_end": bool(p_end >= w.confident_above) if not np.isnan(p_end) else None,
         "lost_at_s": trace["lost_at_s"].tolist(),
+        "rival_seeded_at_s": trace.get("rival_seeded_at_s", np.zeros(0)).tolist(),
     }
     if "particles" in trace and trace["updated"].any():  # the particles an update ran with, on average
         out["particles_per_update"] = float(trace["particles"][trace["updated"]].mean())
@@ -398,6 +429,7 @@ def world_summary(rows: list[dict]) -> dict:
         "false_alarms": int(sum(r["false_alarms"] for r in rows)),
         "tracking_right_h": float(sum(r["tracking_right_s"] for r in rows) / 3600),
     }
+    s["rival_seeds"] = int(sum(len(r.get("rival_seeded_at_s", [])) for r in rows))
     unmapped = [r["truth_unmapped_share"] for r in rows if "truth_unmapped_share" in r]
     if unmapped:
         s["drives_leaving_map"] = int(sum(u > UNMAPPED_WARN for u in unmapped))
