@@ -368,6 +368,9 @@ class WorldsConfig:
     # enter) | random (a random drive map_drive_m long: the maps before the twenty-sixth session, which left rooms
     # unmapped that the test drives entered)
     map_drive_m: float = 400.0  # map_drive=random: its length (the map: log-odds of its scans at their true poses)
+    map_logodds_limit: Optional[float] = None  # the map's log-odds bounded by +-this (None: unbounded: a static
+    # floor's walls are not forgotten; 4.0: the maps before the twenty-seventh session, where the beams that graze a
+    # wall on a long drive cleared it: mcl/worlds.py logodds_bounds)
     kidnap_at_s: float = 0.0  # > 0: that far into each run, the robot is carried to another drive's place
     calibration: Optional[str] = None  # the confidence's calibration (JSON of eval.confidence fit); None: the one
     # shipped for mcl.weighting (irmcl_warp/mcl/calibration/<weighting>.json), else features only; "off": features

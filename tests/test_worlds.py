@@ -510,6 +510,33 @@ def test_a_rival_place_is_remembered_until_the_scans_rule_it_out():
     assert f[FEATURES.index("rival_margin")] == 1.0 and len(tracker.rivals) == 0
 
 
+def test_a_bounded_map_forgets_a_wall_that_later_beams_graze_and_an_unbounded_one_keeps_it():
+    """150 scans hit a wall cell head on, then 200 beams pass through it and end beyond (as beams grazing a wall
+    do, their range a little long): with log-odds bounded at +-4 the cell ends free, unbounded it stays a wall."""
+    from irmcl_warp.mapping import integrate_scans
+    from irmcl_warp.mcl.worlds import logodds_bounds
+
+    head_on = np.tile([0.025, 1.0, -np.pi / 2], (150, 1))  # from 1 m above the cell (0, 0), looking down
+    grazing = np.tile([-3.0, 0.025, 0.0], (200, 1))  # along the cell row, ending 1 m past the cell
+    poses = np.vstack([head_on, grazing])
+    ranges = np.r_[np.full(150, 0.99), np.full(200, 4.0)][:, None].astype(np.float32)
+    probs = {}
+    for limit in (4.0, None):
+        grid = integrate_scans(
+            poses,
+            ranges,
+            np.zeros(1),
+            resolution_m=0.05,
+            far_m=20.0,
+            bounds=(-4, -1, 4, 2),
+            device=DEVICE,
+            **logodds_bounds(limit),
+        )
+        i, j = grid.cell_of(np.array([[0.025, 0.0]]))[0]
+        probs[limit] = float(grid.probability[j, i])
+    assert probs[4.0] < 0.1 and probs[None] > 0.9, probs
+
+
 def test_a_calibration_refuses_runs_that_track_rivals_otherwise(tmp_path, monkeypatch):
     from irmcl_warp.mcl.worlds import run_worlds
 

@@ -22,7 +22,7 @@ class OccupancyGrid:
 
     @property
     def probability(self) -> np.ndarray:
-        return 1.0 / (1.0 + np.exp(-self.logodds))
+        return 1.0 / (1.0 + np.exp(-np.clip(self.logodds, -80.0, 80.0)))  # unbounded log-odds: no overflow
 
     @property
     def known(self) -> np.ndarray:
