@@ -32,10 +32,12 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
     """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
     worlds of ``side`` (tuning | test)."""
     X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set(), "particles": set(), "tracker": set()}
+    prov["maps"] = set()
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         w = doc.get("settings", {}).get("worlds", {})
         prov["tracker"].add((bool(w.get("refine_rivals", False)), int(w.get("search_rivals_every", 0))))
+        prov["maps"].add((w.get("map_drive", "random"), w.get("map_logodds_limit", 4.0)))  # (runs before: as named)
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
                 raise ValueError(
@@ -68,7 +70,9 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
             "their features differ; one calibration is for one"
         )
     refine, every = prov["tracker"].pop()
+    maps = [{"map_drive": d, "map_logodds_limit": limit} for d, limit in sorted(prov["maps"], key=str)]
     prov = {
+        "maps": maps[0] if len(maps) == 1 else maps,
         "tracker": {"refine_rivals": refine, "search_every": every},
         "runs": prov["runs"],
         "worlds": sorted(prov["worlds"]),
@@ -88,6 +92,7 @@ def fit(args) -> Path:
         "weighting": prov["weighting"],
         "num_particles": prov["particles"],
         "tracker": prov["tracker"],
+        "maps": prov["maps"],
         "updates": int(len(y)),
         "right_share": float(y.mean()),
         "tuning_auroc": auroc(model(X), y),

@@ -194,7 +194,7 @@ def test_a_calibrated_confidence_judges_the_run_and_changes_no_pose(world, tmp_p
 
 def test_the_judge_changes_no_pose(world):
     from irmcl_warp.config import compose_config
-    from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement
+    from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, Judge, ScanAgreement
     from irmcl_warp.mcl.online import filter_in_map
     from irmcl_warp.mcl.track import follow
     from irmcl_warp.io import read_bag
@@ -210,7 +210,7 @@ def test_the_judge_changes_no_pose(world):
             FeatureTracker(
                 ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
             ),
-            Confidence(np.zeros(8), 0.0, np.zeros(8), np.ones(8)),
+            Confidence(np.zeros(len(FEATURES)), 0.0, np.zeros(len(FEATURES)), np.ones(len(FEATURES))),
             log.info.angles_rad,
             log.T_base_laser,
         )

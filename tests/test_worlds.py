@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 import numpy as np
 import pytest
 
@@ -546,6 +547,22 @@ def test_a_calibration_refuses_runs_that_track_rivals_otherwise(tmp_path, monkey
         run_worlds(_worlds_cfg(f"worlds.calibration={cal}"))  # +exp=worlds: searched every 5, refined
 
 
+def test_a_calibration_fitted_on_other_maps_is_a_loud_warning(tmp_path):
+    from irmcl_warp.mcl.worlds import calibration_of
+
+    cal = _fake_calibration(tmp_path / "cal.json")
+    doc = json.loads(cal.read_text())
+    doc["maps"] = {"map_drive": "random", "map_logodds_limit": None}  # as the stage's tests make theirs
+    cal.write_text(json.dumps(doc))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert calibration_of(_worlds_cfg(f"worlds.calibration={cal}")) is not None
+    doc["maps"] = {"map_drive": "cover", "map_logodds_limit": 4.0}
+    cal.write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=f"{cal.name} was fitted on runs whose maps"):
+        calibration_of(_worlds_cfg(f"worlds.calibration={cal}"))
+
+
 class _TwoPlaces:
     """The scan's agreement: ``a`` at places x < 5 (where the set is), ``b`` elsewhere (the rival)."""
 
@@ -820,6 +837,23 @@ def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tm
     assert o["p_mcnemar"] == pytest.approx(0.0703125) and json.loads((tmp_path / "p.json").read_text())["drives"] == 10
     with pytest.raises(SystemExit, match="different drives"):
         main([str(tmp_path / "a"), str(tmp_path / "c")])
+
+
+def test_the_auroc_difference_resamples_drives_and_brackets_a_real_gain():
+    """A's confidence orders every drive's updates right, B's is noise: the interval lies above 0; A against itself
+    gives 0 in every resample."""
+    from eval.analyses.paired_worlds import auroc_difference
+
+    rng = np.random.default_rng()
+    a, b = {}, {}
+    for k in range(20):
+        y = rng.random(30) < 0.6
+        a[("w", k)] = (np.where(y, 0.7, 0.3) + rng.normal(0, 0.05, 30), y)
+        b[("w", k)] = (rng.random(30), y)
+    d = auroc_difference(a, b, draws=200)
+    assert d["a"] > 0.95 and abs(d["b"] - 0.5) < 0.1 and d["ci95"][0] > 0.2 and d["ci95"][0] <= d["difference"]
+    same = auroc_difference(a, a, draws=50)
+    assert same["difference"] == 0 and same["ci95"] == [0.0, 0.0]
 
 
 def test_the_unmapped_analysis_names_the_drives_that_leave_a_random_drives_map():

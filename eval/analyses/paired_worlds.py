@@ -6,7 +6,9 @@ Both runs localize the same drives (world, path seed), so their outcomes are pai
 one, a two-sided binomial test on the drives where exactly one of the two ended right (``right_at_end``) or
 localized by the protocol (``success``). Prints, per outcome, both counts, the discordant drives and the p-value, and
 the particles an update ran with on average (``particles_per_update``, with ``mcl.kld_sampling``); writes the same
-as JSON with ``--out``.
+as JSON with ``--out``. Given the runs' folders, also each run's AUROC (the confidence at every update against right
+or wrong) and a 95 % interval of the difference from resampling the drives (``BOOTSTRAP`` draws): the updates of one
+drive are not independent, the drives are.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import json
 from pathlib import Path
 
 OUTCOMES = ("right_at_end", "success", "localized_at_end")
+BOOTSTRAP = 2000  # drive resamples for the AUROC difference's interval (fixed seed 0)
 
 
 def mcnemar_exact(only_a: int, only_b: int) -> float:
@@ -56,6 +59,52 @@ def compare(a: dict, b: dict) -> dict:
     return out
 
 
+def per_drive_judged(run: Path) -> dict[tuple[str, int], tuple] | None:
+    """(world, run) -> (confidence, right) at that drive's updates, from a worlds run's folder (None when a drive's
+    ``<world>-run<k>.npz`` is not there: a kept metrics.json alone)."""
+    import numpy as np
+
+    from irmcl_warp.mcl.confidence import right
+
+    doc = json.loads((run / "metrics.json").read_text())
+    if not all((run / f"{r['world']}-run{r['run']}.npz").is_file() for r in doc["runs"]):
+        return None
+    out = {}
+    for r in doc["runs"]:
+        z = np.load(run / f"{r['world']}-run{r['run']}.npz")
+        ok = z["updated"] & np.isfinite(z["confidence"]) & np.all(np.isfinite(z["estimate"]), 1)
+        out[(r["world"], int(r["run"]))] = (z["confidence"][ok], right(z["estimate"][ok], z["truth"][ok]))
+    return out
+
+
+def auroc_difference(a: dict, b: dict, draws: int = BOOTSTRAP) -> dict:
+    """Both runs' AUROC over the same drives and the 2.5/97.5 percentiles of (A - B) over drive resamples."""
+    import numpy as np
+
+    from irmcl_warp.mcl.confidence import auroc
+
+    keys = sorted(a)
+
+    def both(sample):
+        out = []
+        for side in (a, b):
+            p = np.concatenate([side[k][0] for k in sample])
+            y = np.concatenate([side[k][1] for k in sample])
+            out.append(auroc(p, y))
+        return out
+
+    whole = both(keys)
+    rng = np.random.default_rng(0)
+    diffs = []
+    for _ in range(draws):
+        pick = [keys[i] for i in rng.integers(0, len(keys), len(keys))]
+        da, db = both(pick)
+        if np.isfinite(da) and np.isfinite(db):
+            diffs.append(da - db)
+    lo, hi = np.percentile(diffs, [2.5, 97.5])
+    return {"a": whole[0], "b": whole[1], "difference": whole[0] - whole[1], "ci95": [float(lo), float(hi)]}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("a", type=Path, help="a worlds run's folder (or its metrics.json)")
@@ -75,6 +124,14 @@ def main(argv=None) -> dict:
         n = out["drives"]
         print(
             f"| {key} | {o['a']}/{n} | {o['b']}/{n} | {len(o['only_a'])} | {len(o['only_b'])} | {o['p_mcnemar']:.3g} |"
+        )
+    judged = [per_drive_judged(p) if p.is_dir() else None for p in (args.a, args.b)]
+    if all(j is not None for j in judged):
+        out["auroc"] = auroc_difference(*judged)
+        au = out["auroc"]
+        print(
+            f"AUROC: A {au['a']:.3f}, B {au['b']:.3f}; A - B {au['difference']:+.3f} "
+            f"(95 % over drive resamples {au['ci95'][0]:+.3f} to {au['ci95'][1]:+.3f})"
         )
     for side in ("a", "b"):
         ppu = out[f"particles_per_update_{side}"]

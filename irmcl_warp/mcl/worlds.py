@@ -95,6 +95,14 @@ def calibration_of(cfg) -> Confidence | None:
             f"{path} was fitted on runs that tracked rivals as {conf.tracker}; this run tracks them as {mine} "
             "(worlds.refine_rivals, worlds.search_rivals_every): its features would not be the ones it was fitted on"
         )
+    fitted = conf.meta.get("maps")
+    mine = {"map_drive": cfg.worlds.map_drive, "map_logodds_limit": cfg.worlds.map_logodds_limit}
+    if fitted is not None and fitted != mine:
+        warnings.warn(
+            f"worlds: {path} was fitted on runs whose maps were made as {fitted}, this run's are made as {mine}: "
+            "the confidence may not be calibrated for them (fit it again on tuning runs of these maps)",
+            stacklevel=1,
+        )
     return conf
 
 
