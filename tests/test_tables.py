@@ -417,6 +417,11 @@ def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
         "per_update_a": "12.9k",
         "per_update_b": "20.0k",
     }
+    doc["auroc"] = {"a": 0.889, "b": 0.8584, "difference": 0.0306, "ci95": [-0.0371, 0.0904]}  # made from folders
+    (tmp_path / "checks" / f"paired_worlds_{PAIRED_WORLDS[0]}.json").write_text(json.dumps(doc))
+    assert _paired_worlds(tmp_path)[PAIRED_WORLDS[0]]["auroc"] == (
+        "0.889 against 0.858 (difference +0.031, 95 % over drive resamples -0.037 to +0.090)"
+    )
 
 
 def test_the_seeds_of_one_recipe_make_one_row_per_card_with_medians_and_spans():

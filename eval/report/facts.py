@@ -89,6 +89,10 @@ PAIRED_WORLDS = (
     "kld100k_vs_100k_gpu",
     "map_cover_vs_random_gpu",
     "map_cover_vs_random_cpu",
+    "rivals_vs_before_cpu",
+    "rivals_vs_before_gpu",
+    "rivals_vs_before_kidnap",
+    "unbounded_vs_bounded_cpu",
 )  # results/checks/paired_worlds_<name>.json
 
 
@@ -110,6 +114,12 @@ def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
                 facts[f"{key}_only_{side}"] = ", ".join(o[f"only_{side}"]) or "none"
         for side in ("a", "b"):
             facts[f"per_update_{side}"] = f"{d[f'particles_per_update_{side}'] / 1000:.1f}k"
+        if "auroc" in d:  # comparisons made from the runs' folders: the AUROCs and their difference's interval
+            au = d["auroc"]
+            facts["auroc"] = (
+                f"{au['a']:.3f} against {au['b']:.3f} (difference {au['difference']:+.3f}, 95 % over drive resamples "
+                f"{au['ci95'][0]:+.3f} to {au['ci95'][1]:+.3f})"
+            )
         out[name] = facts
     return out
 
@@ -252,6 +262,17 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         for how, names in u["leaving"].items():
             out[f"worlds_unmapped_{how}_count"] = f"{len(names)} of the {n} test drives"
             out[f"worlds_unmapped_{how}_drives"] = ", ".join(names) or "none"
+    import json
+
+    for path in sorted((RESULTS / "checks").glob("worlds_twins_*.json")):  # eval.analyses.twins
+        name = path.stem[len("worlds_twins_") :]
+        rows = json.loads(path.read_text())["drives"]
+        against = [f"{r['world']}-run{r['run']}" for r in rows if r["evidence"] <= 0]
+        out[f"worlds_twins_{name}_against"] = f"{len(against)} of the {len(rows)} twin-floor drives" + (
+            f" ({', '.join(against)})" if against else ""
+        )
+        wrong = [r for r in rows if not r["right_at_end"]]
+        out[f"worlds_twins_{name}_wrong_against"] = f"{sum(r['evidence'] <= 0 for r in wrong)} of the {len(wrong)}"
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value

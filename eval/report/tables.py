@@ -423,7 +423,8 @@ def worlds_table(runs: list) -> str:
     """Global localization on the held-out simulated floors (stage worlds): one row per kept run of the test split
     (observation model, particles, kidnapped or not), its counts over all runs and, per floor, how many runs
     ended right. Runs on the maps of a random mapping drive (before the twenty-sixth session: some test drives
-    entered rooms those maps lacked) say so in their label."""
+    entered rooms those maps lacked) say so in their label, as do runs on maps with bounded log-odds (before the
+    twenty-seventh: the beams grazing a wall cleared it) and runs that seed a rival place."""
     rows = [
         "| floors | weighting | particles | device | kidnap | localized (protocol) | right at the end | ended "
         "confident | confidently wrong | AUROC | false alarms per hour | kidnap detected <= 2 s | re-converged "
@@ -443,14 +444,18 @@ def worlds_table(runs: list) -> str:
         back = f"{s['reconverged_within_5s']}/{k}" if k else "-"
         agree = r.setting("worlds.lost_agreement_below") or 0  # (runs before the agreement trigger: none)
         random_map = (r.setting("worlds.map_drive") or "random") == "random"  # (runs before the setting: random)
+        limit = r.setting("worlds.map_logodds_limit")  # (runs before the setting: 4.0, records.BEFORE)
+        seed = r.setting("worlds.rival_seed_below") or 0  # (runs before rival seeding: none)
         how = (
             ([f"map of a random {r.setting('worlds.map_drive_m') or 400:g} m drive"] if random_map else [])
+            + ([f"map's log-odds within +-{limit:g}"] if limit is not None and not random_map else [])
             + (["rivals re-aligned"] if r.setting("worlds.refine_rivals") else [])
             + (
                 [f"searched every {r.setting('worlds.search_rivals_every')} updates"]
                 if r.setting("worlds.search_rivals_every")
                 else []
             )
+            + ([f"a rival {seed:g} better seeded"] if seed > 0 else [])
             + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
             + (
