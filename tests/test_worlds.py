@@ -839,6 +839,29 @@ def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tm
         main([str(tmp_path / "a"), str(tmp_path / "c")])
 
 
+def test_the_twins_analysis_turns_walls_onto_walls_and_sums_over_the_updates_only():
+    """eval.analyses.twins: a twin floor's wall end points turned about its centre are wall end points again; the
+    evidence is summed over the run's updates only: over a mask and over its complement it adds up to the sum over
+    every scan."""
+    from eval.analyses.twins import drive_evidence, turned
+    from irmcl_warp.mcl.worlds import world_map
+
+    world = floors.build("twin-9")
+    walls = world.segments[: world.n_walls]
+    ends = np.vstack([walls[:, :2], walls[:, 2:]])
+    moved = turned(world, np.column_stack([ends, np.zeros(len(ends))]))[:, :2]
+    assert np.min(np.hypot(*(moved[:, None] - ends[None]).transpose(2, 0, 1)), 1).max() < 1e-9
+    assert np.allclose(turned(world, turned(world, np.array([[3.0, 4.0, 0.5]]))), [[3.0, 4.0, 0.5]])
+    cfg = _worlds_cfg("worlds.split=twin-9", "worlds.run_s=6")
+    grid = world_map(world, cfg, DEVICE)
+    every = np.ones(400, bool)
+    odd = np.arange(400) % 2 == 1
+    parts = [drive_evidence(world, cfg, 1, m, grid, DEVICE) for m in (every, odd, ~odd)]
+    assert parts[1]["updates"] + parts[2]["updates"] == parts[0]["updates"] > 0
+    assert parts[1]["evidence"] + parts[2]["evidence"] == pytest.approx(parts[0]["evidence"], rel=1e-9, abs=1e-9)
+    assert parts[0]["evidence"] != 0.0
+
+
 def test_the_auroc_difference_resamples_drives_and_brackets_a_real_gain():
     """A's confidence orders every drive's updates right, B's is noise: the interval lies above 0; A against itself
     gives 0 in every resample."""

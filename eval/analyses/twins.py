@@ -52,12 +52,12 @@ def drive_evidence(world, cfg, k: int, updated: np.ndarray, grid=None, device: s
     log, _ = query_log(world, cfg, k, device)
     beams = pick_beams(log.ranges_m.shape[1], m.num_beams, m.beam_pick)
     angles = log.info.angles_rad[beams]
-    far = cfg.sim.range_max_m
+    far_m = cfg.sim.range_max_m
     total = 0.0
     idx = np.flatnonzero(updated[: len(log.stamps)])
     for i in idx:
         z = log.ranges_m[i, beams].astype(float)
-        z = np.where((z > m.near_m) & (z < far), z, np.nan)
+        z = np.where((z > m.near_m) & (z < far_m), z, np.nan)
         both = np.vstack([log.ground_truth[i], turned(world, log.ground_truth[i][None])[0]])
         ll = likelihood_field_log_weights(
             dist,
@@ -70,7 +70,7 @@ def drive_evidence(world, cfg, k: int, updated: np.ndarray, grid=None, device: s
             m.z_hit,
             m.z_rand,
             m.sigma_hit_m,
-            far,
+            far_m,
             m.field_max_dist_m,
         )
         total += m.temper * float(ll[0] - ll[1])
