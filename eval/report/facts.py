@@ -93,6 +93,7 @@ PAIRED_WORLDS = (
     "rivals_vs_before_gpu",
     "rivals_vs_before_kidnap",
     "unbounded_vs_bounded_cpu",
+    "seed_vs_noseed_cpu",
 )  # results/checks/paired_worlds_<name>.json
 
 
