@@ -31,8 +31,8 @@ from irmcl_warp.sim import floors
 def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict]:
     """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
     worlds of ``side`` (tuning | test)."""
-    X, y, prov = [], [], {"runs": [], "worlds": set(), "weighting": set(), "particles": set(), "tracker": set()}
-    prov["maps"] = set()
+    X, y = [], []
+    prov = {"runs": [], "worlds": set(), "weighting": set(), "particles": set(), "tracker": set(), "maps": set()}
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         w = doc.get("settings", {}).get("worlds", {})
