@@ -94,6 +94,8 @@ PAIRED_WORLDS = (
     "rivals_vs_before_kidnap",
     "unbounded_vs_bounded_cpu",
     "seed_vs_noseed_cpu",
+    "unbounded_vs_bounded_gpu",
+    "unbounded_vs_bounded_kidnap",
 )  # results/checks/paired_worlds_<name>.json
 
 
