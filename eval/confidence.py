@@ -36,7 +36,9 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         w = doc.get("settings", {}).get("worlds", {})
-        prov["tracker"].add((bool(w.get("refine_rivals", False)), int(w.get("search_rivals_every", 0))))
+        prov["tracker"].add(
+            (bool(w.get("refine_rivals", False)), int(w.get("search_rivals_every", 0)), w.get("mode_pose", "block"))
+        )
         prov["maps"].add((w.get("map_drive", "random"), w.get("map_logodds_limit", 4.0)))  # (runs before: as named)
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
@@ -66,14 +68,15 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
         )
     if len(prov["tracker"]) != 1:
         raise ValueError(
-            f"runs that tracked rivals differently ((refine_rivals, search_rivals_every): {sorted(prov['tracker'])}): "
+            "runs that tracked rivals or read modes differently ((refine_rivals, search_rivals_every, mode_pose): "
+            f"{sorted(prov['tracker'])}): "
             "their features differ; one calibration is for one"
         )
-    refine, every = prov["tracker"].pop()
+    refine, every, mode_pose = prov["tracker"].pop()
     maps = [{"map_drive": d, "map_logodds_limit": limit} for d, limit in sorted(prov["maps"], key=str)]
     prov = {
         "maps": maps[0] if len(maps) == 1 else maps,
-        "tracker": {"refine_rivals": refine, "search_every": every},
+        "tracker": {"refine_rivals": refine, "search_every": every, "mode_pose": mode_pose},
         "runs": prov["runs"],
         "worlds": sorted(prov["worlds"]),
         "weighting": prov["weighting"].pop(),

@@ -382,6 +382,12 @@ class WorldsConfig:
     lost_agreement_below: float = 0.0  # > 0: also lost when the scan's agreement with the map at the estimate ...
     lost_agreement_updates: int = 2  # ... stays below it for this many updates in a row (mcl/worlds.py LostRule;
     # off by default, as runs before it; +exp=worlds sets the pair chosen on tuning runs)
+    lost_timeout_agreement_below: Optional[float] = None  # the confidence's timeout (lost_below for lost_after_s)
+    # counts only over updates whose scan agreement at the estimate (the feature agreement) is below this: an estimate
+    # that explains the scans with another mode as likely is ambiguous, not lost, and a uniform re-seed would throw
+    # its right mode away (None: every update counts, as in runs before it)
+    mode_pose: str = "densest"  # a mode's pose: its densest cluster's (densest) | its 3 x 3 m block's weighted mean
+    # (block: runs before the twenty-eighth session; mcl/confidence.py modes). The estimate is the heaviest mode's
     relocalize: bool = True  # False: only report when lost (side-by-side runs of the detector alone)
     refine_rivals: bool = False  # the confidence's rival places re-aligned with each scan (mcl/confidence.py,
     # FeatureTracker; False: moved by the odometry only)
@@ -483,6 +489,7 @@ CHOICES = {
     "mcl.weighting": ("nog_raymarch", "nog_table", "nof_direct", "likelihood_field", "beam_model"),
     "mcl.estimate": ("top_share", "best_cluster", "mean"),
     "worlds.map_drive": ("cover", "random"),
+    "worlds.mode_pose": ("densest", "block"),
     "mcl.beam_pick": ("spread", "stride"),
     "mcl.resample": ("low_variance", "multinomial"),
     "mcl.first_update": ("scan", "motion"),
@@ -581,6 +588,7 @@ RANGES = {
     "worlds.lost_after_s": ("> 0", None),
     "worlds.lost_agreement_below": (0, 1),
     "worlds.lost_agreement_updates": (1, None),
+    "worlds.lost_timeout_agreement_below": (0, None),
     "worlds.search_rivals_every": (0, None),
     "worlds.rival_seed_below": (0, None),
     "worlds.rival_seed_share": ("> 0", 1),

@@ -108,6 +108,30 @@ def test_modes_find_two_clouds_with_their_weights_and_poses():
     assert np.allclose(m.poses[0], a, atol=0.02) and np.allclose(m.poses[1], b, atol=0.02)
 
 
+def test_a_modes_pose_is_its_densest_cluster_not_the_mean_of_its_block():
+    """Two clusters 1.2 m apart in one 3 x 3 m block (a resampled set's look-alike poses) and, at the heavier one,
+    a share of particles turned 1 rad: the block's weighted mean lies between the clusters and between the headings,
+    where no scan fits; the densest pose is the heavier cluster's. One cluster alone: both read the same pose."""
+    rng = np.random.default_rng()
+    a = np.array([rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-3, 3)])
+    b = a + [1.2 * np.cos(a[2] + 1), 1.2 * np.sin(a[2] + 1), 0.0]
+    n = 3000
+    heavy = a + rng.normal(0, [0.08, 0.08, 0.02], (n, 3))
+    light = b + rng.normal(0, [0.08, 0.08, 0.02], (n // 2, 3))
+    turned = a + [0, 0, 1.0] + rng.normal(0, [0.08, 0.08, 0.02], (n // 2, 3))
+    both = np.vstack([heavy, light, turned])
+    one_block = modes(both, np.zeros(len(both)), cell_m=2.0, k=1)  # cells of 2 m: one block holds both
+    assert one_block.weights[0] == pytest.approx(1.0)
+    densest = one_block.poses[0]
+    block = modes(both, np.zeros(len(both)), cell_m=2.0, k=1, pose="block").poses[0]
+    assert np.hypot(*(densest[:2] - a[:2])) < 0.05 and abs(np.angle(np.exp(1j * (densest[2] - a[2])))) < 0.02
+    assert np.hypot(*(block[:2] - a[:2])) > 0.25 and abs(np.angle(np.exp(1j * (block[2] - a[2])))) > 0.15
+    alone = np.vstack([heavy])
+    assert np.allclose(modes(alone, np.zeros(n)).poses[0], modes(alone, np.zeros(n), pose="block").poses[0], atol=0.02)
+    with pytest.raises(ValueError, match="pose 'mean'"):
+        modes(alone, np.zeros(n), pose="mean")
+
+
 def _box_map(res=0.05):
     occ = np.zeros((200, 300), np.float32)
     occ[[0, -1], :] = 1
@@ -306,15 +330,15 @@ def _worlds_cfg(*extra):
     )
 
 
-def _fake_calibration(path, refine_rivals=True, search_every=5):
+def _fake_calibration(path, refine_rivals=True, search_every=5, mode_pose="densest"):
     """A calibration that trusts the scan's agreement alone (for the stage's bookkeeping, not a fitted one), as
-    if fitted on runs tracking rivals as +exp=worlds does."""
+    if fitted on runs tracking rivals and reading modes as +exp=worlds does."""
     coef = np.zeros(len(FEATURES))
     coef[FEATURES.index("agreement")] = 6.0
     path.write_text(
         json.dumps(
             {
-                "tracker": {"refine_rivals": refine_rivals, "search_every": search_every},
+                "tracker": {"refine_rivals": refine_rivals, "search_every": search_every, "mode_pose": mode_pose},
                 "features": list(FEATURES),
                 "coef": coef.tolist(),
                 "intercept": 0.0,
@@ -547,6 +571,20 @@ def test_a_calibration_refuses_runs_that_track_rivals_otherwise(tmp_path, monkey
         run_worlds(_worlds_cfg(f"worlds.calibration={cal}"))  # +exp=worlds: searched every 5, refined
 
 
+def test_a_calibration_refuses_runs_that_read_modes_otherwise(tmp_path):
+    """A calibration fitted before the densest poses (no mode_pose in its file: "block") is refused by a run that
+    reads them, and accepted by one that reads block means, as those runs did."""
+    from irmcl_warp.mcl.worlds import calibration_of
+
+    cal = _fake_calibration(tmp_path / "cal.json")
+    doc = json.loads(cal.read_text())
+    del doc["tracker"]["mode_pose"]
+    cal.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="worlds.mode_pose"):
+        calibration_of(_worlds_cfg(f"worlds.calibration={cal}"))
+    assert calibration_of(_worlds_cfg(f"worlds.calibration={cal}", "worlds.mode_pose=block")) is not None
+
+
 def test_a_calibration_fitted_on_other_maps_is_a_loud_warning(tmp_path):
     from irmcl_warp.mcl.worlds import calibration_of
 
@@ -757,6 +795,26 @@ def test_the_lost_rule_fires_on_a_low_confidence_held_or_a_low_agreement_in_a_ro
     one = LostRule(_lost_settings(lost_agreement_below=0.4, lost_agreement_updates=1))
     assert not one(0.0, 0.95, 1.0) and one(0.4, 0.95, 0.39)  # one low scan: lost, even with the confidence high
     assert not one(0.8, 0.5, 0.1)  # and not localized again until the confidence says so
+
+
+def test_the_lost_rules_timeout_waits_while_the_estimate_explains_the_scans():
+    """worlds.lost_timeout_agreement_below: a confidence held low while the scans keep agreeing with the map at the
+    estimate (two modes, both fitting them) is ambiguity, not lost; once the agreement falls the timeout counts from
+    there; without the setting the rule fires as before. The agreement trigger is not gated."""
+    from irmcl_warp.mcl.worlds import LostRule
+
+    ts = np.arange(0.4, 3.0, 0.4)
+    gated = LostRule(_lost_settings(lost_timeout_agreement_below=0.94))
+    assert not gated(0.0, 0.9, 1.0)
+    assert not any(gated(t, 0.1, 0.97) for t in ts)  # ambiguous for 2.6 s: not lost
+    assert [gated(t, 0.1, 0.6) for t in (3.2, 3.6, 4.0, 4.4)] == [False, False, False, True]  # counted from 3.2 s
+    plain = LostRule(_lost_settings())
+    assert not plain(0.0, 0.9, 1.0)
+    assert any(plain(t, 0.1, 0.97) for t in ts)
+    one = LostRule(
+        _lost_settings(lost_timeout_agreement_below=0.94, lost_agreement_below=0.4, lost_agreement_updates=1)
+    )
+    assert not one(0.0, 0.95, 1.0) and one(0.4, 0.95, 0.1)
 
 
 def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger(tmp_path):

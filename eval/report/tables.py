@@ -424,7 +424,8 @@ def worlds_table(runs: list) -> str:
     (observation model, particles, kidnapped or not), its counts over all runs and, per floor, how many runs
     ended right. Runs on the maps of a random mapping drive (before the twenty-sixth session: some test drives
     entered rooms those maps lacked) say so in their label, as do runs on maps with bounded log-odds (before the
-    twenty-seventh: the beams grazing a wall cleared it) and runs that seed a rival place."""
+    twenty-seventh: the beams grazing a wall cleared it) and runs that seed a rival place; from the twenty-eighth, runs
+    that read a mode's pose at its densest cluster and gate the confidence's timeout by the scan's agreement."""
     rows = [
         "| floors | weighting | particles | device | kidnap | localized (protocol) | right at the end | ended "
         "confident | confidently wrong | AUROC | false alarms per hour | kidnap detected <= 2 s | re-converged "
@@ -446,6 +447,7 @@ def worlds_table(runs: list) -> str:
         random_map = (r.setting("worlds.map_drive") or "random") == "random"  # (runs before the setting: random)
         limit = r.setting("worlds.map_logodds_limit")  # (runs before the setting: 4.0, records.BEFORE)
         seed = r.setting("worlds.rival_seed_below") or 0  # (runs before rival seeding: none)
+        gate = r.setting("worlds.lost_timeout_agreement_below")  # (runs before it: none)
         how = (
             ([f"map of a random {r.setting('worlds.map_drive_m') or 400:g} m drive"] if random_map else [])
             + ([f"map's log-odds within +-{limit:g}"] if limit is not None and not random_map else [])
@@ -457,6 +459,8 @@ def worlds_table(runs: list) -> str:
             )
             + ([f"a rival {seed:g} better seeded"] if seed > 0 else [])
             + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
+            + ([f"timeout only at agreement < {gate:g}"] if gate is not None else [])
+            + (["modes' densest poses"] if r.setting("worlds.mode_pose") == "densest" else [])
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
             + (
                 [

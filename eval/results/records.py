@@ -66,7 +66,7 @@ RENAMED = {"sim.max_range_m": "sim.range_max_m"}  # the simulated lidar's larges
 REMOVED = ("mapping.max_range_m",)
 # settings whose default is a new behaviour: what a record from before the setting did (twenty-sixth session: the
 # worlds' maps from a drive past every roadmap node; the runs before mapped each floor with a random 400 m drive)
-BEFORE = {"worlds.map_drive": "random", "worlds.map_logodds_limit": 4.0}
+BEFORE = {"worlds.map_drive": "random", "worlds.map_logodds_limit": 4.0, "worlds.mode_pose": "block"}
 
 
 def complete(config: dict) -> dict:

@@ -2,8 +2,12 @@
 confidence built on them (issue 33).
 
 * ``modes(particles, log_w)``: the particle set's hypotheses, heaviest first: a weighted histogram of the
-  positions in ``cell_m`` cells; the heaviest 3 x 3 block of cells is a mode (its weight, its weighted mean pose),
-  its particles are taken out, and so on. The heaviest mode's pose is the estimate a multi-hypothesis user reads.
+  positions in ``cell_m`` cells; the heaviest 3 x 3 block of cells is a mode (its weight), its particles are taken
+  out, and so on. A mode's pose (``pose="densest"``) is that of its densest cluster: from its heaviest
+  ``DENSEST_CELL_M`` cell and ``DENSEST_YAW_BINS`` heading bin, the weighted mean of its particles within
+  ``DENSEST_RADIUS_M`` and ``DENSEST_YAW_RAD`` of the pose, three times (a mean shift). The block's plain weighted
+  mean (``pose="block"``, before the twenty-eighth session) lands between two clusters a block holds, or at a heading
+  between two, where no scan fits. The heaviest mode's pose is the estimate a multi-hypothesis user reads.
 * ``ScanAgreement``: the share of a scan's end points, placed from a pose, that lie within ``tolerance_m`` of a
   wall of the map (its distance transform). Near 1 where the scan fits the map at that pose.
 * ``FEATURES``: what the robot has at each update: the heaviest mode's weight, the second's, the scan's agreement
@@ -32,6 +36,10 @@ MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set 
 # host work per update at 100k, 9 ms at 20k (2-core CPU); resampling keeps a set's copies together, so a stride
 # samples it evenly
 COARSE_TOLERANCE_M = 0.5  # ScanAgreement.search's first pass: poses 0.5 m and 22.5 deg apart are scored this loosely
+MODE_POSES = ("densest", "block")  # how a mode's pose is read (``modes``)
+DENSEST_CELL_M, DENSEST_YAW_BINS = 0.25, 16  # where the mean shift of a mode's pose starts: its heaviest such cell
+DENSEST_RADIUS_M, DENSEST_YAW_RAD = 0.5, 0.35  # ... and the window it averages over: RIGHT_M, and 20 deg (twice
+# RIGHT_DEG), so a cluster the estimate would count right with is one mode's pose
 RIGHT_M = 0.5  # issue 33: the estimate counts as right within 0.5 m ...
 RIGHT_DEG = 10.0  # ... and 10 deg of the truth
 FEATURES = (
@@ -60,8 +68,34 @@ def normalised(log_w: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
-def modes(particles: np.ndarray, log_w: np.ndarray, cell_m: float = 1.0, k: int = 3) -> Modes:
+def circular_mean(w: np.ndarray, yaw: np.ndarray) -> float:
+    return float(np.arctan2(np.sum(w * np.sin(yaw)), np.sum(w * np.cos(yaw))))
+
+
+def densest_pose(p: np.ndarray, w: np.ndarray, steps: int = 3) -> np.ndarray:
+    """The pose of the densest cluster of particles ``p`` [n, 3] weighted ``w`` [n] (see the module's text)."""
+    cells = np.floor(p[:, :2] / DENSEST_CELL_M).astype(np.int64)
+    cells -= cells.min(0)  # (a mode's block: a few metres, so a dense histogram)
+    bins = np.minimum(np.floor(np.mod(p[:, 2], 2 * np.pi) / (2 * np.pi / DENSEST_YAW_BINS)), DENSEST_YAW_BINS - 1)
+    key = (cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1]) * DENSEST_YAW_BINS + bins.astype(np.int64)
+    heaviest = key == np.argmax(np.bincount(key, w))
+    pose = np.array([*(w[heaviest] @ p[heaviest, :2] / w[heaviest].sum()), circular_mean(w[heaviest], p[heaviest, 2])])
+    for _ in range(steps):
+        d = p - pose
+        near = (d[:, 0] ** 2 + d[:, 1] ** 2 <= DENSEST_RADIUS_M**2) & (
+            np.abs(np.mod(d[:, 2] + np.pi, 2 * np.pi) - np.pi) <= DENSEST_YAW_RAD
+        )
+        if w[near].sum() <= 0:
+            break
+        ww = w[near] / w[near].sum()
+        pose = np.array([*(ww @ p[near, :2]), circular_mean(ww, p[near, 2])])
+    return pose
+
+
+def modes(particles: np.ndarray, log_w: np.ndarray, cell_m: float = 1.0, k: int = 3, pose: str = "densest") -> Modes:
     """The ``k`` heaviest modes of the weighted particles (see the module's text)."""
+    if pose not in MODE_POSES:
+        raise ValueError(f"modes: pose {pose!r} is not one of {MODE_POSES}")
     p = np.asarray(particles, float)
     w = normalised(log_w)
     cells = np.floor(p[:, :2] / cell_m).astype(np.int64)
@@ -80,8 +114,10 @@ def modes(particles: np.ndarray, log_w: np.ndarray, cell_m: float = 1.0, k: int 
         if not mine.any() or w[mine].sum() <= 0:
             break
         ww = w[mine] / w[mine].sum()
-        yaw = np.arctan2(np.sum(ww * np.sin(p[mine, 2])), np.sum(ww * np.cos(p[mine, 2])))
-        poses.append([*(ww @ p[mine, :2]), yaw])
+        if pose == "densest":
+            poses.append(densest_pose(p[mine], ww))
+        else:
+            poses.append([*(ww @ p[mine, :2]), circular_mean(ww, p[mine, 2])])
         weights.append(float(w[mine].sum()))
         left &= ~mine
     return Modes(np.array(poses).reshape(-1, 3), np.array(weights))
@@ -214,7 +250,8 @@ class FeatureTracker:
     Each rival also carries its evidence: the heaviest mode's agreement less the rival's, summed over the updates
     since it appeared (with ``refine_rivals`` the heaviest mode's agreement is also its best near it, as the rival's
     is, so that neither is favoured). ``rival_evidence`` is the smallest over the rivals (EVIDENCE_CAP without
-    one; a rival whose evidence reaches EVIDENCE_CAP is dropped); ``best_rival()`` the pose whose evidence it is."""
+    one; a rival whose evidence reaches EVIDENCE_CAP is dropped); ``best_rival()`` the pose whose evidence it is.
+    ``mode_pose``: how the modes' poses are read (``modes``; "block" for calibrations fitted before it)."""
 
     def __init__(
         self,
@@ -227,8 +264,11 @@ class FeatureTracker:
         refine_rivals: bool = False,
         search_poses=None,
         search_every: int = 0,
+        mode_pose: str = "densest",
     ):
-        self.agreement, self.refine_rivals = agreement, refine_rivals
+        if mode_pose not in MODE_POSES:
+            raise ValueError(f"FeatureTracker: mode_pose {mode_pose!r} is not one of {MODE_POSES}")
+        self.agreement, self.refine_rivals, self.mode_pose = agreement, refine_rivals, mode_pose
         self.search_poses, self.search_every = search_poses, int(search_every)
         self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
         self.rule_out, self.max_rivals = rule_out, max_rivals
@@ -248,7 +288,7 @@ class FeatureTracker:
         """``odom_delta``: the odometry's motion since the last update, in the robot's frame (x, y, yaw)."""
         stride = -(-len(log_w) // MAX_PARTICLES)  # a systematic sample of a large set (a GPU's 100k)
         particles, log_w = np.asarray(particles)[::stride], np.asarray(log_w)[::stride]
-        m = modes(particles, log_w)
+        m = modes(particles, log_w, pose=self.mode_pose)
         self.updates += 1
         scan = (ranges_m, angles_rad, T_base_laser)
         top = self.agreement(m.poses[0], *scan)
@@ -350,8 +390,9 @@ class Confidence:
     past its data and called every long right run unsure: 0.12 at the end of MIT Killian, 0.6 on intel.)
     Calibrations fitted before the bounds were kept have none and are read as they were.
 
-    ``tracker``: how the runs it was fitted on tracked their rivals (``FeatureTracker``'s ``refine_rivals`` and
-    ``search_every``): features made otherwise are not the ones it was fitted on."""
+    ``tracker``: how the runs it was fitted on tracked their rivals and read their modes (``FeatureTracker``'s
+    ``refine_rivals``, ``search_every`` and ``mode_pose``; a file without ``mode_pose`` was fitted on "block"):
+    features made otherwise are not the ones it was fitted on."""
 
     def __init__(
         self, coef, intercept: float, mean, scale, meta: dict | None = None, lo=None, hi=None, features=FEATURES
@@ -375,7 +416,7 @@ class Confidence:
     @property
     def tracker(self) -> dict:
         """{"refine_rivals", "search_every"} of the runs it was fitted on (calibrations older than the setting: none)."""
-        return {"refine_rivals": False, "search_every": 0, **self.meta.get("tracker", {})}
+        return {"refine_rivals": False, "search_every": 0, "mode_pose": "block", **self.meta.get("tracker", {})}
 
     @classmethod
     def load(cls, path) -> "Confidence":

@@ -66,6 +66,7 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
         refine_rivals=conf.tracker["refine_rivals"],
         search_poses=search_grid(grid) if conf.tracker["search_every"] > 0 else None,
         search_every=conf.tracker["search_every"],
+        mode_pose=conf.tracker["mode_pose"],
     )
     judge = Judge(tracker, conf, log.info.angles_rad, log.T_base_laser)
     return judge, f"confidence calibrated by {path.name}"

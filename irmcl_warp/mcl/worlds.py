@@ -89,11 +89,16 @@ def calibration_of(cfg) -> Confidence | None:
     if not path:
         return None
     conf = Confidence.load(path)
-    mine = {"refine_rivals": bool(cfg.worlds.refine_rivals), "search_every": int(cfg.worlds.search_rivals_every)}
+    mine = {
+        "refine_rivals": bool(cfg.worlds.refine_rivals),
+        "search_every": int(cfg.worlds.search_rivals_every),
+        "mode_pose": cfg.worlds.mode_pose,
+    }
     if conf.tracker != mine:
         raise ValueError(
             f"{path} was fitted on runs that tracked rivals as {conf.tracker}; this run tracks them as {mine} "
-            "(worlds.refine_rivals, worlds.search_rivals_every): its features would not be the ones it was fitted on"
+            "(worlds.refine_rivals, worlds.search_rivals_every, worlds.mode_pose): its features would not be the "
+            "ones it was fitted on"
         )
     fitted = conf.meta.get("maps")
     mine = {"map_drive": cfg.worlds.map_drive, "map_logodds_limit": cfg.worlds.map_logodds_limit}
@@ -211,6 +216,7 @@ def localize_worlds(run: runs.Run) -> Path:
                     refine_rivals=cfg.worlds.refine_rivals,
                     search_poses=search,
                     search_every=cfg.worlds.search_rivals_every,
+                    mode_pose=cfg.worlds.mode_pose,
                 ),
                 conf,
             )
@@ -265,7 +271,10 @@ def unmapped_share(grid, poses: np.ndarray) -> float:
 class LostRule:
     """When a localized robot counts as lost (issue 33), update by update: ``rule(t, confidence, agreement)`` is True
     at the update where it is declared lost. Localized: the confidence reached ``confident_above``. Lost: either the
-    confidence stayed below ``lost_below`` for ``lost_after_s``, or (``agreement_below`` > 0) the scan's agreement
+    confidence stayed below ``lost_below`` for ``lost_after_s`` (with ``lost_timeout_agreement_below``, counted only
+    over updates whose scan agreement at the estimate is below it: an estimate that keeps explaining the scans while
+    another mode is as likely is ambiguous, not lost), or
+    (``agreement_below`` > 0) the scan's agreement
     with the map at the estimate stayed below ``agreement_below`` for ``agreement_updates`` updates in a row. The
     second trigger reads one feature, the one a kidnapping moves at once (from ~1 to 0.1-0.3 on the first scan after
     it, on the kidnapped test floors), where the calibrated confidence falls over several updates. After a lost
@@ -275,6 +284,8 @@ class LostRule:
     def __init__(self, w):
         self.confident_above, self.lost_below, self.lost_after_s = w.confident_above, w.lost_below, w.lost_after_s
         self.agreement_below, self.agreement_updates = float(w.lost_agreement_below), int(w.lost_agreement_updates)
+        gate = getattr(w, "lost_timeout_agreement_below", None)  # (runs before it: none)
+        self.timeout_below = np.inf if gate is None else float(gate)
         self.reset()
 
     def reset(self) -> None:
@@ -283,7 +294,7 @@ class LostRule:
     def __call__(self, t: float, p: float, agreement: float) -> bool:
         if p >= self.confident_above:
             self.localized, self.low_since = True, None
-        elif self.localized and p < self.lost_below:
+        elif self.localized and p < self.lost_below and agreement < self.timeout_below:
             self.low_since = t if self.low_since is None else self.low_since
         else:
             self.low_since = None
