@@ -422,6 +422,23 @@ def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
     assert _paired_worlds(tmp_path)[PAIRED_WORLDS[0]]["auroc"] == (
         "0.889 against 0.858 (difference +0.031, 95 % over drive resamples -0.037 to +0.090)"
     )
+    assert "false_alarms" not in _paired_worlds(tmp_path)[PAIRED_WORLDS[0]]  # (comparisons kept before the rates)
+    doc["false_alarms"] = {"a": 0, "b": 4, "hours_a": 1.2152, "hours_b": 1.1867, "p_rates": 0.1203}
+    (tmp_path / "checks" / f"paired_worlds_{PAIRED_WORLDS[0]}.json").write_text(json.dumps(doc))
+    assert _paired_worlds(tmp_path)[PAIRED_WORLDS[0]]["false_alarms"] == (
+        "0 in 1.22 h against 4 in 1.19 h of right tracking (exact test of two Poisson rates p = 0.12)"
+    )
+
+
+def test_two_false_alarm_rates_are_compared_by_their_exposures():
+    """eval.analyses.paired_worlds.rates_exact: equal counts over equal hours are no difference (p = 1); 0 against 4
+    over equal hours is 2 / 2^4; over unequal hours the expected share moves; 0 against 0 says nothing."""
+    from eval.analyses.paired_worlds import rates_exact
+
+    assert rates_exact(3, 1.0, 3, 1.0) == pytest.approx(1.0)
+    assert rates_exact(0, 1.0, 4, 1.0) == pytest.approx(2 / 16)
+    assert rates_exact(0, 3.0, 4, 1.0) < rates_exact(0, 1.0, 4, 1.0) < rates_exact(0, 1.0, 4, 3.0)
+    assert rates_exact(0, 1.0, 0, 2.0) == 1.0
 
 
 def test_the_seeds_of_one_recipe_make_one_row_per_card_with_medians_and_spans():

@@ -8,7 +8,9 @@ localized by the protocol (``success``). Prints, per outcome, both counts, the d
 the particles an update ran with on average (``particles_per_update``, with ``mcl.kld_sampling``); writes the same
 as JSON with ``--out``. Given the runs' folders, also each run's AUROC (the confidence at every update against right
 or wrong) and a 95 % interval of the difference from resampling the drives (``BOOTSTRAP`` draws): the updates of one
-drive are not independent, the drives are.
+drive are not independent, the drives are. False alarms (a right estimate declared lost) are counts over each run's
+hours of right tracking: compared by the exact conditional test of two Poisson rates (``rates_exact``: given the
+total, A's share is binomial with p = A's hours over both runs').
 """
 
 from __future__ import annotations
@@ -27,6 +29,14 @@ def mcnemar_exact(only_a: int, only_b: int) -> float:
 
     n = only_a + only_b
     return 1.0 if n == 0 else float(binomtest(only_a, n, 0.5).pvalue)
+
+
+def rates_exact(count_a: int, hours_a: float, count_b: int, hours_b: float) -> float:
+    """Two-sided p that two Poisson counts over these exposures share one rate (conditional binomial test)."""
+    from scipy.stats import binomtest
+
+    n = count_a + count_b
+    return 1.0 if n == 0 else float(binomtest(count_a, n, hours_a / (hours_a + hours_b)).pvalue)
 
 
 def drives(metrics: dict) -> dict[tuple[str, int], dict]:
@@ -53,6 +63,14 @@ def compare(a: dict, b: dict) -> dict:
             "only_b": [f"{w}-run{k}" for w, k in only_b],
             "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
         }
+    sa, sb = a["summary"], b["summary"]
+    out["false_alarms"] = {
+        "a": int(sa["false_alarms"]),
+        "b": int(sb["false_alarms"]),
+        "hours_a": float(sa["tracking_right_h"]),
+        "hours_b": float(sb["tracking_right_h"]),
+        "p_rates": rates_exact(sa["false_alarms"], sa["tracking_right_h"], sb["false_alarms"], sb["tracking_right_h"]),
+    }
     for side, m in (("a", a), ("b", b)):
         out[f"particles_per_update_{side}"] = m["summary"].get("particles_per_update")
         out[f"num_particles_{side}"] = m["summary"]["num_particles"]
@@ -125,6 +143,11 @@ def main(argv=None) -> dict:
         print(
             f"| {key} | {o['a']}/{n} | {o['b']}/{n} | {len(o['only_a'])} | {len(o['only_b'])} | {o['p_mcnemar']:.3g} |"
         )
+    fa = out["false_alarms"]
+    print(
+        f"false alarms: A {fa['a']} in {fa['hours_a']:.2f} h, B {fa['b']} in {fa['hours_b']:.2f} h of right tracking "
+        f"(exact test of two Poisson rates p = {fa['p_rates']:.3g})"
+    )
     judged = [per_drive_judged(p) if p.is_dir() else None for p in (args.a, args.b)]
     if all(j is not None for j in judged):
         out["auroc"] = auroc_difference(*judged)

@@ -96,6 +96,10 @@ PAIRED_WORLDS = (
     "seed_vs_noseed_cpu",
     "unbounded_vs_bounded_gpu",
     "unbounded_vs_bounded_kidnap",
+    "densest_gate_vs_before_gpu",
+    "densest_gate_vs_before_kidnap",
+    "densest_gate_vs_before_cpu",
+    "densest_gate_vs_before_cpu_kidnap",
 )  # results/checks/paired_worlds_<name>.json
 
 
@@ -122,6 +126,12 @@ def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
             facts["auroc"] = (
                 f"{au['a']:.3f} against {au['b']:.3f} (difference {au['difference']:+.3f}, 95 % over drive resamples "
                 f"{au['ci95'][0]:+.3f} to {au['ci95'][1]:+.3f})"
+            )
+        if "false_alarms" in d:  # comparisons since the twenty-eighth session: the false alarms' rates
+            fa = d["false_alarms"]
+            facts["false_alarms"] = (
+                f"{fa['a']} in {fa['hours_a']:.2f} h against {fa['b']} in {fa['hours_b']:.2f} h of right tracking "
+                f"(exact test of two Poisson rates p = {fa['p_rates']:.2g})"
             )
         out[name] = facts
     return out
