@@ -870,6 +870,43 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     assert choose([amcl[0.3], amcl[0.9]]) is amcl[0.3]
 
 
+def test_replaying_with_the_timeout_gated_or_not_tells_ambiguity_from_a_false_alarm(tmp_path):
+    """eval.analyses.lost_rules --timeout-below: a right drive whose confidence sits at 0.1 for 3 s while its scans
+    keep agreeing with the map (a second mode as likely) is a false alarm with the timeout always counting, none with
+    it gated at 0.94, and the run's own gate (recorded with it) is what the default replays."""
+    from eval.analyses.lost_rules import AS_RECORDED, agreement_rule, score_rule
+    from irmcl_warp.mcl.confidence import FEATURES
+    from irmcl_warp.mcl.worlds import AGREEMENT
+
+    t = np.arange(0.0, 20.0, 0.2)
+    truth = np.column_stack([t * 0.1, np.zeros_like(t), np.zeros_like(t)])
+    conf = np.where((t >= 6.0) & (t < 9.0), 0.1, 0.99)
+    feats = np.full((len(t), len(FEATURES)), 0.5)
+    feats[:, AGREEMENT] = 0.97
+    trace = dict(stamps=t, truth=truth, estimate=truth.copy(), features=feats, confidence=conf, updated=t >= 0)
+    run = tmp_path / "run"
+    run.mkdir()
+    np.savez(run / "loop-1-run1.npz", **trace, lost_at_s=np.array([]))
+    w = dict(
+        confident_above=0.8,
+        lost_below=0.2,
+        lost_after_s=1.0,
+        relocalize=True,
+        kidnap_at_s=0.0,
+        run_s=20.0,
+        lost_agreement_below=0.4,
+        lost_agreement_updates=1,
+        lost_timeout_agreement_below=0.94,
+    )
+    (run / "metrics.json").write_text(json.dumps({"settings": {"worlds": w}, "runs": [{"world": "loop-1", "run": 1}]}))
+    always = score_rule([run], agreement_rule(0.4, 1, None))
+    gated = score_rule([run], agreement_rule(0.4, 1, 0.94))
+    recorded = score_rule([run], agreement_rule(0.4, 1, AS_RECORDED))
+    assert always["false_alarms"] == 1 and gated["false_alarms"] == 0 and recorded["false_alarms"] == 0
+    assert always["timeout_below"] is None and gated["timeout_below"] == 0.94 and "timeout_below" not in recorded
+    assert "timeout always" in always["rule"] and "timeout at agreement < 0.94" in gated["rule"]
+
+
 def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tmp_path):
     """eval.analyses.paired_worlds: McNemar's exact test on the drives where only one run ended right (7 against 1:
     p = 0.0703, the binomial's two-sided tail), the counts of both, and an error naming the problem when the runs

@@ -1,4 +1,5 @@
-"""``python -m eval.analyses.lost_rules <worlds run>... [--agreement-below 0 0.3 ...] [--updates 1 2 3] [--choose FILE]``
+"""``python -m eval.analyses.lost_rules <worlds run>... [--agreement-below 0 0.3 ...] [--updates 1 2 3]
+[--timeout-below none 0.94] [--choose FILE]``
 
 Lost-robot rules replayed over recorded worlds runs (issue 33; irmcl_warp/mcl/worlds.py ``LostRule``): each run's
 traces (``<world>-run<k>.npz``: the confidence and the features at every update) are fed to the rule again, and the
@@ -74,17 +75,27 @@ class Rule:
     needs_mean_likelihood: bool = False
 
 
-def agreement_rule(agreement_below: float, updates: int) -> Rule:
-    """The stage's LostRule with these agreement settings (0 = the confidence alone)."""
+AS_RECORDED = "recorded"  # agreement_rule's timeout gate: the one each run was recorded with
+
+
+def agreement_rule(agreement_below: float, updates: int, timeout_below=AS_RECORDED) -> Rule:
+    """The stage's LostRule with these agreement settings (0 = the confidence alone) and the confidence's timeout
+    gated at ``timeout_below`` (``worlds.lost_timeout_agreement_below``; None: every update counts; AS_RECORDED: as
+    each run was made)."""
 
     def make(w):
+        gate = {} if timeout_below == AS_RECORDED else {"lost_timeout_agreement_below": timeout_below}
         rule = LostRule(
-            SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates})
+            SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates, **gate})
         )
         return lambda t, p, agreement, _mean: rule(t, p, agreement)
 
     name = "confidence" if agreement_below == 0 else f"agreement < {agreement_below:g} x {updates}"
-    return Rule(name, {"agreement_below": agreement_below, "updates": updates}, make)
+    fields = {"agreement_below": agreement_below, "updates": updates}
+    if timeout_below != AS_RECORDED:
+        name += ", timeout " + ("always" if timeout_below is None else f"at agreement < {timeout_below:g}")
+        fields["timeout_below"] = timeout_below
+    return Rule(name, fields, make)
 
 
 def amcl_rule(alpha_slow: float, alpha_fast: float, above: float) -> Rule:
@@ -188,15 +199,24 @@ def main(argv=None) -> dict:
     ap.add_argument("runs", nargs="+", type=Path, help="worlds run folders (outputs/worlds/worlds/<run>)")
     ap.add_argument("--agreement-below", nargs="+", type=float, default=[0.0, 0.3, 0.4, 0.5, 0.6])
     ap.add_argument("--updates", nargs="+", type=int, default=[1, 2, 3])
+    ap.add_argument(
+        "--timeout-below",
+        nargs="+",
+        default=[AS_RECORDED],
+        help="the confidence's timeout gated at each of these agreements ('none': every update counts; default: as "
+        "each run was recorded)",
+    )
     ap.add_argument("--amcl", nargs="*", default=[], help="AMCL's alphas SLOW:FAST, each side by side (e.g. 0.001:0.1)")
     ap.add_argument("--amcl-above", nargs="+", type=float, default=[0.0, 0.1, 0.3, 0.5])
     ap.add_argument("--choose", type=Path, help="write the kept rule here (tuning runs only)")
     ap.add_argument("--out", type=Path, help="the JSON record")
     a = ap.parse_args(argv)
     results = []
+    gates = [g if g == AS_RECORDED else None if g == "none" else float(g) for g in a.timeout_below]
     for below in a.agreement_below:
         for n in [1] if below == 0 else a.updates:
-            results.append(score_rule(a.runs, agreement_rule(below, n)))
+            for gate in gates:
+                results.append(score_rule(a.runs, agreement_rule(below, n, gate)))
     amcl = []
     for pair in a.amcl:
         slow, fast = (float(x) for x in pair.split(":"))
