@@ -64,13 +64,16 @@ def compare(a: dict, b: dict) -> dict:
             "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
         }
     sa, sb = a["summary"], b["summary"]
-    out["false_alarms"] = {
-        "a": int(sa["false_alarms"]),
-        "b": int(sb["false_alarms"]),
-        "hours_a": float(sa["tracking_right_h"]),
-        "hours_b": float(sb["tracking_right_h"]),
-        "p_rates": rates_exact(sa["false_alarms"], sa["tracking_right_h"], sb["false_alarms"], sb["tracking_right_h"]),
-    }
+    if all("false_alarms" in x and "tracking_right_h" in x for x in (sa, sb)):  # (runs that scored them)
+        out["false_alarms"] = {
+            "a": int(sa["false_alarms"]),
+            "b": int(sb["false_alarms"]),
+            "hours_a": float(sa["tracking_right_h"]),
+            "hours_b": float(sb["tracking_right_h"]),
+            "p_rates": rates_exact(
+                sa["false_alarms"], sa["tracking_right_h"], sb["false_alarms"], sb["tracking_right_h"]
+            ),
+        }
     for side, m in (("a", a), ("b", b)):
         out[f"particles_per_update_{side}"] = m["summary"].get("particles_per_update")
         out[f"num_particles_{side}"] = m["summary"]["num_particles"]
@@ -143,11 +146,12 @@ def main(argv=None) -> dict:
         print(
             f"| {key} | {o['a']}/{n} | {o['b']}/{n} | {len(o['only_a'])} | {len(o['only_b'])} | {o['p_mcnemar']:.3g} |"
         )
-    fa = out["false_alarms"]
-    print(
-        f"false alarms: A {fa['a']} in {fa['hours_a']:.2f} h, B {fa['b']} in {fa['hours_b']:.2f} h of right tracking "
-        f"(exact test of two Poisson rates p = {fa['p_rates']:.3g})"
-    )
+    if "false_alarms" in out:
+        fa = out["false_alarms"]
+        print(
+            f"false alarms: A {fa['a']} in {fa['hours_a']:.2f} h, B {fa['b']} in {fa['hours_b']:.2f} h of right "
+            f"tracking (exact test of two Poisson rates p = {fa['p_rates']:.3g})"
+        )
     judged = [per_drive_judged(p) if p.is_dir() else None for p in (args.a, args.b)]
     if all(j is not None for j in judged):
         out["auroc"] = auroc_difference(*judged)
