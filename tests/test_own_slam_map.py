@@ -49,8 +49,30 @@ def test_a_run_on_a_look_alike_place_fails_where_an_alignment_would_pass_it(tmp_
     table = own_slam_map_table([rec])
     # both said localized at the end; the one 4 m along the look-alike path was wrong; no per-scan confidence here
     assert "| toy | likelihood field | 2k | cpu | 2 (0,1) | 1/2 |" in table and table.endswith(
-        "| 2/2 | 1 | - | - / - |"
+        "| 2/2 | 1 | - | - / - | - |"  # no calibration judged these runs
     )
+
+
+def test_a_record_names_the_calibration_that_judged_its_runs():
+    """eval.analyses.own_slam_map.calibration_of_run: the own-map calibration's digest in a run's manifest is the
+    shipped file's: named with what it was fitted on (its source: the tuning runs); a digest of a file since fitted again: named by its
+    digest; none (no calibration, or a run made before the digest): None. The table shows it per record."""
+    from eval.analyses.own_slam_map import calibration_of_run
+    from irmcl_warp.config import own_map_calibration
+    from irmcl_warp.runs import OWN_MAP_CALIBRATION, file_digest
+
+    cfg = OmegaConf.create({"mcl": {"num_particles": 20000, "weighting": "likelihood_field"}})
+    shipped = own_map_calibration("likelihood_field", 20000)
+    source = json.loads(shipped.read_text())["source"]
+    now = {"inputs": {OWN_MAP_CALIBRATION: [{"path": str(shipped), "sha256": file_digest(shipped)}]}}
+    assert calibration_of_run(now, cfg) == f"{shipped.name} ({source})" and "tuning-" in source
+    since = {"inputs": {OWN_MAP_CALIBRATION: [{"path": str(shipped), "sha256": "ab" * 32}]}}
+    assert calibration_of_run(since, cfg) == "sha256 ababababab"
+    assert calibration_of_run({"inputs": {}}, cfg) is None and calibration_of_run({}, cfg) is None
+    row = {"seed": 0, "particles": 20000, "weighting": "likelihood_field", "device": "cpu", "time_to_converge_s": 3.0}
+    row |= {"location_rmse_cm": 8.0, "localized_at_end": True, "error_at_end_m": 0.1, "calibration": "x.json"}
+    rec = {"log": "toy", "runs": [row], "successes": 1, "of": 1}
+    assert own_slam_map_table([rec]).endswith("| x.json |")
 
 
 def test_the_record_says_how_the_confidence_separates_right_scans_from_wrong(tmp_path, rng):

@@ -20,7 +20,9 @@ from omegaconf import OmegaConf
 
 from irmcl_warp.io import read_tum
 from irmcl_warp.mcl.confidence import auroc, right
+from irmcl_warp.config import own_map_calibration
 from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
+from irmcl_warp.runs import OWN_MAP_CALIBRATION, file_digest
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.metrics import error_at_end, localization_metrics
 from irmcl_warp.services.outputs import write_json
@@ -81,12 +83,28 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
             for k in ("converged", "time_to_converge_s", "success", "location_rmse_cm", "yaw_rmse_deg", "divergences")
         },
         "error_at_end_m": error_at_end(est, on_ref),
+        "calibration": calibration_of_run(manifest, cfg),
         "confidence_at_end": m.get("confidence_at_end"),
         "localized_at_end": m.get("localized_at_end"),
         # per scan, where the confidence and the SLAM pose exist: the confidence, and whether the estimate was right
         # (within RIGHT_M and RIGHT_DEG of the SLAM pose); pooled over the runs by ``judge_confidence``
         **per_scan_judgement(confidence_per_scan(run, stamps), est, on_ref),
     }
+
+
+def calibration_of_run(manifest: dict, cfg) -> str | None:
+    """Which calibration judged an own-map run: the file and what it was fitted on (its ``source``), read from the file
+    when its content is still the one the run's manifest digested (runs.OWN_MAP_CALIBRATION); else the digest's
+    first 10 hex digits (a file since fitted again); None for a run with no calibration or made before the digest."""
+    files = (manifest.get("inputs") or {}).get(OWN_MAP_CALIBRATION) or []  # [{"path", "sha256"}]
+    if not files:
+        return None
+    digests = [f["sha256"] if isinstance(f, dict) else f for f in files]
+    path = own_map_calibration(OmegaConf.select(cfg, "mcl.weighting"), OmegaConf.select(cfg, "mcl.num_particles"))
+    if path is not None and path.is_file() and file_digest(path) == digests[0]:
+        source = json.loads(path.read_text()).get("source")  # "eval.confidence fit on <tuning runs>"
+        return f"{path.name} ({source})" if source else path.name
+    return f"sha256 {digests[0][:10]}"
 
 
 def per_scan_judgement(conf: np.ndarray, est: np.ndarray, on_ref: np.ndarray) -> dict:

@@ -483,12 +483,13 @@ def worlds_table(runs: list) -> str:
 
 def own_slam_map_table(records: list) -> str:
     """Real logs localized globally from their first scan, over the whole log, in their own SLAM map (issue 33): one
-    row per record of eval.analyses.own_slam_map (results/own_slam_map/), its runs scored against the SLAM poses."""
+    row per record of eval.analyses.own_slam_map (results/own_slam_map/), its runs scored against the SLAM poses, with
+    the calibration that judged them (the tuning runs its file was fitted on)."""
     rows = [
         "| log | weighting | particles | device | runs (seeds) | success (protocol) | converged after (s), median "
         "[min-max] | RMSE after (cm), median | ended confident (>= 0.8) | ended confident and wrong | AUROC, every "
-        "scan | confidence when right / wrong, median |",
-        "|" + "---|" * 12,
+        "scan | confidence when right / wrong, median | calibration |",
+        "|" + "---|" * 13,
     ]
     for rec in sorted(records, key=lambda r: (r["log"], r["runs"][0]["particles"])):
         runs = rec["runs"]
@@ -504,9 +505,11 @@ def own_slam_map_table(records: list) -> str:
         medians = f"{when_right} / {when_wrong}" if judged else "-"
         span = f"{np.median(t):.1f} [{min(t):.1f}-{max(t):.1f}]" if t else "-"
         seeds = ",".join(str(r["seed"]) for r in sorted(runs, key=lambda r: r["seed"]))
+        # which calibration judged the runs (records before it was kept: "-"; runs judged by two: both)
+        calibration = " / ".join(sorted({r.get("calibration") or "-" for r in runs}))
         rows.append(
             f"| {rec['log']} | {first['weighting'].replace('_', ' ')} | {first['particles'] // 1000}k | {first['device']} "
             f"| {len(runs)} ({seeds}) | {rec['successes']}/{len(runs)} | {span} | {_f(np.median(e) if e else None)} "
-            f"| {conf}/{len(runs)} | {wrong} | {auc} | {medians} |"
+            f"| {conf}/{len(runs)} | {wrong} | {auc} | {medians} | {calibration} |"
         )
     return "\n".join(rows)
