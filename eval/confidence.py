@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from irmcl_warp.config import CALIBRATION_DIR
-from irmcl_warp.mcl.confidence import FEATURES, Confidence, auroc, fit_logistic, reliability, right
+from irmcl_warp.mcl.confidence import FEATURES, Confidence, auroc, fit_logistic, reliability, right, tracker_of
 from irmcl_warp.services.outputs import save_figure, write_json
 from irmcl_warp.sim import floors
 
@@ -36,9 +36,7 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         w = doc.get("settings", {}).get("worlds", {})
-        prov["tracker"].add(
-            (bool(w.get("refine_rivals", False)), int(w.get("search_rivals_every", 0)), w.get("mode_pose", "block"))
-        )
+        prov["tracker"].add(tuple(tracker_of(w).items()))
         prov["maps"].add((w.get("map_drive", "random"), w.get("map_logodds_limit", 4.0)))  # (runs before: as named)
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
@@ -68,15 +66,14 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
         )
     if len(prov["tracker"]) != 1:
         raise ValueError(
-            "runs that tracked rivals or read modes differently ((refine_rivals, search_rivals_every, mode_pose): "
-            f"{sorted(prov['tracker'])}): "
+            f"runs that tracked rivals or read modes differently ({[dict(t) for t in sorted(prov['tracker'])]}): "
             "their features differ; one calibration is for one"
         )
-    refine, every, mode_pose = prov["tracker"].pop()
+    tracker = dict(prov["tracker"].pop())
     maps = [{"map_drive": d, "map_logodds_limit": limit} for d, limit in sorted(prov["maps"], key=str)]
     prov = {
         "maps": maps[0] if len(maps) == 1 else maps,
-        "tracker": {"refine_rivals": refine, "search_every": every, "mode_pose": mode_pose},
+        "tracker": tracker,
         "runs": prov["runs"],
         "worlds": sorted(prov["worlds"]),
         "weighting": prov["weighting"].pop(),

@@ -381,6 +381,16 @@ def right(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return (np.hypot(*(est[:, :2] - gt[:, :2]).T) < RIGHT_M) & (d_yaw < RIGHT_DEG)
 
 
+def tracker_of(w) -> dict:
+    """How a worlds run tracked rivals and read modes (``Confidence.tracker``'s keys), from its worlds settings (a
+    dict or a config); a setting a record lacks reads as runs before it did."""
+    return {
+        "refine_rivals": bool(w.get("refine_rivals", False)),
+        "search_every": int(w.get("search_rivals_every", 0)),
+        "mode_pose": w.get("mode_pose", "block"),
+    }
+
+
 class Confidence:
     """p(right | features) = sigmoid(coef . (f - mean) / scale + intercept), the model of a calibration file.
 

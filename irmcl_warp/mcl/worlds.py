@@ -49,6 +49,7 @@ from irmcl_warp.mcl.confidence import (
     search_grid,
     right,
     shipped,
+    tracker_of,
 )
 from irmcl_warp.mcl.track import between_updates, moved
 from irmcl_warp.services.filters import NOF_WEIGHTINGS, build_filter, free_space_view, grid_maps
@@ -89,11 +90,7 @@ def calibration_of(cfg) -> Confidence | None:
     if not path:
         return None
     conf = Confidence.load(path)
-    mine = {
-        "refine_rivals": bool(cfg.worlds.refine_rivals),
-        "search_every": int(cfg.worlds.search_rivals_every),
-        "mode_pose": cfg.worlds.mode_pose,
-    }
+    mine = tracker_of(cfg.worlds)
     if conf.tracker != mine:
         raise ValueError(
             f"{path} was fitted on runs that tracked rivals as {conf.tracker}; this run tracks them as {mine} "
