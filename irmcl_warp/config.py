@@ -242,6 +242,11 @@ class MCLConfig:
     kld_min_particles: int = 500  # nav2 amcl's min_particles
     kld_cell_m: float = 0.5  # the histogram's cells: AMCL's kd-tree, 0.5 m x 0.5 m x 10 deg
     kld_cell_deg: float = 10.0
+    # a global start's first update (after init_uniform: the start and every relocalization) weighs this many times
+    # num_particles candidates spread uniformly, then keeps num_particles of them drawn by their tempered weights: one
+    # update of a filter that many times larger (1 = off: the uniform set itself is weighed). Later updates run
+    # with num_particles (ParticleFilter._first_from_candidates)
+    global_candidates: int = 1
     cpu_threads: Optional[int] = None  # CPU only: motion and the grid models launched as a block of particles per core
     #   (None = the process's cores; 1 = one launch, which a CPU graph may capture); the same bits either way
     seed: int = 0
@@ -579,6 +584,7 @@ RANGES = {
     "mcl.kld_min_particles": (1, None),
     "mcl.kld_cell_m": ("> 0", None),
     "mcl.kld_cell_deg": ("> 0", 360),
+    "mcl.global_candidates": (1, None),
     "worlds.runs": (1, None),
     "worlds.run_s": ("> 0", None),
     "worlds.map_drive_m": ("> 0", None),

@@ -461,6 +461,11 @@ def worlds_table(runs: list) -> str:
             + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
             + ([f"timeout only at agreement < {gate:g}"] if gate is not None else [])
             + (["modes' densest poses"] if r.setting("worlds.mode_pose") == "densest" else [])
+            + (
+                [f"a global start's first update from {r.setting('mcl.global_candidates')}x candidates"]
+                if (r.setting("mcl.global_candidates") or 1) > 1
+                else []
+            )
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
             + (
                 [

@@ -84,6 +84,20 @@ def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray
     raise ValueError(f"MCL: mcl.beam_pick={how!r}; choose spread or stride")
 
 
+def systematic_draw(log_w: np.ndarray, n: int, u: float) -> np.ndarray:
+    """``n`` indices into ``log_w`` by systematic (low-variance) resampling with the offset ``u`` in [0, 1): index i
+    is drawn about n w_i times (Thrun et al. Table 4.4; a numpy twin of kernels/resample.py's draw). Weights that
+    are all -inf or NaN are an error."""
+    log_w = np.asarray(log_w, np.float64)
+    finite = np.isfinite(log_w)
+    if not finite.any():
+        raise ValueError("MCL: no candidate has a finite log-weight")
+    w = np.where(finite, np.exp(log_w - log_w[finite].max()), 0.0)
+    cdf = np.cumsum(w / w.sum())
+    cdf[-1] = 1.0
+    return np.minimum(np.searchsorted(cdf, (np.arange(n) + u) / n, side="right"), len(w) - 1)
+
+
 def log_running_average(l_old: float, l_new: float, rate: float) -> float:
     """AMCL's running average w <- (1 - rate) w + rate w_new, kept as logs (l = log w) so that likelihoods far below
     float32's range still compare (ParticleFilter.recovery_probability; eval.analyses.lost_rules' AmclRule)."""
@@ -157,7 +171,8 @@ class ParticleFilter:
         self.graphs = {}  # the particle buffer a step starts from -> its captured launches
         self._side, self._forked = None, False  # the estimate's stream on a GPU (_side_stream); forked this step
         self.rng = np.random.default_rng(cfg.seed)
-        self.steps = 0
+        self.steps = self.plain_steps = 0  # steps; those by move -> weigh -> resample (a graph replays only after one)
+        self.global_start = False  # the particles are init_uniform's, not weighed yet
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
         self.log_mean_likelihood = LogMeanLikelihood(d)
@@ -201,18 +216,24 @@ class ParticleFilter:
 
     # --- initialisation ---------------------------------------------------------------------------
     def init_uniform(self) -> None:
-        """Global localization: particles spread uniformly over the free nodes of the map, any heading."""
+        """Global localization: particles spread uniformly over the free nodes of the map, any heading. With
+        ``mcl.global_candidates`` > 1 the next update draws its particles afresh (``_first_from_candidates``)."""
+        self.set_particles(self.uniform_poses(self.cfg.num_particles))
+        self.global_start = True
+
+    def uniform_poses(self, n: int) -> np.ndarray:
+        """``n`` poses uniform over the free nodes of the map (within each node's cell), any heading."""
         iy, ix = np.nonzero(self.free_space.occupancy < 0.5)
         if len(ix) == 0:
             raise ValueError("MCL: the map has no free space to spread particles over")
-        k = self.rng.integers(0, len(ix), self.cfg.num_particles)
+        k = self.rng.integers(0, len(ix), n)
         res = self.free_space.resolution_m
         xy = (
             np.stack([ix[k], iy[k]], -1) * res
             + np.asarray(self.free_space.origin_xy)
             + self.rng.uniform(-res / 2, res / 2, (len(k), 2))
         )
-        self.set_particles(np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))]))
+        return np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))])
 
     def init_gaussian(self, pose, std=(0.5, 0.5, 0.3)) -> None:
         """Pose tracking from a noisy initial pose."""
@@ -234,6 +255,7 @@ class ParticleFilter:
         self.particles.assign(wp.array(poses, dtype=wp.vec3, device=self.device))
         self.log_w.zero_()
         self.l_slow = self.l_fast = None
+        self.global_start = False  # (init_uniform sets it again)
 
     # --- one filter step --------------------------------------------------------------------------
     def _graph_choice(self) -> bool:
@@ -277,8 +299,10 @@ class ParticleFilter:
         they are one graph, captured once and replayed from the second step on (the same launches, the same
         bits). The host waits once per step, before the estimate is read back."""
         limit = self._upload(odom_step, ranges_m)  # u_t, z_t and the step's seeds; resample when N_eff < limit
+        if self.global_start and self.cfg.global_candidates > 1:
+            return self._first_from_candidates()
         p_inject = 0.0
-        if self.use_graph and self.steps > 1:  # (the first step launches one by one: it loads the kernels)
+        if self.use_graph and self.plain_steps > 0:  # (the first step launches one by one: it loads the kernels)
             self._replay(limit)  # the four calls below, captured once as one CUDA graph
         else:
             self._move()  # x_t ~ p(x_t | u_t, x_t-1): sample_motion_model_odometry (Table 5.6)
@@ -286,11 +310,42 @@ class ParticleFilter:
             p_inject = self.recovery_probability()  # max(0, 1 - w_fast / w_slow) (Table 8.3)
             self._resample(np.inf if p_inject > 0 else limit)  # low-variance resampling (Table 4.4) if N_eff < limit
         wp.synchronize_device(self.device)
+        self.plain_steps += 1
+        self.global_start = False
         self.particles, self.scratch = self.scratch, self.particles  # the resampled set is the new one
         self._inject(p_inject)  # each particle a random free pose with probability p_inject (Table 8.3)
         pose, neff = self._read_estimate(limit, p_inject)  # the estimate (mcl.estimate) and N_eff, read back once
         if self.kld is not None and (p_inject > 0 or neff < limit):  # resampled this step:
             self._adapt_count()  # KLD-sampling's count for the next steps (Fox 2003)
+        return pose, neff
+
+    def _first_from_candidates(self) -> tuple[np.ndarray, float]:
+        """``mcl.global_candidates`` = K > 1, the first update after ``init_uniform``: K x N poses drawn uniformly
+        over the free space are weighed by this scan (in K batches of N, through the filter's own weighting and
+        its scratch), and N of them are kept by systematic resampling on their tempered weights (Thrun et al.
+        Table 4.4), with equal weights after. That is one update of a K-times larger filter followed by its
+        resampling: a global start covers the map K times more densely when the scan first decides, and every
+        later update costs what N particles cost. The scan's evidence is in where the particles are, not in their
+        weights; the odometry step is not applied (the candidates are drawn where the robot is now). Returns
+        (the estimate, N_eff = N)."""
+        n, k, d = self.num_particles, int(self.cfg.global_candidates), self.device
+        self.inputs.send()
+        poses = np.empty((k * n, 3), np.float64)
+        lik = np.empty(k * n, np.float64)
+        for b in range(k):  # the filter's own arrays: the weighting's scratch is sized for N
+            poses[b * n : (b + 1) * n] = self.uniform_poses(n)
+            self.particles.assign(wp.array(poses[b * n : (b + 1) * n].astype(np.float32), dtype=wp.vec3, device=d))
+            self._observe()
+            lik[b * n : (b + 1) * n] = self.log_lik.numpy()
+        keep = systematic_draw(float(self.cfg.temper) * lik, n, float(self.rng.uniform()))
+        self.set_particles(poses[keep])
+        self.log_lik.zero_()  # the weights stay equal: the estimate of the kept set, unweighted
+        self._normalise()
+        self._resample(0.0)  # (never resamples: copies the set into the scratch buffer)
+        wp.synchronize_device(d)
+        self.particles, self.scratch = self.scratch, self.particles
+        pose, neff = self._read_estimate(0.0, 0.0)
+        self.log_lik.assign(wp.array(lik[keep].astype(np.float32), dtype=wp.float32, device=d))  # (what was weighed)
         return pose, neff
 
     def _adapt_count(self) -> None:
