@@ -940,6 +940,21 @@ def test_paired_worlds_counts_the_discordant_drives_and_refuses_unpaired_runs(tm
         (tmp_path / name / "metrics.json").write_text(json.dumps(doc))
     fa = main([str(tmp_path / "a"), str(tmp_path / "b")])["false_alarms"]
     assert (fa["a"], fa["b"], fa["hours_b"]) == (0, 4, 1.0) and fa["p_rates"] == pytest.approx(2 / 16)
+    # kidnapped runs: detection (<= 2 s) and re-convergence (<= 5 s) over the drives right before it in both
+    for name, detected, back in (
+        ("a", [1.0, 0.4, None, 2.0], [3.0, 6.0, None, 5.0]),
+        ("b", [1.0, 2.2, 0.2, 0.2], [9.0] * 4),
+    ):
+        doc = json.loads((tmp_path / name / "metrics.json").read_text())
+        for k, row in enumerate(doc["runs"]):
+            row.update(kidnap_at_s=30.0, right_before_kidnap=k < 4 or (name == "a" and k == 9))
+            row.update(detected_after_s=detected[k % 4], reconverged_after_s=back[k % 4])
+        (tmp_path / name / "metrics.json").write_text(json.dumps(doc))
+    out = main([str(tmp_path / "a"), str(tmp_path / "b")])
+    det, rec = out["outcomes"]["detected_within_2s"], out["outcomes"]["reconverged_within_5s"]
+    assert out["kidnapped_drives"] == 4 and det["of"] == 4  # run 10 was right before it in A only
+    assert (det["a"], det["b"], det["only_a"], det["only_b"]) == (3, 3, ["w-1-run2"], ["w-1-run3"])
+    assert (rec["a"], rec["b"], len(rec["only_a"]), rec["p_mcnemar"]) == (2, 0, 2, pytest.approx(0.5))
 
 
 def test_the_twins_analysis_turns_walls_onto_walls_and_sums_over_the_updates_only():

@@ -4,7 +4,8 @@ test").
 
 Both runs localize the same drives (world, path seed), so their outcomes are paired: the test is McNemar's exact
 one, a two-sided binomial test on the drives where exactly one of the two ended right (``right_at_end``) or
-localized by the protocol (``success``). Prints, per outcome, both counts, the discordant drives and the p-value, and
+localized by the protocol (``success``); on kidnapped runs also, over the drives right before the kidnapping in
+both, detected within 2 s and re-converged within 5 s (``KIDNAP_OUTCOMES``). Prints, per outcome, both counts, the discordant drives and the p-value, and
 the particles an update ran with on average (``particles_per_update``, with ``mcl.kld_sampling``); writes the same
 as JSON with ``--out``. Given the runs' folders, also each run's AUROC (the confidence at every update against right
 or wrong) and a 95 % interval of the difference from resampling the drives (``BOOTSTRAP`` draws): the updates of one
@@ -20,6 +21,11 @@ import json
 from pathlib import Path
 
 OUTCOMES = ("right_at_end", "success", "localized_at_end")
+# kidnapped runs (worlds.kidnap_at_s): outcome, the drive's field, within (s): the issue's 2 s and 5 s
+KIDNAP_OUTCOMES = (
+    ("detected_within_2s", "detected_after_s", 2.0),
+    ("reconverged_within_5s", "reconverged_after_s", 5.0),
+)
 BOOTSTRAP = 2000  # drive resamples for the AUROC difference's interval (fixed seed 0)
 
 
@@ -37,6 +43,10 @@ def rates_exact(count_a: int, hours_a: float, count_b: int, hours_b: float) -> f
 
     n = count_a + count_b
     return 1.0 if n == 0 else float(binomtest(count_a, n, hours_a / (hours_a + hours_b)).pvalue)
+
+
+def _within(seconds, limit: float) -> bool:
+    return seconds is not None and seconds <= limit
 
 
 def drives(metrics: dict) -> dict[tuple[str, int], dict]:
@@ -63,6 +73,22 @@ def compare(a: dict, b: dict) -> dict:
             "only_b": [f"{w}-run{k}" for w, k in only_b],
             "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
         }
+    kidnapped = [d for d in da if da[d].get("right_before_kidnap") and db[d].get("right_before_kidnap")]
+    if kidnapped:  # kidnapped runs: detection and re-convergence over the drives right before it in both
+        out["kidnapped_drives"] = len(kidnapped)
+        for key, field, within in KIDNAP_OUTCOMES:
+            ra = {d: _within(da[d].get(field), within) for d in kidnapped}
+            rb = {d: _within(db[d].get(field), within) for d in kidnapped}
+            only_a = sorted(d for d in kidnapped if ra[d] and not rb[d])
+            only_b = sorted(d for d in kidnapped if rb[d] and not ra[d])
+            out["outcomes"][key] = {
+                "a": sum(ra.values()),
+                "b": sum(rb.values()),
+                "of": len(kidnapped),
+                "only_a": [f"{w}-run{k}" for w, k in only_a],
+                "only_b": [f"{w}-run{k}" for w, k in only_b],
+                "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
+            }
     sa, sb = a["summary"], b["summary"]
     if all("false_alarms" in x and "tracking_right_h" in x for x in (sa, sb)):  # (runs that scored them)
         out["false_alarms"] = {
@@ -142,7 +168,7 @@ def main(argv=None) -> dict:
     print(f"A = {args.a}\nB = {args.b}\n{out['drives']} drives, paired")
     print("| outcome | A | B | only A | only B | McNemar exact p |\n|---|---|---|---|---|---|")
     for key, o in out["outcomes"].items():
-        n = out["drives"]
+        n = o.get("of", out["drives"])
         print(
             f"| {key} | {o['a']}/{n} | {o['b']}/{n} | {len(o['only_a'])} | {len(o['only_b'])} | {o['p_mcnemar']:.3g} |"
         )

@@ -7,6 +7,7 @@
 # SLAM_ARGS: overrides of the SLAM run (MIT Killian: "slam.num_particles=60 slam.proposal=gmapping_code slam.seed=6",
 # a seed whose map converged, 0.045 m on the relations: the experiment's 30-particle map did not, 0.19 m);
 # JOBS: localization runs at once (separate processes sharing the GPU; each run is host-bound), default 1.
+# LOCALIZE_ARGS: more overrides of the localization runs (e.g. "mcl.global_candidates=10").
 # Results: $OUT/own_slam_map-<log>.json (the scores) and $OUT/own_slam_map.tgz (the runs' trajectories, metrics and
 # settings, the SLAM runs' maps and poses; not the MCAP replays or animations). Unpack into the repository root.
 set -uo pipefail
@@ -24,6 +25,8 @@ for log in ${LOGS:-fr079 intel mit_csail}; do
   slam=$(dirname "$(ls -td outputs/gmapping_"$log"/slam/*/map.yaml | head -1)")
   echo "=== $log: localized in $slam/map.yaml, $N particles, seeds $SEEDS, $JOBS at once"
   localize=(+exp="$log" mcl=amcl mcl.num_particles="$N" localize.map_path="$slam/map.yaml" localize.run_s=null)
+  # shellcheck disable=SC2206
+  localize+=(${LOCALIZE_ARGS:-})
   if [ "$JOBS" -gt 1 ]; then
     for s in ${SEEDS//,/ }; do
       python -m irmcl_warp.localize "${localize[@]}" mcl.seed="$s" > "$OUT/localize-$log-seed$s.log" 2>&1 &
