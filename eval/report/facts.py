@@ -100,6 +100,11 @@ PAIRED_WORLDS = (
     "densest_gate_vs_before_kidnap",
     "densest_gate_vs_before_cpu",
     "densest_gate_vs_before_cpu_kidnap",
+    "candidates_vs_before_gpu",
+    "candidates_vs_before_kidnap",
+    "candidates_vs_before_cpu",
+    "candidates_vs_before_cpu_kidnap",
+    "candidates_vs_off_tuning_kidnap",
 )  # results/checks/paired_worlds_<name>.json
 
 
@@ -116,7 +121,8 @@ def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
         d, facts = json.loads(path.read_text()), {}
         n = d["drives"]
         for key, o in d["outcomes"].items():
-            facts[key] = f"{o['a']}/{n} against {o['b']}/{n} (McNemar exact p = {o['p_mcnemar']:.2g})"
+            of = o.get("of", n)  # (kidnapped runs' detection and re-convergence: the drives right before it in both)
+            facts[key] = f"{o['a']}/{of} against {o['b']}/{of} (McNemar exact p = {o['p_mcnemar']:.2g})"
             for side in ("a", "b"):  # the drives only one side got right, by name
                 facts[f"{key}_only_{side}"] = ", ".join(o[f"only_{side}"]) or "none"
         for side in ("a", "b"):
