@@ -1008,3 +1008,62 @@ def test_the_unmapped_analysis_names_the_drives_that_leave_a_random_drives_map()
     assert len(random_shares) == len(cover_shares) == 3 and all(0.0 <= s <= 1.0 for s in random_shares)
     assert "twin-1002-run2" in res["leaving"]["random"] and random_shares[1] > 0.1
     assert res["leaving"]["cover"] == [] and max(cover_shares) == 0.0
+
+
+def test_the_kidnaps_analysis_tells_the_misses_apart(tmp_path):
+    """eval.analyses.kidnaps on four synthetic kidnapped drives (kidnapped at 3 s, scans every 0.2 s, an update every
+    other scan): one met, one right again after 0.4 s but 15 deg off between two updates later, one right again but
+    taken over at an update later, one never detected and confidently wrong for 1 s; a drive wrong before the
+    kidnapping is left out."""
+    import json
+
+    from eval.analyses.kidnaps import kidnaps
+
+    t = np.arange(0.0, 10.0, 0.2)
+    updated = np.arange(len(t)) % 2 == 0
+    rows, cases = (
+        [],
+        {
+            1: (0.2, 0.4, None),  # met
+            2: (0.2, 6.0, ("yaw", 7.0)),  # back at 3.6 s, 15 deg off at the scan after 7 s (between updates)
+            3: (0.2, 6.0, ("place", 7.0)),  # back, then 5 m off from the update at 7 s on
+            4: (None, None, None),  # not detected
+        },
+    )
+    for run, (detected, back, later) in cases.items():
+        truth = np.column_stack([t, np.zeros_like(t), np.zeros_like(t)])
+        est = truth.copy()
+        conf = np.full(len(t), 0.95)
+        gone = (t >= 3.0) & (t < 3.0 + (detected or 0.0) + 0.4)  # wrong from the kidnapping until right again
+        if detected is None:
+            gone = (t >= 3.0) & (t < 4.0)
+        est[gone, 1] += 8.0
+        conf[gone & (detected is not None)] = 0.1
+        if later and later[0] == "yaw":
+            k = int(np.flatnonzero((t > later[1]) & ~updated)[0])
+            est[k, 2] = np.radians(15.0)
+        if later and later[0] == "place":
+            est[t >= later[1], 1] += 5.0
+        np.savez(tmp_path / f"w-1-run{run}.npz", stamps=t, estimate=est, truth=truth, updated=updated, confidence=conf)
+        rows.append(
+            dict(
+                world="w-1",
+                run=run,
+                kidnap_at_s=3.0,
+                right_before_kidnap=True,
+                detected_after_s=detected,
+                reconverged_after_s=back,
+            )  # fmt: skip
+        )
+    rows.append(dict(world="w-1", run=5, kidnap_at_s=3.0, right_before_kidnap=False))
+    (tmp_path / "metrics.json").write_text(json.dumps({"runs": rows, "settings": {"worlds": {"confident_above": 0.8}}}))
+    res = kidnaps(tmp_path)
+    by = {d["drive"]: d for d in res["drives"]}
+    assert res["kidnaps"] == 4 and by["w-1-run1"]["class"] == "met"
+    assert by["w-1-run2"]["class"] == "back, off between updates only"
+    assert by["w-1-run2"]["excursion_max_heading_deg"] == pytest.approx(15.0) and by["w-1-run2"][
+        "first_right_after_s"
+    ] == pytest.approx(0.2, abs=0.21)
+    assert by["w-1-run3"]["class"] == "back, then wrong again at updates"
+    assert by["w-1-run4"]["class"] == "not detected" and by["w-1-run4"]["confidently_wrong_s"] == pytest.approx(1.0)
+    assert by["w-1-run1"]["confidently_wrong_s"] == 0.0
