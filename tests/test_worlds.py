@@ -1067,3 +1067,25 @@ def test_the_kidnaps_analysis_tells_the_misses_apart(tmp_path):
     assert by["w-1-run3"]["class"] == "back, then wrong again at updates"
     assert by["w-1-run4"]["class"] == "not detected" and by["w-1-run4"]["confidently_wrong_s"] == pytest.approx(1.0)
     assert by["w-1-run1"]["confidently_wrong_s"] == 0.0
+
+
+def test_a_search_grid_over_the_budget_is_covered_in_turns(monkeypatch):
+    """confidence.SEARCH_BUDGET: a grid of at most the budget is searched whole every time; a larger one in slices of
+    the budget that together hold every pose once per turn, and the turns go on."""
+    import irmcl_warp.mcl.confidence as confidence
+
+    occ, origin, res = _box_map()
+    rng = np.random.default_rng()
+    grid = np.column_stack([rng.uniform(1, 14, 1000), rng.uniform(1, 9, 1000), rng.uniform(-3, 3, 1000)])
+    monkeypatch.setattr(confidence, "SEARCH_BUDGET", 1000)
+    whole = FeatureTracker(ScanAgreement(occ, origin, res), search_poses=grid, search_every=1)
+    assert whole._search_slice() is grid and whole._search_slice() is grid
+    monkeypatch.setattr(confidence, "SEARCH_BUDGET", 300)
+    turns = FeatureTracker(ScanAgreement(occ, origin, res), search_poses=grid, search_every=1)
+    slices = [turns._search_slice() for _ in range(4)]  # 300 + 300 + 300 + 100 of one turn, 200 of the next
+    assert all(len(s) == 300 for s in slices)
+    first_turn = np.vstack(slices)[:1000]
+    assert len(np.unique(first_turn, axis=0)) == 1000 and np.array_equal(
+        np.unique(first_turn, axis=0), np.unique(grid, axis=0)
+    )
+    assert np.array_equal(np.vstack(slices)[1000:], turns.search_poses[:200])

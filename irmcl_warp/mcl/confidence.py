@@ -53,6 +53,9 @@ FEATURES = (
     "log_spread",
     "rival_evidence",
 )
+SEARCH_BUDGET = 40_000  # the look-alike search scores at most this many poses per search; a larger grid is covered in
+# turns (a fixed shuffle of it, the next slice each search). Every simulated floor's grid holds fewer (34k at most:
+# the calibrations' runs searched whole maps); MIT Killian's holds 586k, 1.6 s a search on the 2-core CPU
 EVIDENCE_CAP = 3.0  # rival_evidence is read within +-this, and this without a rival: a rival the estimate has
 # out-explained by this much (in scan shares summed over updates) is ruled out
 
@@ -270,6 +273,9 @@ class FeatureTracker:
             raise ValueError(f"FeatureTracker: mode_pose {mode_pose!r} is not one of {MODE_POSES}")
         self.agreement, self.refine_rivals, self.mode_pose = agreement, refine_rivals, mode_pose
         self.search_poses, self.search_every = search_poses, int(search_every)
+        if search_poses is not None and len(search_poses) > SEARCH_BUDGET:  # covered in turns, SEARCH_BUDGET a search
+            self.search_poses = np.asarray(search_poses)[np.random.default_rng(0).permutation(len(search_poses))]
+        self.search_from = 0  # where the next search's slice starts
         self.recent, self.rival_weight, self.rival_apart_m = recent, rival_weight, rival_apart_m
         self.rule_out, self.max_rivals = rule_out, max_rivals
         self.reset()
@@ -323,6 +329,16 @@ class FeatureTracker:
         filter's own weights judge it from there)."""
         self.rival_evidence[:] = 0.0
 
+    def _search_slice(self) -> np.ndarray:
+        """The poses this search scores: all of them when they are at most SEARCH_BUDGET, else the next slice of
+        SEARCH_BUDGET of the shuffled grid (wrapping around)."""
+        n = len(self.search_poses)
+        if n <= SEARCH_BUDGET:
+            return self.search_poses
+        pick = (self.search_from + np.arange(SEARCH_BUDGET)) % n
+        self.search_from = int((self.search_from + SEARCH_BUDGET) % n)
+        return self.search_poses[pick]
+
     def _rivals(self, m: Modes, odom_delta, scan, recent_top: float, top: float) -> tuple[float, float]:
         if len(self.rivals):  # moved as the robot moved
             self.rivals = compose_rows(self.rivals, np.asarray(odom_delta, float))
@@ -330,7 +346,7 @@ class FeatureTracker:
         if self.search_every > 0 and self.search_poses is not None and self.updates % self.search_every == 0:
             found = [
                 (p, 1.0)
-                for p, a in self.agreement.search(self.search_poses, *scan, m.poses[0], self.rival_apart_m)
+                for p, a in self.agreement.search(self._search_slice(), *scan, m.poses[0], self.rival_apart_m)
                 if a > recent_top - self.rule_out
             ]
         for pose, w in [*zip(m.poses[1:], m.weights[1:]), *found]:
