@@ -74,6 +74,7 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "seed": OmegaConf.select(cfg, "mcl.seed"),
         "particles": OmegaConf.select(cfg, "mcl.num_particles"),
         "weighting": OmegaConf.select(cfg, "mcl.weighting"),
+        "global_candidates": OmegaConf.select(cfg, "mcl.global_candidates") or 1,  # (runs before the setting: 1)
         "device": manifest.get("device"),
         "wall_time_s": manifest.get("wall_time_s"),
         "scans": int(len(stamps)),

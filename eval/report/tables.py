@@ -496,9 +496,13 @@ def own_slam_map_table(records: list) -> str:
         "scan | confidence when right / wrong, median | calibration |",
         "|" + "---|" * 13,
     ]
-    for rec in sorted(records, key=lambda r: (r["log"], r["runs"][0]["particles"])):
+    for rec in sorted(
+        records, key=lambda r: (r["log"], r["runs"][0]["particles"], r["runs"][0].get("global_candidates") or 1)
+    ):
         runs = rec["runs"]
         first = runs[0]
+        k = first.get("global_candidates") or 1  # (records before the setting: 1)
+        weighting = first["weighting"].replace("_", " ") + (f", start from {k}x candidates" if k > 1 else "")
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
         e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
         conf = sum(bool(r["localized_at_end"]) for r in runs)
@@ -513,7 +517,7 @@ def own_slam_map_table(records: list) -> str:
         # which calibration judged the runs (records before it was kept: "-"; runs judged by two: both)
         calibration = " / ".join(sorted({r.get("calibration") or "-" for r in runs}))
         rows.append(
-            f"| {rec['log']} | {first['weighting'].replace('_', ' ')} | {first['particles'] // 1000}k | {first['device']} "
+            f"| {rec['log']} | {weighting} | {first['particles'] // 1000}k | {first['device']} "
             f"| {len(runs)} ({seeds}) | {rec['successes']}/{len(runs)} | {span} | {_f(np.median(e) if e else None)} "
             f"| {conf}/{len(runs)} | {wrong} | {auc} | {medians} | {calibration} |"
         )

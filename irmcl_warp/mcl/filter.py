@@ -300,7 +300,7 @@ class ParticleFilter:
         bits). The host waits once per step, before the estimate is read back."""
         limit = self._upload(odom_step, ranges_m)  # u_t, z_t and the step's seeds; resample when N_eff < limit
         if self.global_start and self.cfg.global_candidates > 1:
-            return self._first_from_candidates()
+            return self._first_from_candidates()  # a global start: K x N uniform candidates weighed, N kept
         p_inject = 0.0
         if self.use_graph and self.plain_steps > 0:  # (the first step launches one by one: it loads the kernels)
             self._replay(limit)  # the four calls below, captured once as one CUDA graph
