@@ -65,11 +65,10 @@ def drive(trace, row: dict, confident_above: float) -> dict:
             return out
         between = not updated[later].any()
         out["class"] = "back, off between updates only" if between else "back, then wrong again at updates"
-        if later.any():
-            out["excursion_at_s"] = float(t[np.flatnonzero(later)[-1]])
-            out["excursion_max_heading_deg"] = float(np.nanmax(yaw[later]))
-            out["excursion_max_position_m"] = float(np.nanmax(err[later]))
-            out["excursion_between_updates_only"] = bool(between)
+        out["excursion_at_s"] = float(t[np.flatnonzero(later)[-1]])
+        out["excursion_max_heading_deg"] = float(np.nanmax(yaw[later]))
+        out["excursion_max_position_m"] = float(np.nanmax(err[later]))
+        out["excursion_between_updates_only"] = bool(between)
         return out
     out["class"] = "look-alike"
     return out

@@ -49,6 +49,20 @@ def _within(seconds, limit: float) -> bool:
     return seconds is not None and seconds <= limit
 
 
+def paired(ra: dict, rb: dict) -> dict:
+    """One outcome over the same drives (drive -> bool in each run): both counts, the discordant drives by name and
+    McNemar's exact p."""
+    only_a = sorted(d for d in ra if ra[d] and not rb[d])
+    only_b = sorted(d for d in ra if rb[d] and not ra[d])
+    return {
+        "a": sum(ra.values()),
+        "b": sum(rb.values()),
+        "only_a": [f"{w}-run{k}" for w, k in only_a],
+        "only_b": [f"{w}-run{k}" for w, k in only_b],
+        "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
+    }
+
+
 def drives(metrics: dict) -> dict[tuple[str, int], dict]:
     """(world, run) -> that drive's row of a worlds run's metrics.json."""
     return {(r["world"], int(r["run"])): r for r in metrics["runs"]}
@@ -62,33 +76,16 @@ def compare(a: dict, b: dict) -> dict:
         raise SystemExit(f"paired_worlds: the two runs localized different drives (e.g. {only}): nothing to pair")
     out = {"drives": len(da), "outcomes": {}}
     for key in OUTCOMES:
-        ra = {d: bool(r.get(key)) for d, r in da.items()}
-        rb = {d: bool(r.get(key)) for d, r in db.items()}
-        only_a = sorted(d for d in da if ra[d] and not rb[d])
-        only_b = sorted(d for d in da if rb[d] and not ra[d])
-        out["outcomes"][key] = {
-            "a": sum(ra.values()),
-            "b": sum(rb.values()),
-            "only_a": [f"{w}-run{k}" for w, k in only_a],
-            "only_b": [f"{w}-run{k}" for w, k in only_b],
-            "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
-        }
+        out["outcomes"][key] = paired(
+            {d: bool(r.get(key)) for d, r in da.items()}, {d: bool(r.get(key)) for d, r in db.items()}
+        )
     kidnapped = [d for d in da if da[d].get("right_before_kidnap") and db[d].get("right_before_kidnap")]
     if kidnapped:  # kidnapped runs: detection and re-convergence over the drives right before it in both
         out["kidnapped_drives"] = len(kidnapped)
         for key, field, within in KIDNAP_OUTCOMES:
             ra = {d: _within(da[d].get(field), within) for d in kidnapped}
             rb = {d: _within(db[d].get(field), within) for d in kidnapped}
-            only_a = sorted(d for d in kidnapped if ra[d] and not rb[d])
-            only_b = sorted(d for d in kidnapped if rb[d] and not ra[d])
-            out["outcomes"][key] = {
-                "a": sum(ra.values()),
-                "b": sum(rb.values()),
-                "of": len(kidnapped),
-                "only_a": [f"{w}-run{k}" for w, k in only_a],
-                "only_b": [f"{w}-run{k}" for w, k in only_b],
-                "p_mcnemar": mcnemar_exact(len(only_a), len(only_b)),
-            }
+            out["outcomes"][key] = {**paired(ra, rb), "of": len(kidnapped)}
     sa, sb = a["summary"], b["summary"]
     if all("false_alarms" in x and "tracking_right_h" in x for x in (sa, sb)):  # (runs that scored them)
         out["false_alarms"] = {

@@ -176,9 +176,8 @@ class ParticleFilter:
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
         self.log_mean_likelihood = LogMeanLikelihood(d)
-        free = np.argwhere(free_space.occupancy < 0.5)[:, ::-1] * free_space.resolution_m + np.asarray(
-            free_space.origin_xy
-        )
+        self.free_nodes = np.nonzero(free_space.occupancy < 0.5)  # (iy, ix): where uniform poses and recovery draw
+        free = np.column_stack(self.free_nodes[::-1]) * free_space.resolution_m + np.asarray(free_space.origin_xy)
         self.free_xy = wp.array(free.astype(np.float32), dtype=wp.vec2, device=d) if len(free) else None
 
     def _allocate(self, n: int) -> None:
@@ -223,7 +222,7 @@ class ParticleFilter:
 
     def uniform_poses(self, n: int) -> np.ndarray:
         """``n`` poses uniform over the free nodes of the map (within each node's cell), any heading."""
-        iy, ix = np.nonzero(self.free_space.occupancy < 0.5)
+        iy, ix = self.free_nodes
         if len(ix) == 0:
             raise ValueError("MCL: the map has no free space to spread particles over")
         k = self.rng.integers(0, len(ix), n)
