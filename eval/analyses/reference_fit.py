@@ -1,0 +1,156 @@
+"""``python -m eval.analyses.reference_fit --slam <slam run> --runs <own-map localize runs>... [--out FILE.json]``
+
+How far the reference of the own-map tables can be trusted, scan by scan (issue 33). A log localized in its own SLAM
+map is scored against that SLAM run's poses (eval.analyses.own_slam_map), and its confidence's AUROC counts a scan as
+wrong where the estimate is more than RIGHT_M / RIGHT_DEG from the SLAM pose. The SLAM pose is no ground truth: the
+map is the best particle's at the end of the run, so where a later visit redrew a corridor, or the SLAM run
+dead-reckoned between two processed scans (GMapping processes a scan after 0.5 rad of turning), the SLAM pose of a
+scan may fit that scan to the map worse than the localizer's pose does.
+
+For each scan the SLAM run has a pose of, this reads the scan's agreement with the SLAM map at the SLAM pose
+(``ScanAgreement``, the confidence's own measure: the share of end points within 0.2 m of a wall) and at each run's
+pose of it. It reports:
+
+* the reference's fit: quantiles of its agreement over every scan;
+* over every scan of the runs and over their wrong scans, the share where the localizer's pose fits the scan better than the SLAM pose (by more than
+  ``MARGIN``), and the other way round;
+* the confidence's AUROC over the scans whose SLAM pose agrees at least ``t`` with its map, for several ``t``: no
+  threshold is chosen, the curve shows how much of the AUROC's shortfall lies where the reference fits its own map
+  badly.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from eval.analyses.own_slam_map import confidence_per_scan, on_reference
+from irmcl_warp.io import read_tum
+from irmcl_warp.mapping.mapio import load_map
+from irmcl_warp.mcl.confidence import ScanAgreement, auroc, right
+from irmcl_warp.services.cli import guard
+from irmcl_warp.services.data import load_stream
+from irmcl_warp.services.outputs import write_json
+
+THRESHOLDS = (0.0, 0.6, 0.7, 0.8, 0.9)  # the reference's agreement with its map at or above which a scan is judged
+MARGIN = 0.02  # one pose fits a scan better than another when its agreement is higher by more than this
+
+
+def auroc_where_reference_fits(conf, hit, ref_fit, thresholds=THRESHOLDS) -> list[dict]:
+    """For each threshold t: the scans whose reference agreement is >= t, their share of all, how many are wrong, and
+    the confidence's AUROC over them (None where they are all right or all wrong)."""
+    conf, hit, ref_fit = np.asarray(conf, float), np.asarray(hit, bool), np.asarray(ref_fit, float)
+    out = []
+    for t in thresholds:
+        s = ref_fit >= t
+        both = s.any() and hit[s].any() and (~hit[s]).any()
+        out.append(
+            {
+                "reference_agreement_at_least": float(t),
+                "share_of_scans": float(s.mean()) if len(s) else 0.0,
+                "wrong": int((~hit[s]).sum()),
+                "auroc": auroc(conf[s], hit[s]) if both else None,
+            }
+        )
+    return out
+
+
+def who_fits_better(at_estimate, at_reference, margin: float = MARGIN) -> dict:
+    """Over scans judged wrong: the share where the localizer's pose fits the scan better than the SLAM pose, the share
+    where the SLAM pose fits better, and both poses' median agreement."""
+    a, r = np.asarray(at_estimate, float), np.asarray(at_reference, float)
+    if not len(a):
+        return {"scans": 0}
+    return {
+        "scans": int(len(a)),
+        "estimate_fits_better": float(np.mean(a > r + margin)),
+        "reference_fits_better": float(np.mean(r > a + margin)),
+        "median_at_estimate": float(np.median(a)),
+        "median_at_reference": float(np.median(r)),
+    }
+
+
+def reference_fit(slam: Path, runs: list[Path]) -> dict:
+    cfg = OmegaConf.load(runs[0] / "config.yaml")  # the log the runs read (and the SLAM run made its map of)
+    log = load_stream(cfg)
+    grid = load_map(slam / "map.yaml")
+    agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
+    ref_stamps, ref = read_tum(slam / "trajectory.tum")
+    k = np.clip(np.searchsorted(log.stamps, ref_stamps - 1e-6), 0, len(log.stamps) - 1)
+    has_scan = np.abs(log.stamps[k] - ref_stamps) < 1e-4
+    if has_scan.mean() < 0.9:
+        raise ValueError(f"{slam}: fewer than 90 % of its poses have a scan of {cfg.data.name}'s log: another log?")
+    scan = (log.info.angles_rad, log.T_base_laser)
+    ref_fit = np.full(len(ref), np.nan)
+    for i in np.flatnonzero(has_scan):
+        ref_fit[i] = agreement(ref[i], log.ranges_m[k[i]], *scan)
+    conf_all, hit_all, fit_all, at_est, at_ref, wrong = [], [], [], [], [], []
+    for run in runs:
+        stamps, est = read_tum(run / "trajectory.tum")
+        on_ref = on_reference(stamps, est, ref_stamps, ref)
+        j = np.clip(np.searchsorted(ref_stamps, stamps - 1e-6), 0, len(ref_stamps) - 1)
+        conf = confidence_per_scan(run, stamps)
+        use = np.isfinite(conf) & np.isfinite(on_ref).all(1) & np.isfinite(ref_fit[j])
+        hit = right(est, on_ref)
+        conf_all.append(conf[use])
+        hit_all.append(hit[use])
+        fit_all.append(ref_fit[j][use])
+        for i in np.flatnonzero(use):
+            at_est.append(agreement(est[i], log.ranges_m[k[j[i]]], *scan))
+            at_ref.append(ref_fit[j[i]])
+            wrong.append(not hit[i])
+    conf_all, hit_all, fit_all = (np.concatenate(x) for x in (conf_all, hit_all, fit_all))
+    fit = ref_fit[np.isfinite(ref_fit)]
+    at_est, at_ref, wrong = np.array(at_est), np.array(at_ref), np.array(wrong, bool)
+    return {
+        "log": cfg.data.name,
+        "slam_run": str(slam),
+        "runs": [str(r) for r in runs],
+        "reference_agreement": {
+            "scans": int(len(fit)),
+            "quantiles": {q: float(np.quantile(fit, float(q) / 100)) for q in ("5", "10", "25", "50")},
+            "below_0.8": float(np.mean(fit < 0.8)),
+        },
+        "every_scan": who_fits_better(at_est, at_ref),
+        "wrong_scans": who_fits_better(at_est[wrong], at_ref[wrong]),
+        "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, fit_all),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m eval.analyses.reference_fit", description=__doc__.split("\n\n")[1])
+    ap.add_argument("--slam", required=True, type=Path, help="the SLAM run whose map.yaml the runs localized in")
+    ap.add_argument("--runs", required=True, nargs="+", type=Path, help="own-map localization runs of that log")
+    ap.add_argument("--out", type=Path, default=None)
+    a = ap.parse_args(argv)
+    rec = reference_fit(a.slam, sorted(a.runs))
+    q = rec["reference_agreement"]["quantiles"]
+    print(
+        f"{rec['log']}: the SLAM poses' scan agreement with their own map over {rec['reference_agreement']['scans']:,} "
+        f"scans: 5 % {q['5']:.3f}, 10 % {q['10']:.3f}, 25 % {q['25']:.3f}, median {q['50']:.3f}; below 0.8 at "
+        f"{rec['reference_agreement']['below_0.8']:.1%}"
+    )
+    for what, w in (("every scan", rec["every_scan"]), ("wrong scans", rec["wrong_scans"])):
+        if not w["scans"]:
+            continue
+        print(
+            f"{what} ({w['scans']:,} over {len(rec['runs'])} runs): the localizer's pose fits the scan better at "
+            f"{w['estimate_fits_better']:.0%}, the SLAM pose at {w['reference_fits_better']:.0%} (median agreement "
+            f"{w['median_at_estimate']:.3f} against {w['median_at_reference']:.3f})"
+        )
+    print("| SLAM pose's agreement at least | share of scans | wrong scans | AUROC |")
+    print("|---|---|---|---|")
+    for r in rec["auroc_where_reference_fits"]:
+        auc = "-" if r["auroc"] is None else f"{r['auroc']:.3f}"
+        print(f"| {r['reference_agreement_at_least']:.1f} | {r['share_of_scans']:.3f} | {r['wrong']:,} | {auc} |")
+    if a.out:
+        write_json(a.out, rec)
+        print(f"-> {a.out}")
+    return rec
+
+
+if __name__ == "__main__":
+    guard(main)
