@@ -359,6 +359,10 @@ class LocalizeConfig:
     start_s: float = 0.0  # map_path: localize from this far into the log
     kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
     reduce_after_s: float = 20.0  # IR-MCL's code keeps the mcl.reduce_to heaviest particles 20 s into a global run
+    report_pose: str = "mode"  # a run with a calibrated confidence (your map, mcl=amcl) reports at each update the
+    # pose the confidence judged: the heaviest mode's (mode), as the worlds stage the calibration was fitted on does;
+    # filter: the filter's estimate (mcl.estimate), a mean that lies between two clusters when the set holds two
+    # (the own-map runs before the thirtieth session). Without a calibration the filter's estimate either way
 
 
 @dataclass
@@ -499,6 +503,7 @@ CHOICES = {
     "mcl.resample": ("low_variance", "multinomial"),
     "mcl.first_update": ("scan", "motion"),
     "localize.mode": ("global", "tracking"),
+    "localize.report_pose": ("mode", "filter"),
     "slam.proposal": ("paper", "gmapping_code", "odometry"),
     "slam.resample": ("selective", "always"),
     "slam.line": ("bresenham", "dda"),

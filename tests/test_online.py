@@ -169,8 +169,8 @@ def test_the_converter_template_turns_arrays_into_a_bag_we_read_back(tmp_path):
 
 def test_a_calibrated_confidence_judges_the_run_and_changes_no_pose(world, tmp_path, monkeypatch, capsys):
     """With the calibrated filter (mcl=amcl) an own-map run writes its confidence per scan and ends saying
-    whether it is localized (never "localized" below the threshold); the judge reads the filter and changes no
-    pose; with another filter the run says it has no calibrated confidence."""
+    whether it is localized (never "localized" below the threshold); with another filter the run says it has no
+    calibrated confidence."""
     import json
 
     from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
@@ -193,6 +193,7 @@ def test_a_calibrated_confidence_judges_the_run_and_changes_no_pose(world, tmp_p
 
 
 def test_the_judge_changes_no_pose(world):
+    """follow's default (report_pose="filter"): the judge reads the filter and changes none of its poses."""
     from irmcl_warp.config import compose_config
     from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, Judge, ScanAgreement
     from irmcl_warp.mcl.online import filter_in_map
@@ -258,3 +259,55 @@ def test_a_run_whose_particle_count_moves_borrows_no_calibration():
     assert judge is None and why.endswith("in kld_sampling"), why
     judge, why = calibrated_judge(compose_config(["mcl=amcl", "mcl.kld_sampling=true", "mcl.temper=0.1"]), None, None)
     assert judge is None and why.endswith("in kld_sampling, temper"), why
+
+
+class _TwoClusters:
+    """A stand-in filter whose set holds two clusters, 70 % at (2, 2, 0) and 30 % at (6, 2, 0): its estimate, the
+    mean, lies between them at (3.2, 2, 0), where no particle is."""
+
+    num_particles = 1000
+
+    def __init__(self, rng):
+        n = self.num_particles
+        xy = np.where(np.arange(n)[:, None] < 700, [2.0, 2.0], [6.0, 2.0]) + rng.normal(0, 0.05, (n, 2))
+        self.p = np.column_stack([xy, rng.normal(0, 0.02, n)])
+        self.particles = type("A", (), {"numpy": lambda _: self.p})()
+        self.log_w = type("A", (), {"numpy": lambda _: np.zeros(n)})()
+
+    def step(self, u, ranges_m):
+        return (np.array([3.2, 2.0, 0.0]),)
+
+
+@pytest.mark.parametrize("report_pose", ["mode", "filter"])
+def test_a_judged_run_reports_the_pose_its_confidence_is_about(report_pose, rng):
+    """With a judge, report_pose="mode" gives the heaviest mode's pose (what the confidence judged, as the worlds
+    stage reports), not the filter's mean between two clusters; "filter" keeps the filter's estimate; between
+    updates either pose follows the odometry."""
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.mcl.confidence import FEATURES, Confidence, FeatureTracker, Judge, ScanAgreement
+    from irmcl_warp.mcl.track import Localizer
+
+    grid = np.zeros((100, 100))
+    grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 1.0  # a 10 m box
+    judge = Judge(
+        FeatureTracker(ScanAgreement(grid, (0.0, 0.0), 0.1)),
+        Confidence(np.zeros(len(FEATURES)), 0.0, np.zeros(len(FEATURES)), np.ones(len(FEATURES))),
+        np.linspace(-1.5, 1.5, 30),
+        (0.0, 0.0, 0.0),
+    )
+    m = OmegaConf.create(
+        {"update_min_trans_m": 0.2, "update_min_rot_rad": 0.5, "first_update": "motion", "reduce_to": 0}
+    )
+    loc = Localizer(_TwoClusters(rng), m, judge=judge, report_pose=report_pose)
+    ranges = np.full(30, 3.0)
+    assert np.isnan(loc.update(0.0, ranges, [0.0, 0.0, 0.0]).pose).all()  # no update before the robot moved
+    e = loc.update(0.1, ranges, [0.3, 0.0, 0.0])
+    assert e.updated
+    want = judge.pose if report_pose == "mode" else np.array([3.2, 2.0, 0.0])
+    assert np.allclose(e.pose, want)
+    assert (np.hypot(*(e.pose[:2] - [2.0, 2.0])) < 0.1) == (report_pose == "mode")
+    moved = loc.update(0.2, ranges, [0.4, 0.0, 0.0])  # 0.1 m more: no update, the pose follows the odometry
+    assert not moved.updated and np.allclose(moved.pose, want + [0.1, 0.0, 0.0], atol=1e-3)
+    with pytest.raises(ValueError, match="report_pose 'mean' is not one of"):
+        Localizer(_TwoClusters(rng), m, judge=judge, report_pose="mean")

@@ -75,6 +75,8 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "particles": OmegaConf.select(cfg, "mcl.num_particles"),
         "weighting": OmegaConf.select(cfg, "mcl.weighting"),
         "global_candidates": OmegaConf.select(cfg, "mcl.global_candidates") or 1,  # (runs before the setting: 1)
+        # the pose reported at each update: the judged mode's, or the filter's estimate (runs before the setting)
+        "report_pose": OmegaConf.select(cfg, "localize.report_pose") or "filter",
         "device": manifest.get("device"),
         "wall_time_s": manifest.get("wall_time_s"),
         "scans": int(len(stamps)),

@@ -546,15 +546,19 @@ def reliability(prob: np.ndarray, label: np.ndarray, bins: int = 10) -> list[dic
 class Judge:
     """A localizer's confidence after each update (track.Localizer's ``judge``): the features of a
     ``FeatureTracker`` on the map, through a calibrated ``Confidence``, from the filter's particles and weights
-    as read back after the update (a systematic sample of at most MAX_PARTICLES is used)."""
+    as read back after the update (a systematic sample of at most MAX_PARTICLES is used). ``pose``: the heaviest
+    mode's pose, the one the confidence is about (the worlds stage's estimate, which the calibration judged)."""
 
     def __init__(self, tracker: FeatureTracker, confidence: Confidence, angles_rad, T_base_laser):
         self.tracker, self.confidence = tracker, confidence
         self.angles, self.T = np.asarray(angles_rad, float), tuple(map(float, T_base_laser))
+        self.pose = None  # the pose the last confidence is about: the heaviest mode's [x, y, yaw]
 
     def __call__(self, particles, log_w, ranges_m, odom_delta) -> float:
-        f, _ = self.tracker(particles, log_w, ranges_m, self.angles, self.T, odom_delta)
+        f, m = self.tracker(particles, log_w, ranges_m, self.angles, self.T, odom_delta)
+        self.pose = np.array(m.poses[0], float)
         return float(self.confidence(f))
 
     def reset(self) -> None:
         self.tracker.reset()
+        self.pose = None

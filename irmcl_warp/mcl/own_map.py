@@ -144,6 +144,7 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         progress=f"localize {Path(str(log.source)).name}",
         judge=judge,
         confidences=confidences,
+        report_pose=loc.report_pose,  # with the judge: the pose its confidence is about
     )
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]

@@ -86,10 +86,16 @@ class Localizer:
         covariance: bool = False,
         step_times: list | None = None,
         judge=None,
+        report_pose: str = "filter",
     ):
         """``judge``: where given, ``judge(particles, log_w, ranges_m, odom_delta) -> probability`` after every
-        update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge)."""
+        update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge).
+        ``report_pose``: with a judge, ``"mode"`` reports the pose the judge's confidence is about (its ``pose``,
+        the heaviest mode's) at each update; ``"filter"`` the filter's estimate (``m.estimate``)."""
+        if report_pose not in ("mode", "filter"):
+            raise ValueError(f"Localizer: report_pose {report_pose!r} is not one of ('mode', 'filter')")
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
+        self.report_mode = judge is not None and report_pose == "mode"
         self.confidence = float("nan")
         self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
         self.reduce_after_s = reduce_after_s
@@ -132,6 +138,8 @@ class Localizer:
                 cloud = self.pf.particles.numpy(), self.pf.log_w.numpy()
                 delta = relative(self.odom_at_update[None], odom[None])[0]
                 self.confidence = float(self.judge(*cloud, ranges_m, delta))
+                if self.report_mode:  # the pose the confidence judged, not a mean between two clusters
+                    self.pose = self.judge.pose
             self.odom_at_update = odom
             if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
                 self.pf.reduce(m.reduce_to)
@@ -153,6 +161,7 @@ def follow(
     progress: str | None = None,
     judge=None,
     confidences: list | None = None,
+    report_pose: str = "filter",
 ) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
@@ -160,8 +169,17 @@ def follow(
     ``step_times``, when given, gets the wall time (s) of every filter step (each reads its estimate back, so
     the step is done when it returns). ``covariances``, when given, gets the particles' covariance [3, 3] at
     every scan (NaN where the scan weighed nothing). ``progress``: a progress bar with that label, on a terminal.
-    ``judge`` and ``confidences``: the confidence after each update, appended per scan (the last update's)."""
-    loc = Localizer(pf, m, reduce_after_s, covariance=covariances is not None, step_times=step_times, judge=judge)
+    ``judge`` and ``confidences``: the confidence after each update, appended per scan (the last update's);
+    ``report_pose``: Localizer's (with a judge, "mode" follows the pose the confidence judged)."""
+    loc = Localizer(
+        pf,
+        m,
+        reduce_after_s,
+        covariance=covariances is not None,
+        step_times=step_times,
+        judge=judge,
+        report_pose=report_pose,
+    )
     est = np.empty((len(idx), 3))
     scans = enumerate(idx)
     if progress is not None:
