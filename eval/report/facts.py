@@ -295,6 +295,19 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value
+    out["reference_fit_below"], out["reference_fit_at_least"] = "0.8", "0.9"  # the thresholds the prose quotes
+    for path in sorted((RESULTS / "checks").glob("reference_fit_*.json")):  # eval.analyses.reference_fit
+        name, rec = path.stem[len("reference_fit_") :], json.loads(path.read_text())
+        out[f"reference_fit_{name}_below_08"] = f"{100 * rec['reference_agreement']['below_0.8']:.1f} %"
+        wrong = rec["wrong_scans"]
+        out[f"reference_fit_{name}_wrong"] = f"{wrong['scans']:,}"
+        out[f"reference_fit_{name}_estimate_better"] = f"{100 * wrong['estimate_fits_better']:.0f} %"
+        out[f"reference_fit_{name}_reference_better"] = f"{100 * wrong['reference_fits_better']:.0f} %"
+        for row in rec["auroc_where_reference_fits"]:
+            t = row["reference_agreement_at_least"]
+            out[f"reference_fit_{name}_auroc_at_{round(10 * t):02d}"] = (
+                "-" if row["auroc"] is None else f"{row['auroc']:.3f}"
+            )
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
