@@ -14,6 +14,8 @@ pose of it. It reports:
 * the reference's fit: quantiles of its agreement over every scan;
 * over every scan of the runs and over their wrong scans, the share where the localizer's pose fits the scan better than the SLAM pose (by more than
   ``MARGIN``), and the other way round;
+* the AUROC the scan's agreement at the reported pose alone would have as the score (every scan's own, between
+  updates too), beside the confidence's;
 * the confidence's AUROC over the scans whose SLAM pose agrees at least ``t`` with its map, for several ``t``: no
   threshold is chosen, the curve shows how much of the AUROC's shortfall lies where the reference fits its own map
   badly.
@@ -117,6 +119,8 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         "every_scan": who_fits_better(at_est, at_ref),
         "wrong_scans": who_fits_better(at_est[wrong], at_ref[wrong]),
         "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, fit_all),
+        # the scan's agreement at the reported pose, every scan's own (between updates too), taken as the score
+        "auroc_of_agreement_alone": auroc(at_est, ~wrong) if wrong.any() and (~wrong).any() else None,
     }
 
 
@@ -140,6 +144,10 @@ def main(argv=None):
             f"{what} ({w['scans']:,} over {len(rec['runs'])} runs): the localizer's pose fits the scan better at "
             f"{w['estimate_fits_better']:.0%}, the SLAM pose at {w['reference_fits_better']:.0%} (median agreement "
             f"{w['median_at_estimate']:.3f} against {w['median_at_reference']:.3f})"
+        )
+    if rec["auroc_of_agreement_alone"] is not None:
+        print(
+            f"the scan's agreement at the reported pose alone as the score: AUROC {rec['auroc_of_agreement_alone']:.3f}"
         )
     print("| SLAM pose's agreement at least | share of scans | wrong scans | AUROC |")
     print("|---|---|---|---|")
