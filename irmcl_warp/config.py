@@ -359,6 +359,9 @@ class LocalizeConfig:
     start_s: float = 0.0  # map_path: localize from this far into the log
     kidnap_at_s: float = 0.0  # > 0: teleport the robot this far into each run (to the next start's place)
     reduce_after_s: float = 20.0  # IR-MCL's code keeps the mcl.reduce_to heaviest particles 20 s into a global run
+    relocalize: bool = True  # a run with a calibrated confidence (your map, mcl=amcl): a robot declared lost by the
+    # worlds stage's rule (mcl/worlds.LostRule, with the settings of conf/exp/worlds.yaml that the calibration and the
+    # rule were chosen with) starts again from a uniform spread, and the run says so; false: the lost events only
     report_pose: str = "mode"  # a run with a calibrated confidence (your map, mcl=amcl) reports at each update the
     # pose the confidence judged: the heaviest mode's (mode), as the worlds stage the calibration was fitted on does;
     # filter: the filter's estimate (mcl.estimate), a mean that lies between two clusters when the set holds two
@@ -465,6 +468,20 @@ def own_map_calibration(weighting: str, num_particles: int) -> Path | None:
     particle count (``<weighting>.json`` for 20k, ``<weighting>-<n>k.json`` otherwise), or None."""
     n = int(num_particles)
     return shipped_calibration(weighting if n == 20000 else f"{weighting}-{n // 1000}k")
+
+
+def own_map_lost_rule_file() -> Path:
+    """The settings a run in your own map declares its robot lost by: the worlds stage's (``+exp=worlds``), with which
+    the calibration and the rule were chosen."""
+    return CONF_DIR / "exp" / "worlds.yaml"
+
+
+def own_map_lost_rule_settings():
+    """``WorldsConfig`` with ``own_map_lost_rule_file()``'s worlds section over its defaults (what LostRule reads)."""
+    from omegaconf import OmegaConf
+
+    doc = OmegaConf.load(own_map_lost_rule_file())
+    return OmegaConf.merge(OmegaConf.structured(WorldsConfig), doc.get("worlds", {}))
 
 
 def compose_config(overrides=(), name: str = "config"):

@@ -45,7 +45,7 @@ from typing import Callable, Iterator
 
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.atomic import atomic_write_json as write_json
-from irmcl_warp.config import own_map_calibration, shipped_calibration
+from irmcl_warp.config import own_map_calibration, own_map_lost_rule_file, shipped_calibration
 
 REPO = Path(__file__).resolve().parents[1]
 OUTPUTS = Path("outputs")  # relative to the working directory, as Hydra's run dir
@@ -265,10 +265,12 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
             calibration = None
         if calibration is not None:
             out[OWN_MAP_CALIBRATION] = [calibration]
+            out[OWN_MAP_LOST_RULE] = [own_map_lost_rule_file()]
     return out
 
 
 OWN_MAP_CALIBRATION = "localize.calibration"  # an input no setting names: the file own_map_calibration picks
+OWN_MAP_LOST_RULE = "localize.lost_rule"  # ... and the worlds stage's settings its lost-robot rule reads
 
 
 def _by_name(key: str, value):

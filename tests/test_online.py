@@ -311,3 +311,66 @@ def test_a_judged_run_reports_the_pose_its_confidence_is_about(report_pose, rng)
     assert not moved.updated and np.allclose(moved.pose, want + [0.1, 0.0, 0.0], atol=1e-3)
     with pytest.raises(ValueError, match="report_pose 'mean' is not one of"):
         Localizer(_TwoClusters(rng), m, judge=judge, report_pose="mean")
+
+
+class _Scripted:
+    """A stand-in judge: the confidences it is given, one per update, with the scan's agreement at 0.5 (above the
+    lost rule's one-scan trigger, below its timeout gate)."""
+
+    def __init__(self, confidences):
+        from irmcl_warp.mcl.confidence import FEATURES
+
+        self.left, self.resets = list(confidences), 0
+        self.features = np.zeros(len(FEATURES))
+        self.features[FEATURES.index("agreement")] = 0.5
+        self.pose = np.array([2.0, 2.0, 0.0])
+
+    def __call__(self, particles, log_w, ranges_m, odom_delta):
+        return self.left.pop(0)
+
+    def reset(self):
+        self.resets += 1
+
+
+class _Counting(_TwoClusters):
+    def __init__(self, rng):
+        super().__init__(rng)
+        self.uniform_starts = 0
+
+    def init_uniform(self):
+        self.uniform_starts += 1
+
+
+@pytest.mark.parametrize("relocalize", [True, False])
+def test_a_robot_the_worlds_rule_declares_lost_starts_again_and_says_when(relocalize, rng):
+    """An own-map localizer with a judge runs the worlds stage's lost-robot rule (its settings from
+    conf/exp/worlds.yaml): localized (0.9), then a confidence below lost_below for lost_after_s is one lost event,
+    at that update's time; with relocalize the filter starts again from a uniform spread (the judge reset, no pose
+    until the next update after motion), without it only the event is kept."""
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.config import own_map_lost_rule_settings
+    from irmcl_warp.mcl.track import Localizer
+    from irmcl_warp.mcl.worlds import LostRule
+
+    w = own_map_lost_rule_settings()
+    assert w.lost_after_s == 1.0 and w.lost_below == 0.2  # the +exp=worlds values the rule was chosen with
+    m = OmegaConf.create(
+        {"update_min_trans_m": 0.2, "update_min_rot_rad": 0.5, "first_update": "motion", "reduce_to": 0}
+    )
+    pf, judge = _Counting(rng), _Scripted([0.9, 0.1, 0.1, 0.1, 0.1, 0.9])
+    loc = Localizer(pf, m, judge=judge, report_pose="mode", lost_rule=LostRule(w), relocalize=relocalize)
+    ranges = np.full(30, 3.0)
+    loc.update(0.0, ranges, [0.0, 0.0, 0.0])
+    out = [loc.update(0.5 * k, ranges, [0.3 * k, 0.0, 0.0]) for k in range(1, 5)]  # updates at 0.5 .. 2.0 s
+    assert [e.updated for e in out] == [True] * 4
+    assert loc.lost_at_s == [2.0]  # low since 1.0 s: lost at 2.0 s
+    assert out[-1].confidence == 0.1
+    if relocalize:
+        assert pf.uniform_starts == 1 and judge.resets == 1 and np.isnan(out[-1].pose).all()
+        still = loc.update(2.1, ranges, [1.2, 0.0, 0.0])  # the spread waits for the robot to move
+        assert not still.updated and np.isnan(still.pose).all()
+        again = loc.update(2.5, ranges, [1.5, 0.0, 0.0])
+        assert again.updated and np.allclose(again.pose, judge.pose)
+    else:
+        assert pf.uniform_starts == 0 and judge.resets == 0 and np.isfinite(out[-1].pose).all()

@@ -121,6 +121,18 @@ def test_a_run_in_your_own_map_is_another_run_when_its_confidence_calibration_ch
     assert runs.identify(cfg, "localize").id != first.id
     fewer = _cfg(*SMALL, f"localize.map_path={tmp_path / 'map.yaml'}", "mcl=amcl", "mcl.num_particles=5000")
     assert runs.OWN_MAP_CALIBRATION not in runs.identify(fewer, "localize").inputs
+    # its lost-robot rule reads the worlds stage's settings: that file is an input too, so a rule changed there is
+    # another run
+    assert [f["path"] for f in first.inputs[runs.OWN_MAP_LOST_RULE]] == [str(config.own_map_lost_rule_file())]
+    rule = tmp_path / "worlds.yaml"
+    rule.write_text("worlds:\n  lost_after_s: 2.0\n")
+    monkeypatch.setattr(config, "own_map_lost_rule_file", lambda: rule)
+    monkeypatch.setattr(runs, "own_map_lost_rule_file", lambda: rule)
+    moved = runs.identify(cfg, "localize")
+    assert moved.id == runs.identify(cfg, "localize").id
+    rule.write_text("worlds:\n  lost_after_s: 3.0\n")
+    assert runs.identify(cfg, "localize").id != moved.id
+    assert runs.OWN_MAP_LOST_RULE not in runs.identify(fewer, "localize").inputs
 
 
 # --- stages: folders of their own, never overwritten ------------------------------------------------------------

@@ -553,12 +553,13 @@ class Judge:
         self.tracker, self.confidence = tracker, confidence
         self.angles, self.T = np.asarray(angles_rad, float), tuple(map(float, T_base_laser))
         self.pose = None  # the pose the last confidence is about: the heaviest mode's [x, y, yaw]
+        self.features = None  # the last update's feature row (FEATURES)
 
     def __call__(self, particles, log_w, ranges_m, odom_delta) -> float:
-        f, m = self.tracker(particles, log_w, ranges_m, self.angles, self.T, odom_delta)
+        self.features, m = self.tracker(particles, log_w, ranges_m, self.angles, self.T, odom_delta)
         self.pose = np.array(m.poses[0], float)
-        return float(self.confidence(f))
+        return float(self.confidence(self.features))
 
     def reset(self) -> None:
         self.tracker.reset()
-        self.pose = None
+        self.pose = self.features = None

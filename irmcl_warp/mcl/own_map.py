@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import OmegaConf
 
-from irmcl_warp.config import CONF_DIR, own_map_calibration
+from irmcl_warp.config import CONF_DIR, own_map_calibration, own_map_lost_rule_settings
 from irmcl_warp.geometry import align_rigid, compose, inverse
 from irmcl_warp.io import resolve, write_tum
 from irmcl_warp.io.atomic import atomic_write_bytes
@@ -32,6 +32,7 @@ from irmcl_warp.mapping.mapio import load_map, occupancy_data
 from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement, search_grid
 from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
+from irmcl_warp.mcl.worlds import LostRule
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.metrics import CONVERGED_FOR_S, CONVERGED_M, aligned_error, localization_metrics
@@ -133,6 +134,8 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     t_run = time.perf_counter()
     covariances, confidences = [], []
     judge, judged = calibrated_judge(cfg, grid, log)
+    lost_rule = LostRule(own_map_lost_rule_settings()) if judge is not None else None  # the worlds stage's rule
+    lost_at_s = []
     est = follow(
         pf,
         log,
@@ -145,7 +148,15 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         judge=judge,
         confidences=confidences,
         report_pose=loc.report_pose,  # with the judge: the pose its confidence is about
+        lost_rule=lost_rule,
+        relocalize=loc.relocalize,
+        lost_at_s=lost_at_s,
     )
+    for t_lost in lost_at_s:
+        print(
+            f"{log.source}: lost {t_lost:.1f} s into the run (the confidence stayed low, or the scan left the map)"
+            + ("; starting again from a uniform spread" if loc.relocalize else "")
+        )
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
     write_tum(out / "trajectory.tum", stamps, est)
@@ -171,6 +182,10 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         "confidence": judged,
         "confidence_at_end": None if np.isnan(confidences[-1]) else confidences[-1],
         "localized_at_end": None if np.isnan(confidences[-1]) else bool(confidences[-1] >= CONFIDENT_ABOVE),
+        # when the worlds stage's rule declared the robot lost (s since the first scan); each a uniform start again
+        # with localize.relocalize
+        "lost_at_s": lost_at_s if judge is not None else None,
+        "relocalized": len(lost_at_s) if (judge is not None and loc.relocalize) else 0,
     }
     gt, gt_in_map = log.ground_truth[idx] if log.ground_truth is not None else None, None
     if gt is not None and np.isfinite(gt).all(1).sum() >= 3:

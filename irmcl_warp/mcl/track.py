@@ -12,6 +12,7 @@ import numpy as np
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.types import LaserLog
 from irmcl_warp.kernels.motion import odometry_step
+from irmcl_warp.mcl.confidence import FEATURES
 
 
 def window(log: LaserLog, start_s: float, run_s: float | None, section: str) -> np.ndarray:
@@ -87,15 +88,22 @@ class Localizer:
         step_times: list | None = None,
         judge=None,
         report_pose: str = "filter",
+        lost_rule=None,
+        relocalize: bool = False,
     ):
         """``judge``: where given, ``judge(particles, log_w, ranges_m, odom_delta) -> probability`` after every
         update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge).
         ``report_pose``: with a judge, ``"mode"`` reports the pose the judge's confidence is about (its ``pose``,
-        the heaviest mode's) at each update; ``"filter"`` the filter's estimate (``m.estimate``)."""
+        the heaviest mode's) at each update; ``"filter"`` the filter's estimate (``m.estimate``). ``lost_rule``:
+        with a judge, ``lost_rule(t, confidence, agreement) -> bool`` after each update (mcl/worlds.LostRule); when
+        it declares the robot lost, the time goes to ``lost_at_s`` and, with ``relocalize``, the filter starts again
+        from a uniform spread (``global_start``)."""
         if report_pose not in ("mode", "filter"):
             raise ValueError(f"Localizer: report_pose {report_pose!r} is not one of ('mode', 'filter')")
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
         self.report_mode = judge is not None and report_pose == "mode"
+        self.lost_rule = lost_rule if judge is not None else None
+        self.relocalize, self.lost_at_s = relocalize, []  # lost_at_s: seconds since the first scan
         self.confidence = float("nan")
         self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
         self.reduce_after_s = reduce_after_s
@@ -140,6 +148,14 @@ class Localizer:
                 self.confidence = float(self.judge(*cloud, ranges_m, delta))
                 if self.report_mode:  # the pose the confidence judged, not a mean between two clusters
                     self.pose = self.judge.pose
+                agreement = self.judge.features[FEATURES.index("agreement")] if self.lost_rule else None
+                if self.lost_rule is not None and self.lost_rule(stamp, self.confidence, agreement):
+                    self.lost_at_s.append(float(stamp - self.t_start))
+                    if self.relocalize:  # lost: a global start again (weighs once the robot moved)
+                        low = self.confidence
+                        self.global_start()
+                        self.confidence = low  # what the robot knows until the next update: it is lost
+                        return Estimate(np.full(3, np.nan), True, cov, low)
             self.odom_at_update = odom
             if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
                 self.pf.reduce(m.reduce_to)
@@ -162,6 +178,9 @@ def follow(
     judge=None,
     confidences: list | None = None,
     report_pose: str = "filter",
+    lost_rule=None,
+    relocalize: bool = False,
+    lost_at_s: list | None = None,
 ) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
@@ -170,7 +189,9 @@ def follow(
     the step is done when it returns). ``covariances``, when given, gets the particles' covariance [3, 3] at
     every scan (NaN where the scan weighed nothing). ``progress``: a progress bar with that label, on a terminal.
     ``judge`` and ``confidences``: the confidence after each update, appended per scan (the last update's);
-    ``report_pose``: Localizer's (with a judge, "mode" follows the pose the confidence judged)."""
+    ``report_pose``, ``lost_rule``, ``relocalize``: Localizer's (with a judge, "mode" follows the pose the confidence
+    judged; the rule declares the robot lost, and a relocalization starts again); ``lost_at_s``, when given, gets the
+    times the rule declared the robot lost."""
     loc = Localizer(
         pf,
         m,
@@ -179,6 +200,8 @@ def follow(
         step_times=step_times,
         judge=judge,
         report_pose=report_pose,
+        lost_rule=lost_rule,
+        relocalize=relocalize,
     )
     est = np.empty((len(idx), 3))
     scans = enumerate(idx)
@@ -197,4 +220,6 @@ def follow(
             confidences.append(e.confidence)
         if watch is not None:
             watch(j, pf)
+    if lost_at_s is not None:
+        lost_at_s.extend(loc.lost_at_s)
     return est
