@@ -100,3 +100,17 @@ def test_the_record_says_how_the_confidence_separates_right_scans_from_wrong(tmp
         assert judged["scans"] == len(t) - 5 and judged["scans_right"] == int((~wrong[5:]).sum())
         assert judged["auroc"] == (1.0 if name == "fits" else 0.0), f"seed {rng.seed}"
         assert "scan_confidence" not in json.loads(out.read_text())["runs"][0]  # pooled, not kept per scan
+
+
+def test_a_lost_event_on_a_right_estimate_is_a_false_alarm():
+    """false_alarms counts the lost events whose last scan before held an estimate right by the SLAM pose; an event
+    after wrong scans, or before any estimate, is no false alarm; a run without the record has None."""
+    from eval.analyses.own_slam_map import false_alarms
+
+    stamps = np.arange(0.0, 10.0, 1.0) + 100.0
+    ref = np.zeros((10, 3))
+    est = np.zeros((10, 3))
+    est[5:8, 0] = 3.0  # wrong from 5 s to 7 s
+    est[0] = np.nan  # no estimate at the first scan
+    assert false_alarms([0.0, 3.5, 6.0, 8.5], stamps, est, ref) == 2  # 3.5 (right at 3 s), 8.5 (right at 8 s)
+    assert false_alarms([], stamps, est, ref) == 0 and false_alarms(None, stamps, est, ref) is None

@@ -88,11 +88,30 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "error_at_end_m": error_at_end(est, on_ref),
         "calibration": calibration_of_run(manifest, cfg),
         "confidence_at_end": m.get("confidence_at_end"),
+        # the lost-robot rule's events (own-map runs since the thirtieth session; None before) and how many of them
+        # came while the estimate was right (a false alarm: right by the SLAM pose at the scan before the event)
+        "relocalize": bool(OmegaConf.select(cfg, "localize.relocalize")),
+        "lost_at_s": m.get("lost_at_s"),
+        "false_alarms": false_alarms(m.get("lost_at_s"), stamps, est, on_ref),
         "localized_at_end": m.get("localized_at_end"),
         # per scan, where the confidence and the SLAM pose exist: the confidence, and whether the estimate was right
         # (within RIGHT_M and RIGHT_DEG of the SLAM pose); pooled over the runs by ``judge_confidence``
         **per_scan_judgement(confidence_per_scan(run, stamps), est, on_ref),
     }
+
+
+def false_alarms(lost_at_s, stamps: np.ndarray, est: np.ndarray, on_ref: np.ndarray) -> int | None:
+    """Of the lost events (s since the first scan), those whose last scan before held an estimate right by the SLAM
+    pose (within RIGHT_M / RIGHT_DEG): the rule fired on a robot that was not lost. None without the record."""
+    if lost_at_s is None:
+        return None
+    t = stamps - stamps[0]
+    ok = right(est, on_ref)
+    count = 0
+    for at in lost_at_s:
+        before = np.flatnonzero((t < at - 1e-6) & np.isfinite(est).all(1))
+        count += bool(len(before) and ok[before[-1]])
+    return count
 
 
 def calibration_of_run(manifest: dict, cfg) -> str | None:
@@ -154,6 +173,15 @@ def main(argv=None):
         conf = "-" if r["confidence_at_end"] is None else f"{r['confidence_at_end']:.2f}"
         print(f"| {r['seed']} | {r['scans']} | {conv} | {r['success']} | {rmse} | {end} | {conf} |")
     print(f"success {ok}/{len(rows)}")
+    lost = [r for r in rows if r["lost_at_s"] is not None]
+    if lost:
+        hours = sum(r["log_s"] for r in lost) / 3600
+        events, false = sum(len(r["lost_at_s"]) for r in lost), sum(r["false_alarms"] for r in lost)
+        print(
+            f"lost-robot rule: {events} events in {hours:.2f} h, {false} of them while the estimate was right "
+            f"({false / hours:.1f} false alarms an hour); "
+            + ("each re-seeded" if lost[0]["relocalize"] else "reported")
+        )
     judged = judge_confidence(rows)
     for r in rows:  # the per-scan arrays are pooled above; the record keeps each run's share of right scans
         conf, hit = r.pop("scan_confidence"), r.pop("scan_right")

@@ -503,6 +503,7 @@ def own_slam_map_table(records: list) -> str:
             r["runs"][0]["particles"],
             r["runs"][0].get("global_candidates") or 1,
             r["runs"][0].get("report_pose") or "filter",
+            bool(r["runs"][0].get("relocalize")),
         ),
     ):
         runs = rec["runs"]
@@ -511,6 +512,8 @@ def own_slam_map_table(records: list) -> str:
         weighting = first["weighting"].replace("_", " ") + (f", start from {k}x candidates" if k > 1 else "")
         if first.get("report_pose") == "mode":  # (records before the setting reported the filter's estimate)
             weighting += ", the judged mode's pose"
+        if first.get("relocalize"):
+            weighting += ", re-seeded when lost"
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
         e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
         conf = sum(bool(r["localized_at_end"]) for r in runs)
