@@ -363,7 +363,7 @@ class LocalizeConfig:
     # lost-robot rule (mcl/worlds.LostRule, with the settings of conf/exp/worlds.yaml that the calibration and the rule
     # were chosen with) and says when it fires; true: it also starts again from a uniform spread then. Off by
     # default: on MIT Killian at 20k the rule fired while the estimate was right, at the same places of the log in
-    # every seed, and each re-seed cost 10-40 s lost (0/5 by the protocol against 8/10; docs/benchmarks.md,
+    # every seed, and each re-seed cost 10-40 s lost (0/4 by the protocol against 8/10; docs/benchmarks.md,
     # thirtieth session)
     report_pose: str = "mode"  # a run with a calibrated confidence (your map, mcl=amcl) reports at each update the
     # pose the confidence judged: the heaviest mode's (mode), as the worlds stage the calibration was fitted on does;

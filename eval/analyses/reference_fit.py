@@ -89,7 +89,7 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
     ref_fit = np.full(len(ref), np.nan)
     for i in np.flatnonzero(has_scan):
         ref_fit[i] = agreement(ref[i], log.ranges_m[k[i]], *scan)
-    conf_all, hit_all, fit_all, at_est, at_ref, wrong = [], [], [], [], [], []
+    conf_all, hit_all, fit_all, at_est = [], [], [], []
     for run in runs:
         stamps, est = read_tum(run / "trajectory.tum")
         on_ref = on_reference(stamps, est, ref_stamps, ref)
@@ -100,13 +100,10 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         conf_all.append(conf[use])
         hit_all.append(hit[use])
         fit_all.append(ref_fit[j][use])
-        for i in np.flatnonzero(use):
-            at_est.append(agreement(est[i], log.ranges_m[k[j[i]]], *scan))
-            at_ref.append(ref_fit[j[i]])
-            wrong.append(not hit[i])
-    conf_all, hit_all, fit_all = (np.concatenate(x) for x in (conf_all, hit_all, fit_all))
+        at_est += [agreement(est[i], log.ranges_m[k[j[i]]], *scan) for i in np.flatnonzero(use)]
+    conf_all, hit_all, at_ref = (np.concatenate(x) for x in (conf_all, hit_all, fit_all))
     fit = ref_fit[np.isfinite(ref_fit)]
-    at_est, at_ref, wrong = np.array(at_est), np.array(at_ref), np.array(wrong, bool)
+    at_est, wrong = np.array(at_est), ~hit_all  # each used scan's, in the order of the runs
     return {
         "log": cfg.data.name,
         "slam_run": str(slam),
@@ -118,7 +115,7 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         },
         "every_scan": who_fits_better(at_est, at_ref),
         "wrong_scans": who_fits_better(at_est[wrong], at_ref[wrong]),
-        "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, fit_all),
+        "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, at_ref),
         # the scan's agreement at the reported pose, every scan's own (between updates too), taken as the score
         "auroc_of_agreement_alone": auroc(at_est, ~wrong) if wrong.any() and (~wrong).any() else None,
     }

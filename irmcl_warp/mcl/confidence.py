@@ -53,6 +53,7 @@ FEATURES = (
     "log_spread",
     "rival_evidence",
 )
+AGREEMENT = FEATURES.index("agreement")  # the scan's agreement at the heaviest mode, in a feature row
 SEARCH_BUDGET = 40_000  # the look-alike search scores at most this many poses per search; a larger grid is covered in
 # turns (a fixed shuffle of it, the next slice each search). Every simulated floor's grid holds fewer (34k at most:
 # the calibrations' runs searched whole maps); MIT Killian's holds 586k, 1.6 s a search on the 2-core CPU

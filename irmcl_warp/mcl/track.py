@@ -12,7 +12,7 @@ import numpy as np
 from irmcl_warp.geometry import compose, relative
 from irmcl_warp.types import LaserLog
 from irmcl_warp.kernels.motion import odometry_step
-from irmcl_warp.mcl.confidence import FEATURES
+from irmcl_warp.mcl.confidence import AGREEMENT
 
 
 def window(log: LaserLog, start_s: float, run_s: float | None, section: str) -> np.ndarray:
@@ -148,8 +148,9 @@ class Localizer:
                 self.confidence = float(self.judge(*cloud, ranges_m, delta))
                 if self.report_mode:  # the pose the confidence judged, not a mean between two clusters
                     self.pose = self.judge.pose
-                agreement = self.judge.features[FEATURES.index("agreement")] if self.lost_rule else None
-                if self.lost_rule is not None and self.lost_rule(stamp, self.confidence, agreement):
+                if self.lost_rule is not None and self.lost_rule(
+                    stamp, self.confidence, self.judge.features[AGREEMENT]
+                ):
                     self.lost_at_s.append(float(stamp - self.t_start))
                     if self.relocalize:  # lost: a global start again (weighs once the robot moved)
                         low = self.confidence

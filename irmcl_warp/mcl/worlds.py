@@ -39,6 +39,7 @@ from irmcl_warp.geometry import compose, relative
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mcl.confidence import (
+    AGREEMENT,
     FEATURES,
     Confidence,
     FeatureTracker,
@@ -302,9 +303,6 @@ class LostRule:
             self.reset()
             return True
         return False
-
-
-AGREEMENT = FEATURES.index("agreement")  # the scan's agreement at the heaviest mode, in a feature row
 
 
 def follow_with_confidence(pf, log: LaserLog, m, w, tracker: FeatureTracker, conf: Confidence | None) -> dict:
