@@ -404,6 +404,9 @@ class WorldsConfig:
     mode_pose: str = "densest"  # a mode's pose: its densest cluster's (densest) | its 3 x 3 m block's weighted mean
     # (block: runs before the twenty-eighth session; mcl/confidence.py modes). The estimate is the heaviest mode's
     relocalize: bool = True  # False: only report when lost (side-by-side runs of the detector alone)
+    relocalize_places: int = 0  # > 0: a relocalization's first update also weighs poses about this many places the
+    # scan fits best over the whole map (ScanAgreement.search), beside the uniform candidates (mcl.global_candidates
+    # > 1; 0: uniform only, as runs before it; mcl/worlds.py RelocalizePlaces)
     refine_rivals: bool = False  # the confidence's rival places re-aligned with each scan (mcl/confidence.py,
     # FeatureTracker; False: moved by the odometry only)
     search_rivals_every: int = 0  # > 0: every this many updates, search the map's free space (0.5 m, 22.5 deg grid)
@@ -623,6 +626,7 @@ RANGES = {
     "worlds.search_rivals_every": (0, None),
     "worlds.rival_seed_below": (0, None),
     "worlds.rival_seed_share": ("> 0", 1),
+    "worlds.relocalize_places": (0, None),
     "localize.num_starts": (1, None),
     "localize.run_s": ("> 0", None),
     "localize.kidnap_at_s": (0, None),

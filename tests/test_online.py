@@ -324,6 +324,7 @@ class _Scripted:
         self.features = np.zeros(len(FEATURES))
         self.features[FEATURES.index("agreement")] = 0.5
         self.pose = np.array([2.0, 2.0, 0.0])
+        self.angles, self.T = np.zeros(30), (0.0, 0.0, 0.0)
 
     def __call__(self, particles, log_w, ranges_m, odom_delta):
         return self.left.pop(0)
@@ -374,3 +375,42 @@ def test_a_robot_the_worlds_rule_declares_lost_starts_again_and_says_when(reloca
         assert again.updated and np.allclose(again.pose, judge.pose)
     else:
         assert pf.uniform_starts == 0 and judge.resets == 0 and np.isfinite(out[-1].pose).all()
+
+
+class _Places:
+    """A stand-in RelocalizePlaces: how often a relocalization asked it for places."""
+
+    def __init__(self):
+        self.seeded = 0
+
+    def seed(self, pf, ranges_m, angles_rad, T_base_laser):
+        self.seeded += 1
+        return 1
+
+
+def test_a_relocalizations_first_update_is_given_the_places_its_scan_fits(rng):
+    """Localizer with places: lost at 2.0 s (the worlds rule), a uniform start; the first update after the robot moved
+    again asks for the places once, before the filter weighs; later updates do not."""
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.config import own_map_lost_rule_settings
+    from irmcl_warp.mcl.track import Localizer
+    from irmcl_warp.mcl.worlds import LostRule
+
+    m = OmegaConf.create(
+        {"update_min_trans_m": 0.2, "update_min_rot_rad": 0.5, "first_update": "motion", "reduce_to": 0}
+    )
+    pf, places = _Counting(rng), _Places()
+    judge = _Scripted([0.9, 0.1, 0.1, 0.1, 0.9, 0.9])
+    w = own_map_lost_rule_settings()
+    loc = Localizer(pf, m, judge=judge, report_pose="mode", lost_rule=LostRule(w), relocalize=True, places=places)
+    ranges = np.full(30, 3.0)
+    loc.update(0.0, ranges, [0.0, 0.0, 0.0])
+    out = [loc.update(0.5 * k, ranges, [0.3 * k, 0.0, 0.0]) for k in range(1, 5)]
+    assert loc.lost_at_s == [2.0] and pf.uniform_starts == 1 and np.isnan(out[-1].pose).all()
+    assert places.seeded == 0
+    assert not loc.update(2.5, ranges, [1.5, 0.0, 0.0]).updated and places.seeded == 0  # waits for motion
+    again = loc.update(3.0, ranges, [1.8, 0.0, 0.0])
+    assert again.updated and places.seeded == 1
+    loc.update(3.5, ranges, [2.1, 0.0, 0.0])
+    assert places.seeded == 1  # only a relocalization's first update

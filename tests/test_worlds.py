@@ -1089,3 +1089,75 @@ def test_a_search_grid_over_the_budget_is_covered_in_turns(monkeypatch):
         np.unique(first_turn, axis=0), np.unique(grid, axis=0)
     )
     assert np.array_equal(np.vstack(slices)[1000:], turns.search_poses[:200])
+
+
+# --- a relocalization's places (worlds.relocalize_places) ---
+
+
+def _box_scan(pose):
+    occ, origin, res = _box_map()
+    angles = np.linspace(-2.3, 2.3, 360)
+    return occ, origin, res, angles, _true_ranges(occ, res, pose, angles)
+
+
+def test_a_global_starts_first_draw_weighs_the_places_it_is_given():
+    """add_candidates: poses about the truth join the uniform candidates of a global start's first update, and the
+    scan keeps them (most of the set lands within 0.3 m of the truth, far more than from the uniform candidates alone);
+    without a global start with candidates it is an error; poses off the map are dropped."""
+    truth = np.array([3.0, 2.5, 0.4])
+    _, _, _, _, scan = _box_scan(truth)
+    near = {}
+    for extra in (False, True):
+        pf = _filter(weighting="likelihood_field", global_candidates=2)
+        pf.rng = np.random.default_rng(1)
+        pf.init_uniform()
+        if extra:
+            about = truth + pf.rng.normal(0.0, 1.0, (200, 3)) * [0.1, 0.1, 0.03]
+            pf.add_candidates(np.vstack([about, [[-50.0, 3.0, 0.0]]]))
+            assert len(pf.extra_candidates) == 200  # the pose off the map dropped
+        pf.step((0.0, 0.0, 0.0), scan)
+        p = pf.particles.numpy()
+        near[extra] = float(np.mean(np.hypot(*(p[:, :2] - truth[:2]).T) < 0.3))
+    assert near[True] > 0.5 and near[True] > near[False] + 0.3
+    assert len(pf.extra_candidates) == 0  # weighed once
+    with pytest.raises(ValueError, match="global start"):
+        pf.add_candidates(truth[None])
+    plain = _filter(weighting="likelihood_field")
+    plain.init_uniform()
+    with pytest.raises(ValueError, match="global_candidates > 1"):
+        plain.add_candidates(truth[None])
+
+
+def test_a_relocalization_is_given_the_places_its_scan_fits_best():
+    """RelocalizePlaces.seed: a search of the whole map finds the truth (or the box's half-turn twin) among its places,
+    PLACE_SHARE of the particles about each; relocalize_places needs the search poses and a global start with
+    candidates (errors naming the settings)."""
+    from types import SimpleNamespace
+
+    from irmcl_warp.mcl.confidence import search_grid
+    from irmcl_warp.mcl.worlds import PLACE_SHARE, RelocalizePlaces
+
+    truth = np.array([4.0, 3.0, 0.7])
+    occ, origin, res, angles, scan = _box_scan(truth)
+    grid = SimpleNamespace(known=np.ones(occ.shape, bool), probability=occ, origin_xy=origin, resolution_m=res)
+    agree = ScanAgreement(occ, origin, res)
+    w = SimpleNamespace(relocalize_places=2)
+    got = []
+    pf = SimpleNamespace(num_particles=2000, rng=np.random.default_rng(0), add_candidates=got.append)
+    places = RelocalizePlaces(w, agree, search_grid(grid), global_candidates=10)
+    assert places.seed(pf, scan, angles, np.array([0.1, 0.0, 0.0])) == 2
+    poses = got[0]
+    assert len(poses) == 2 * round(PLACE_SHARE * 2000)
+    twin = np.array([15.0 - truth[0], 10.0 - truth[1], truth[2] - np.pi])
+    centres = [poses[: len(poses) // 2].mean(0), poses[len(poses) // 2 :].mean(0)]
+    hits = [
+        min(np.hypot(*(c[:2] - q[:2])) for q in (truth, twin)) < 0.3
+        and min(abs(np.angle(np.exp(1j * (c[2] - q[2])))) for q in (truth, twin)) < 0.15
+        for c in centres
+    ]
+    assert any(hits)
+    with pytest.raises(ValueError, match="search poses"):
+        RelocalizePlaces(w, agree, None, global_candidates=10)
+    with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
+        RelocalizePlaces(w, agree, search_grid(grid), global_candidates=1)
+

@@ -173,6 +173,7 @@ class ParticleFilter:
         self.rng = np.random.default_rng(cfg.seed)
         self.steps = self.plain_steps = 0  # steps; those by move -> weigh -> resample (a graph replays only after one)
         self.global_start = False  # the particles are init_uniform's, not weighed yet
+        self.extra_candidates = np.zeros((0, 3))  # add_candidates': weighed at a global start's first update
         self.spread = float("inf")  # sqrt(var x + var y) of the weighted particles after the last step
         self.l_slow = self.l_fast = None  # recovery: running averages of the log mean likelihood
         self.log_mean_likelihood = LogMeanLikelihood(d)
@@ -220,6 +221,18 @@ class ParticleFilter:
         self.set_particles(self.uniform_poses(self.cfg.num_particles))
         self.global_start = True
 
+    def add_candidates(self, poses) -> None:
+        """Poses [m, 3] the next update weighs beside the uniform candidates of a global start (places a search
+        found: mcl/worlds.py RelocalizePlaces.seed); needs ``init_uniform`` before and ``mcl.global_candidates`` > 1.
+        Poses off the map's free space are dropped."""
+        if not (self.global_start and self.cfg.global_candidates > 1):
+            raise ValueError("MCL: add_candidates needs a global start (init_uniform) with mcl.global_candidates > 1")
+        poses = np.asarray(poses, np.float64).reshape(-1, 3)
+        H, W = self.free_space.shape
+        cells = self.free_space.node_of(poses[:, :2])
+        inside = np.all((cells >= 0) & (cells < np.array([W, H])), 1)
+        self.extra_candidates = poses[inside][: self.num_particles]  # one batch of the weighting's size at most
+
     def uniform_poses(self, n: int) -> np.ndarray:
         """``n`` poses uniform over the free nodes of the map (within each node's cell), any heading."""
         iy, ix = self.free_nodes
@@ -255,6 +268,7 @@ class ParticleFilter:
         self.log_w.zero_()
         self.l_slow = self.l_fast = None
         self.global_start = False  # (init_uniform sets it again)
+        self.extra_candidates = np.zeros((0, 3))
 
     # --- one filter step --------------------------------------------------------------------------
     def _graph_choice(self) -> bool:
@@ -329,13 +343,20 @@ class ParticleFilter:
         (the estimate, N_eff = N)."""
         n, k, d = self.num_particles, int(self.cfg.global_candidates), self.device
         self.inputs.send()
-        poses = np.empty((k * n, 3), np.float64)
-        lik = np.empty(k * n, np.float64)
+        extra, self.extra_candidates = self.extra_candidates, np.zeros((0, 3))  # (add_candidates': this update's)
+        poses = np.empty((k * n + len(extra), 3), np.float64)
+        lik = np.empty(len(poses), np.float64)
         for b in range(k):  # the filter's own arrays: the weighting's scratch is sized for N
             poses[b * n : (b + 1) * n] = self.uniform_poses(n)
             self.particles.assign(wp.array(poses[b * n : (b + 1) * n].astype(np.float32), dtype=wp.vec3, device=d))
             self._observe()
             lik[b * n : (b + 1) * n] = self.log_lik.numpy()
+        if len(extra):  # one more batch, padded to N by repeating the extra poses
+            poses[k * n :] = extra
+            batch = extra[np.arange(n) % len(extra)]
+            self.particles.assign(wp.array(batch.astype(np.float32), dtype=wp.vec3, device=d))
+            self._observe()
+            lik[k * n :] = self.log_lik.numpy()[: len(extra)]
         keep = systematic_draw(float(self.cfg.temper) * lik, n, float(self.rng.uniform()))
         self.set_particles(poses[keep])
         self.log_lik.zero_()  # the weights stay equal: the estimate of the kept set, unweighted

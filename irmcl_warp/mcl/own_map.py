@@ -32,7 +32,7 @@ from irmcl_warp.mapping.mapio import load_map, occupancy_data
 from irmcl_warp.mcl.confidence import Confidence, FeatureTracker, Judge, ScanAgreement, search_grid
 from irmcl_warp.mcl.online import filter_in_map
 from irmcl_warp.mcl.track import follow, window
-from irmcl_warp.mcl.worlds import LostRule
+from irmcl_warp.mcl.worlds import LostRule, RelocalizePlaces
 from irmcl_warp import runs
 from irmcl_warp.services.data import far_bound_m, load_stream
 from irmcl_warp.services.metrics import CONVERGED_FOR_S, CONVERGED_M, aligned_error, localization_metrics
@@ -134,7 +134,14 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
     t_run = time.perf_counter()
     covariances, confidences = [], []
     judge, judged = calibrated_judge(cfg, grid, log)
-    lost_rule = LostRule(own_map_lost_rule_settings()) if judge is not None else None  # the worlds stage's rule
+    lost_rule, places = None, None
+    if judge is not None:  # the worlds stage's rule, and where a relocalization looks first
+        w = own_map_lost_rule_settings()
+        lost_rule = LostRule(w)
+        search = judge.tracker.search_poses
+        if search is None and w.relocalize_places > 0:
+            search = search_grid(grid)
+        places = RelocalizePlaces(w, judge.tracker.agreement, search, m.global_candidates)
     lost_at_s = []
     est = follow(
         pf,
@@ -151,6 +158,7 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         lost_rule=lost_rule,
         relocalize=loc.relocalize,
         lost_at_s=lost_at_s,
+        places=places,
     )
     for t_lost in lost_at_s:
         print(

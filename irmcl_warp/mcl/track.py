@@ -90,6 +90,7 @@ class Localizer:
         report_pose: str = "filter",
         lost_rule=None,
         relocalize: bool = False,
+        places=None,
     ):
         """``judge``: where given, ``judge(particles, log_w, ranges_m, odom_delta) -> probability`` after every
         update, on the particles as read back then (a calibrated confidence, mcl/confidence.Judge).
@@ -97,13 +98,15 @@ class Localizer:
         the heaviest mode's) at each update; ``"filter"`` the filter's estimate (``m.estimate``). ``lost_rule``:
         with a judge, ``lost_rule(t, confidence, agreement) -> bool`` after each update (mcl/worlds.LostRule); when
         it declares the robot lost, the time goes to ``lost_at_s`` and, with ``relocalize``, the filter starts again
-        from a uniform spread (``global_start``)."""
+        from a uniform spread (``global_start``). ``places`` (mcl/worlds.RelocalizePlaces), where given: a
+        relocalization's first update also weighs the places its scan fits best."""
         if report_pose not in ("mode", "filter"):
             raise ValueError(f"Localizer: report_pose {report_pose!r} is not one of ('mode', 'filter')")
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
         self.report_mode = judge is not None and report_pose == "mode"
         self.lost_rule = lost_rule if judge is not None else None
         self.relocalize, self.lost_at_s = relocalize, []  # lost_at_s: seconds since the first scan
+        self.places, self.restarting = places, False
         self.confidence = float("nan")
         self.reduce_pending = reduce_after_s is not None and 0 < m.reduce_to < pf.num_particles
         self.reduce_after_s = reduce_after_s
@@ -137,6 +140,9 @@ class Localizer:
         weigh = (self.pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad)
         cov = np.full((3, 3), np.nan) if self.covariance else None
         if weigh:
+            if self.restarting and self.places is not None:  # a relocalization's first update: its places
+                self.places.seed(self.pf, ranges_m, self.judge.angles, self.judge.T)
+            self.restarting = False
             t0 = time.perf_counter()
             self.pose = self.pf.step(u, ranges_m)[0]
             if self.step_times is not None:
@@ -155,7 +161,7 @@ class Localizer:
                     if self.relocalize:  # lost: a global start again (weighs once the robot moved)
                         low = self.confidence
                         self.global_start()
-                        self.confidence = low  # what the robot knows until the next update: it is lost
+                        self.confidence, self.restarting = low, True  # until the next update the robot is lost
                         return Estimate(np.full(3, np.nan), True, cov, low)
             self.odom_at_update = odom
             if self.reduce_pending and stamp - self.t_start >= self.reduce_after_s:
@@ -182,6 +188,7 @@ def follow(
     lost_rule=None,
     relocalize: bool = False,
     lost_at_s: list | None = None,
+    places=None,
 ) -> np.ndarray:
     """Estimates [len(idx), 3] of one run over the scans ``idx``: a ``Localizer`` fed the log scan by scan; the
     filter is already initialised. A jump in ``idx`` (kidnapping) is invisible to the odometry: the step across
@@ -192,7 +199,7 @@ def follow(
     ``judge`` and ``confidences``: the confidence after each update, appended per scan (the last update's);
     ``report_pose``, ``lost_rule``, ``relocalize``: Localizer's (with a judge, "mode" follows the pose the confidence
     judged; the rule declares the robot lost, and a relocalization starts again); ``lost_at_s``, when given, gets the
-    times the rule declared the robot lost."""
+    times the rule declared the robot lost; ``places``: Localizer's."""
     loc = Localizer(
         pf,
         m,
@@ -203,6 +210,7 @@ def follow(
         report_pose=report_pose,
         lost_rule=lost_rule,
         relocalize=relocalize,
+        places=places,
     )
     est = np.empty((len(idx), 3))
     scans = enumerate(idx)
