@@ -1161,3 +1161,25 @@ def test_a_relocalization_is_given_the_places_its_scan_fits_best():
     with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
         RelocalizePlaces(w, agree, search_grid(grid), global_candidates=1)
 
+
+def test_the_lost_rule_chooser_breaks_a_tie_by_the_rule_that_asks_the_most_of_the_scans():
+    """choose: the most kidnappings within 2 s without false alarms first; among equals the lowest agreement threshold,
+    then the most updates in a row (not the earliest detection); the confidence alone loses a tie; a rule over 1 false
+    alarm an hour is out however fast."""
+    from eval.analyses.lost_rules import choose
+
+    def row(below, updates, detected, per_h, median):
+        return dict(
+            agreement_below=below,
+            updates=updates,
+            detected_within_2s=detected,
+            kidnaps=23,
+            false_alarms_per_h=per_h,
+            median_detection_s=median,
+        )
+
+    one, two, three = row(0.4, 1, 22, 0.0, 0.4), row(0.4, 2, 22, 0.0, 0.8), row(0.5, 3, 22, 0.0, 1.2)
+    fast_loose, alone = row(0.5, 1, 23, 17.5, 0.4), row(0.0, 1, 22, 0.0, 0.2)
+    assert choose([one, two, three, fast_loose, alone]) is two
+    assert choose([one, three, alone]) is one
+    assert choose([alone, row(0.3, 1, 21, 0.0, 0.4)]) is alone  # more detections first
