@@ -506,6 +506,7 @@ class Run:
             "python": platform.python_version(),
             "versions": _versions(),
             "device": device,
+            "device_name": device_name(device),  # cuda:0 names no card: an H100 and an H200 differ in speed
             "wall_time_s": time.time() - self.started,
             "inputs": self.ident.inputs,
             "upstream": {s: {"id": u.id, "run": f"{u.exp}/{u.stage}/{u.name}"} for s, u in self.ident.upstream.items()},
@@ -516,6 +517,19 @@ class Run:
         _swap(self.dir, self.path)
         self.dir, self.done = self.path, True
         return self.path
+
+
+def device_name(device: str) -> str | None:
+    """The card behind a CUDA device string (``"NVIDIA H100 80GB HBM3"``), as Warp names it; None for the CPU or
+    when Warp cannot say."""
+    if not str(device).startswith("cuda"):
+        return None
+    try:
+        import warp as wp
+
+        return str(wp.get_device(device).name)
+    except Exception:  # (a manifest is written whatever the device query says)
+        return None
 
 
 def amend(folder: Path, metrics: dict, why: str) -> None:

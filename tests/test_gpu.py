@@ -37,6 +37,8 @@ def test_slam_on_cuda_replays_its_seed(tmp_path, monkeypatch):
     (_, a), (_, b) = runs
     assert a["resamplings"] == b["resamplings"] and a["trajectory"] == b["trajectory"]
     assert a["trajectory"]["ate_rmse_m"] < 0.5 * a["trajectory_odometry"]["ate_rmse_m"]
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["device"] == "cuda:0" and "NVIDIA" in manifest["device_name"]  # which card, not only cuda:0
 
 
 @pytest.mark.parametrize(

@@ -279,6 +279,8 @@ def test_localize_refuses_an_unfinished_field_and_records_the_one_it_read(tmp_pa
     out = run_localize(cfg)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["upstream"]["train"]["id"] == json.loads((trained / "manifest.json").read_text())["id"]
+    assert manifest["device_name"] == runs.device_name(manifest["device"])  # None on the CPU; the card's on a GPU
+    assert runs.device_name("cpu") is None
 
 
 def test_a_changed_validation_trains_a_run_of_its_own(tmp_path, monkeypatch):
