@@ -20,9 +20,9 @@ from omegaconf import OmegaConf
 
 from irmcl_warp.io import read_tum
 from irmcl_warp.mcl.confidence import auroc, right
-from irmcl_warp.config import own_map_calibration
+from irmcl_warp.config import WorldsConfig, own_map_calibration, own_map_lost_rule_file
 from irmcl_warp.mcl.own_map import CONFIDENT_ABOVE
-from irmcl_warp.runs import OWN_MAP_CALIBRATION, file_digest
+from irmcl_warp.runs import OWN_MAP_CALIBRATION, OWN_MAP_LOST_RULE, file_digest
 from irmcl_warp.services.cli import guard
 from irmcl_warp.services.metrics import error_at_end, localization_metrics
 from irmcl_warp.services.outputs import write_json
@@ -92,6 +92,7 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         # came while the estimate was right (a false alarm: right by the SLAM pose at the scan before the event)
         "relocalize": bool(OmegaConf.select(cfg, "localize.relocalize")),
         "lost_at_s": m.get("lost_at_s"),
+        "lost_rule": lost_rule_of_run(manifest),
         "false_alarms": false_alarms(m.get("lost_at_s"), stamps, est, on_ref),
         "localized_at_end": m.get("localized_at_end"),
         # per scan, where the confidence and the SLAM pose exist: the confidence, and whether the estimate was right
@@ -127,6 +128,42 @@ def calibration_of_run(manifest: dict, cfg) -> str | None:
         source = json.loads(path.read_text()).get("source")  # "eval.confidence fit on <tuning runs>"
         return f"{path.name} ({source})" if source else path.name
     return f"sha256 {digests[0][:10]}"
+
+
+RULE_SETTINGS = ("lost_agreement_below", "lost_agreement_updates", "relocalize_places")  # what the table names
+
+
+def lost_rule_of_run(manifest: dict) -> dict | None:
+    """The lost-robot rule's settings an own-map run read (runs.OWN_MAP_LOST_RULE: conf/exp/worlds.yaml's digest in its
+    manifest): from the file when its content is still the one digested, else from the version of the file in git
+    history with that digest; None for a run made before the digest, {"sha256": ...} when no version matches."""
+    import hashlib
+    import subprocess
+
+    files = (manifest.get("inputs") or {}).get(OWN_MAP_LOST_RULE) or []
+    if not files:
+        return None
+    digest = files[0]["sha256"] if isinstance(files[0], dict) else files[0]
+    path = own_map_lost_rule_file().resolve()
+    texts = [path.read_bytes()] if file_digest(path) == digest else []
+    if not texts:
+        root = Path(__file__).resolve().parents[2]
+        try:
+            rel = path.relative_to(root).as_posix()
+            shas = subprocess.run(
+                ["git", "log", "--format=%H", "--", rel], cwd=root, capture_output=True, text=True, check=True
+            ).stdout.split()
+            for sha in shas:
+                text = subprocess.run(["git", "show", f"{sha}:{rel}"], cwd=root, capture_output=True, check=True).stdout
+                if hashlib.sha256(text).hexdigest() == digest:
+                    texts = [text]
+                    break
+        except (ValueError, OSError, subprocess.CalledProcessError):
+            pass
+    if not texts:
+        return {"sha256": digest[:10]}
+    worlds = OmegaConf.merge(OmegaConf.structured(WorldsConfig), OmegaConf.create(texts[0].decode()).get("worlds", {}))
+    return {k: worlds[k] for k in RULE_SETTINGS}
 
 
 def per_scan_judgement(conf: np.ndarray, est: np.ndarray, on_ref: np.ndarray) -> dict:

@@ -448,6 +448,8 @@ def worlds_table(runs: list) -> str:
         limit = r.setting("worlds.map_logodds_limit")  # (runs before the setting: 4.0, records.BEFORE)
         seed = r.setting("worlds.rival_seed_below") or 0  # (runs before rival seeding: none)
         gate = r.setting("worlds.lost_timeout_agreement_below")  # (runs before it: none)
+        upd = r.setting("worlds.lost_agreement_updates") or 1
+        places = r.setting("worlds.relocalize_places") or 0  # (runs before it: none)
         how = (
             ([f"map of a random {r.setting('worlds.map_drive_m') or 400:g} m drive"] if random_map else [])
             + ([f"map's log-odds within +-{limit:g}"] if limit is not None and not random_map else [])
@@ -458,7 +460,12 @@ def worlds_table(runs: list) -> str:
                 else []
             )
             + ([f"a rival {seed:g} better seeded"] if seed > 0 else [])
-            + ([f"lost also at agreement < {agree:g}"] if agree > 0 else [])
+            + (
+                [f"lost also at agreement < {agree:g}" + (f" for {upd} updates" if upd > 1 else "")]
+                if agree > 0
+                else []
+            )
+            + ([f"a relocalization also from {places} searched places"] if places else [])
             + ([f"timeout only at agreement < {gate:g}"] if gate is not None else [])
             + (["modes' densest poses"] if r.setting("worlds.mode_pose") == "densest" else [])
             + (
@@ -514,6 +521,14 @@ def own_slam_map_table(records: list) -> str:
             weighting += ", the judged mode's pose"
         if first.get("relocalize"):
             weighting += ", re-seeded when lost"
+            rule = first.get("lost_rule") or {}  # (records before it: the rule of the session before, unnamed)
+            if rule.get("lost_agreement_updates", 1) > 1:
+                weighting += (
+                    f" (agreement < {rule['lost_agreement_below']:g} for {rule['lost_agreement_updates']} updates"
+                )
+                weighting += f", {rule['relocalize_places']} searched places)" if rule.get("relocalize_places") else ")"
+            elif rule.get("relocalize_places"):
+                weighting += f" ({rule['relocalize_places']} searched places)"
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
         e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
         conf = sum(bool(r["localized_at_end"]) for r in runs)
