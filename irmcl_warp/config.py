@@ -407,6 +407,8 @@ class WorldsConfig:
     relocalize_places: int = 0  # > 0: a relocalization's first update also weighs poses about this many places the
     # scan fits best over the whole map (ScanAgreement.search), beside the uniform candidates (mcl.global_candidates
     # > 1; 0: uniform only, as runs before it; mcl/worlds.py RelocalizePlaces)
+    relocalize_keeps_particles: bool = False  # a relocalization's first update also weighs the particles the filter
+    # had when declared lost, moved by the odometry since (False: as runs before it)
     refine_rivals: bool = False  # the confidence's rival places re-aligned with each scan (mcl/confidence.py,
     # FeatureTracker; False: moved by the odometry only)
     search_rivals_every: int = 0  # > 0: every this many updates, search the map's free space (0.5 m, 22.5 deg grid)

@@ -381,9 +381,12 @@ class _Places:
     """A stand-in RelocalizePlaces: how often a relocalization asked it for places."""
 
     def __init__(self):
-        self.seeded = 0
+        self.seeded, self.remembered = 0, []
 
-    def seed(self, pf, ranges_m, angles_rad, T_base_laser):
+    def remember(self, pf, odom):
+        self.remembered.append(list(odom))
+
+    def seed(self, pf, ranges_m, angles_rad, T_base_laser, odom=None):
         self.seeded += 1
         return 1
 
@@ -408,7 +411,7 @@ def test_a_relocalizations_first_update_is_given_the_places_its_scan_fits(rng):
     loc.update(0.0, ranges, [0.0, 0.0, 0.0])
     out = [loc.update(0.5 * k, ranges, [0.3 * k, 0.0, 0.0]) for k in range(1, 5)]
     assert loc.lost_at_s == [2.0] and pf.uniform_starts == 1 and np.isnan(out[-1].pose).all()
-    assert places.seeded == 0
+    assert places.seeded == 0 and places.remembered == [[1.2, 0.0, 0.0]]  # the odometry when declared lost
     assert not loc.update(2.5, ranges, [1.5, 0.0, 0.0]).updated and places.seeded == 0  # waits for motion
     again = loc.update(3.0, ranges, [1.8, 0.0, 0.0])
     assert again.updated and places.seeded == 1

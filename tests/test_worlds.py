@@ -1115,6 +1115,8 @@ def test_a_global_starts_first_draw_weighs_the_places_it_is_given():
             about = truth + pf.rng.normal(0.0, 1.0, (200, 3)) * [0.1, 0.1, 0.03]
             pf.add_candidates(np.vstack([about, [[-50.0, 3.0, 0.0]]]))
             assert len(pf.extra_candidates) == 200  # the pose off the map dropped
+            pf.add_candidates(pf.uniform_poses(2100))  # more than one batch of N = 2000: weighed in two
+            assert len(pf.extra_candidates) == 2300
         pf.step((0.0, 0.0, 0.0), scan)
         p = pf.particles.numpy()
         near[extra] = float(np.mean(np.hypot(*(p[:, :2] - truth[:2]).T) < 0.3))
@@ -1159,7 +1161,7 @@ def test_a_relocalization_is_given_the_places_its_scan_fits_best():
     with pytest.raises(ValueError, match="search poses"):
         RelocalizePlaces(w, agree, None, global_candidates=10)
     with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
-        RelocalizePlaces(w, agree, search_grid(grid), global_candidates=1)
+        RelocalizePlaces(w, agree, search_grid(grid), global_candidates=1)  # (the message names both settings)
 
 
 def test_the_lost_rule_chooser_breaks_a_tie_by_the_rule_that_asks_the_most_of_the_scans():
@@ -1183,3 +1185,34 @@ def test_the_lost_rule_chooser_breaks_a_tie_by_the_rule_that_asks_the_most_of_th
     assert choose([one, two, three, fast_loose, alone]) is two
     assert choose([one, three, alone]) is one
     assert choose([alone, row(0.3, 1, 21, 0.0, 0.4)]) is alone  # more detections first
+
+
+def test_a_relocalization_can_weigh_the_particles_it_had_moved_by_the_odometry():
+    """relocalize_keeps_particles: the particles at the lost event, remembered with the odometry's pose then, are
+    given to the first update moved by the odometry since (the robot 1 m ahead: each particle 1 m ahead along its own
+    heading, the yaw kept), once; without the setting nothing is remembered."""
+    from types import SimpleNamespace
+
+    from irmcl_warp.mcl.worlds import RelocalizePlaces
+
+    occ, origin, res = _box_map()
+    agree = ScanAgreement(occ, origin, res)
+    had = np.array([[3.0, 2.0, 0.5], [6.0, 4.0, -1.0]])
+    got = []
+    pf = SimpleNamespace(
+        particles=SimpleNamespace(numpy=lambda: had.astype(np.float32)), num_particles=2, add_candidates=got.append
+    )
+    keep = RelocalizePlaces(SimpleNamespace(relocalize_places=0, relocalize_keeps_particles=True), agree, None, 10)
+    keep.remember(pf, [10.0, 10.0, np.pi / 2])
+    assert keep.seed(pf, None, None, None, [10.0, 11.0, np.pi / 2]) == 0  # (no places searched)
+    moved = got[0]
+    forward = np.column_stack([np.cos(had[:, 2]), np.sin(had[:, 2])])  # 1 m ahead in each particle's own heading
+    assert np.allclose(moved[:, :2], had[:, :2] + forward)
+    assert np.allclose(moved[:, 2], had[:, 2])
+    keep.seed(pf, None, None, None, [10.0, 12.0, np.pi / 2])
+    assert len(got) == 1  # given once
+    plain = RelocalizePlaces(SimpleNamespace(relocalize_places=0), agree, None, 1)
+    plain.remember(pf, [0.0, 0.0, 0.0])
+    assert plain.kept is None
+    with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
+        RelocalizePlaces(SimpleNamespace(relocalize_keeps_particles=True), agree, None, 1)

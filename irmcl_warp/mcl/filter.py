@@ -223,15 +223,15 @@ class ParticleFilter:
 
     def add_candidates(self, poses) -> None:
         """Poses [m, 3] the next update weighs beside the uniform candidates of a global start (places a search
-        found: mcl/worlds.py RelocalizePlaces.seed); needs ``init_uniform`` before and ``mcl.global_candidates`` > 1.
-        Poses off the map's free space are dropped."""
+        found, the particles a relocalization had: mcl/worlds.py RelocalizePlaces); needs ``init_uniform`` before and
+        ``mcl.global_candidates`` > 1. Poses off the map's free space are dropped; calls add up."""
         if not (self.global_start and self.cfg.global_candidates > 1):
             raise ValueError("MCL: add_candidates needs a global start (init_uniform) with mcl.global_candidates > 1")
         poses = np.asarray(poses, np.float64).reshape(-1, 3)
         H, W = self.free_space.shape
         cells = self.free_space.node_of(poses[:, :2])
         inside = np.all((cells >= 0) & (cells < np.array([W, H])), 1)
-        self.extra_candidates = poses[inside][: self.num_particles]  # one batch of the weighting's size at most
+        self.extra_candidates = np.vstack([self.extra_candidates, poses[inside]])  # (weighed in batches of N)
 
     def uniform_poses(self, n: int) -> np.ndarray:
         """``n`` poses uniform over the free nodes of the map (within each node's cell), any heading."""
@@ -351,12 +351,12 @@ class ParticleFilter:
             self.particles.assign(wp.array(poses[b * n : (b + 1) * n].astype(np.float32), dtype=wp.vec3, device=d))
             self._observe()
             lik[b * n : (b + 1) * n] = self.log_lik.numpy()
-        if len(extra):  # one more batch, padded to N by repeating the extra poses
-            poses[k * n :] = extra
-            batch = extra[np.arange(n) % len(extra)]
-            self.particles.assign(wp.array(batch.astype(np.float32), dtype=wp.vec3, device=d))
+        poses[k * n :] = extra
+        for b in range(0, len(extra), n):  # batches of N, the last padded by repeating its poses
+            part = extra[b : b + n]
+            self.particles.assign(wp.array(part[np.arange(n) % len(part)].astype(np.float32), dtype=wp.vec3, device=d))
             self._observe()
-            lik[k * n :] = self.log_lik.numpy()[: len(extra)]
+            lik[k * n + b : k * n + b + len(part)] = self.log_lik.numpy()[: len(part)]
         keep = systematic_draw(float(self.cfg.temper) * lik, n, float(self.rng.uniform()))
         self.set_particles(poses[keep])
         self.log_lik.zero_()  # the weights stay equal: the estimate of the kept set, unweighted

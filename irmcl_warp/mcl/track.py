@@ -99,7 +99,8 @@ class Localizer:
         with a judge, ``lost_rule(t, confidence, agreement) -> bool`` after each update (mcl/worlds.LostRule); when
         it declares the robot lost, the time goes to ``lost_at_s`` and, with ``relocalize``, the filter starts again
         from a uniform spread (``global_start``). ``places`` (mcl/worlds.RelocalizePlaces), where given: a
-        relocalization's first update also weighs the places its scan fits best."""
+        relocalization's first update also weighs the places its scan fits best and, where set, the particles it
+        had when declared lost."""
         if report_pose not in ("mode", "filter"):
             raise ValueError(f"Localizer: report_pose {report_pose!r} is not one of ('mode', 'filter')")
         self.pf, self.m, self.covariance, self.step_times, self.judge = pf, m, covariance, step_times, judge
@@ -140,8 +141,8 @@ class Localizer:
         weigh = (self.pose is None and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad)
         cov = np.full((3, 3), np.nan) if self.covariance else None
         if weigh:
-            if self.restarting and self.places is not None:  # a relocalization's first update: its places
-                self.places.seed(self.pf, ranges_m, self.judge.angles, self.judge.T)
+            if self.restarting and self.places is not None:  # a relocalization's first update: where it looks first
+                self.places.seed(self.pf, ranges_m, self.judge.angles, self.judge.T, odom)
             self.restarting = False
             t0 = time.perf_counter()
             self.pose = self.pf.step(u, ranges_m)[0]
@@ -159,6 +160,8 @@ class Localizer:
                 ):
                     self.lost_at_s.append(float(stamp - self.t_start))
                     if self.relocalize:  # lost: a global start again (weighs once the robot moved)
+                        if self.places is not None:
+                            self.places.remember(self.pf, odom)
                         low = self.confidence
                         self.global_start()
                         self.confidence, self.restarting = low, True  # until the next update the robot is lost

@@ -313,44 +313,63 @@ PLACES_APART_M = 2.0  # the places a search keeps lie at least this far apart (F
 
 
 class RelocalizePlaces:
-    """``worlds.relocalize_places`` = k > 0 (issue 33): the first update after a relocalization's uniform start also
-    weighs poses about the k places its scan fits best over the whole map (``ScanAgreement.search`` over
-    ``search_poses``, a 0.5 m / 22.5 deg grid of the free space; PLACE_SHARE of the particle count about each,
-    SEED_STD apart), beside the uniform candidates (``ParticleFilter.add_candidates``): the filter's likelihood
-    decides among them, as the camera's hypotheses seed the lidar + camera relocalization. A search of a 100 m
-    building's 586k poses takes about 1.2 s on one core of the 2-core machine, once per relocalization."""
+    """Where a relocalization looks first (issue 33), beside the uniform candidates of its first update
+    (``ParticleFilter.add_candidates``; needs ``mcl.global_candidates`` > 1); the filter's likelihood decides among
+    them all. Each part off unless set:
+
+    * ``worlds.relocalize_places`` = k > 0: poses about the k places the first update's scan fits best over the whole
+      map (``ScanAgreement.search`` over ``search_poses``, a 0.5 m / 22.5 deg grid of the free space; PLACE_SHARE of
+      the particle count about each, SEED_STD apart), as the camera's hypotheses seed the lidar + camera
+      relocalization. A search of a 100 m building's 586k poses takes about 1.2 s on one core of the 2-core machine,
+      once per relocalization.
+    * ``worlds.relocalize_keeps_particles``: the particles the filter had when it was declared lost, moved by the
+      odometry since: a robot declared lost that was not (a scan or two the map does not explain) finds its place
+      again on the first update, where a uniform start alone loses it."""
 
     def __init__(self, w, agreement: ScanAgreement, search_poses=None, global_candidates: int = 1):
         self.places = int(getattr(w, "relocalize_places", 0) or 0)
+        self.keeps = bool(getattr(w, "relocalize_keeps_particles", False))
         if self.places > 0 and search_poses is None:
             raise ValueError("worlds.relocalize_places > 0 needs the map's search poses (search_grid)")
-        if self.places > 0 and global_candidates <= 1:
+        if (self.places > 0 or self.keeps) and global_candidates <= 1:
             raise ValueError(
-                f"worlds.relocalize_places={self.places} adds its places to a global start's candidates: it needs "
-                f"mcl.global_candidates > 1 (it is {global_candidates})"
+                "worlds.relocalize_places and worlds.relocalize_keeps_particles add to a global start's candidates: "
+                f"they need mcl.global_candidates > 1 (it is {global_candidates})"
             )
         self.agreement, self.search_poses = agreement, search_poses
+        self.kept = None  # (the particles when declared lost, the odometry then)
 
-    def seed(self, pf, ranges_m, angles_rad, T_base_laser) -> int:
-        """Give a relocalization's first update the places this scan fits best (none where ``places`` is 0);
-        returns how many places."""
-        if self.places <= 0:
-            return 0
-        found = self.agreement.search(
-            self.search_poses,
-            ranges_m,
-            angles_rad,
-            T_base_laser,
-            away_from=np.full(2, np.inf),  # (none excluded)
-            apart_m=PLACES_APART_M,
-            count=self.places,
-        )
-        k = max(1, int(round(PLACE_SHARE * pf.num_particles)))
-        about = [np.asarray(p, float) + pf.rng.normal(0.0, 1.0, (k, 3)) * np.asarray(SEED_STD) for p, _ in found]
-        if about:
-            poses = np.vstack(about)
-            poses[:, 2] = np.angle(np.exp(1j * poses[:, 2]))
-            pf.add_candidates(poses)
+    def remember(self, pf, odom) -> None:
+        """At a lost event, before the uniform start: the particles and the odometry's pose (with keeps_particles)."""
+        self.kept = (pf.particles.numpy().astype(np.float64), np.asarray(odom, float)) if self.keeps else None
+
+    def seed(self, pf, ranges_m, angles_rad, T_base_laser, odom=None) -> int:
+        """Give a relocalization's first update the places this scan fits best and the particles remembered (moved
+        by the odometry from then to ``odom``); returns how many places were searched out."""
+        found = []
+        if self.places > 0:
+            found = self.agreement.search(
+                self.search_poses,
+                ranges_m,
+                angles_rad,
+                T_base_laser,
+                away_from=np.full(2, np.inf),  # (none excluded)
+                apart_m=PLACES_APART_M,
+                count=self.places,
+            )
+            k = max(1, int(round(PLACE_SHARE * pf.num_particles)))
+            about = [np.asarray(p, float) + pf.rng.normal(0.0, 1.0, (k, 3)) * np.asarray(SEED_STD) for p, _ in found]
+            if about:
+                poses = np.vstack(about)
+                poses[:, 2] = np.angle(np.exp(1j * poses[:, 2]))
+                pf.add_candidates(poses)
+        if self.kept is not None and odom is not None:
+            particles, then = self.kept
+            delta = relative(then[None], np.asarray(odom, float)[None])[0]
+            moved = compose(particles, np.repeat(delta[None], len(particles), 0))
+            moved[:, 2] = np.angle(np.exp(1j * moved[:, 2]))
+            pf.add_candidates(moved)
+        self.kept = None
         return len(found)
 
 
@@ -359,7 +378,7 @@ def follow_with_confidence(
 ) -> dict:
     """Drive the filter over the whole log (AMCL's gates and ``mcl.first_update`` as in mcl/track.follow); at
     every update the features, the confidence and the heaviest mode's pose; lost-robot detection by ``LostRule``
-    (with ``worlds.relocalize``, a uniform spread again, whose first update also weighs ``places``' places).
+    (with ``worlds.relocalize``, a uniform spread again, whose first update also weighs what ``places`` gives).
     Returns per-scan arrays and the events."""
     n = len(log.stamps)
     est, feats = np.full((n, 3), np.nan), np.full((n, len(FEATURES)), np.nan)
@@ -372,8 +391,8 @@ def follow_with_confidence(
         u = odometry_step(last_odom, log.odom[i])
         if (not weighed and m.first_update == "scan") or moved(u, m.update_min_trans_m, m.update_min_rot_rad):
             particles[i] = pf.num_particles
-            if restarting and places is not None:  # a relocalization's first update: the places this scan fits
-                places.seed(pf, log.ranges_m[i], angles, T)
+            if restarting and places is not None:  # a relocalization's first update: where it looks first
+                places.seed(pf, log.ranges_m[i], angles, T, log.odom[i])
             restarting = False
             pf.step(u, log.ranges_m[i])
             delta = relative(last_odom[None], log.odom[i][None])[0]
@@ -391,6 +410,8 @@ def follow_with_confidence(
                 if rule(log.stamps[i], p, f[AGREEMENT]):
                     lost_at.append(float(log.stamps[i] - log.stamps[0]))
                     if w.relocalize:
+                        if places is not None:
+                            places.remember(pf, log.odom[i])
                         pf.init_uniform()
                         tracker.reset()
                         weighed, pose, restarting = False, None, True
