@@ -75,6 +75,30 @@ def test_a_record_names_the_calibration_that_judged_its_runs():
     assert own_slam_map_table([rec]).endswith("| x.json |")
 
 
+def test_a_record_names_the_lost_rule_its_runs_read_and_the_table_says_it():
+    """eval.analyses.own_slam_map.lost_rule_of_run: the digest of conf/exp/worlds.yaml in a run's manifest is today's
+    file: its rule's settings; a digest no version of the file has: the digest; none: None. The table names a re-seeding
+    record's rule (two updates, the searched places, the particles kept)."""
+    from eval.analyses.own_slam_map import RULE_SETTINGS, lost_rule_of_run
+    from irmcl_warp.config import own_map_lost_rule_file, own_map_lost_rule_settings
+    from irmcl_warp.runs import OWN_MAP_LOST_RULE, file_digest
+
+    path = own_map_lost_rule_file()
+    now = lost_rule_of_run({"inputs": {OWN_MAP_LOST_RULE: [{"path": str(path), "sha256": file_digest(path)}]}})
+    w = own_map_lost_rule_settings()
+    assert now == {k: w[k] for k in RULE_SETTINGS}
+    unknown = lost_rule_of_run({"inputs": {OWN_MAP_LOST_RULE: [{"path": str(path), "sha256": "cd" * 32}]}})
+    assert unknown == {"sha256": "cdcdcdcdcd"} and lost_rule_of_run({}) is None
+    row = {"seed": 0, "particles": 20000, "weighting": "likelihood_field", "device": "cpu", "time_to_converge_s": 3.0}
+    row |= {"location_rmse_cm": 8.0, "localized_at_end": True, "error_at_end_m": 0.1, "calibration": "x.json"}
+    rule = {"lost_agreement_below": 0.4, "lost_agreement_updates": 2, "relocalize_places": 3}
+    row |= {"relocalize": True, "lost_rule": {**rule, "relocalize_keeps_particles": True}}
+    table = own_slam_map_table([{"log": "toy", "runs": [row], "successes": 1, "of": 1}])
+    assert "re-seeded when lost (agreement < 0.4 for 2 updates, 3 searched places, keeping its particles)" in table
+    row["lost_rule"] = None  # (a record before the rule was named)
+    assert "re-seeded when lost |" in own_slam_map_table([{"log": "toy", "runs": [row], "successes": 1, "of": 1}])
+
+
 def test_the_record_says_how_the_confidence_separates_right_scans_from_wrong(tmp_path, rng):
     """Per scan, the run's confidence (spread.csv) against whether the estimate lies within 0.5 m / 10 deg of the
     SLAM pose, pooled over the runs: a confidence high exactly where the estimate is right has AUROC 1, the same

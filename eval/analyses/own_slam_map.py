@@ -130,7 +130,8 @@ def calibration_of_run(manifest: dict, cfg) -> str | None:
     return f"sha256 {digests[0][:10]}"
 
 
-RULE_SETTINGS = ("lost_agreement_below", "lost_agreement_updates", "relocalize_places")  # what the table names
+RULE_SETTINGS = ("lost_agreement_below", "lost_agreement_updates", "relocalize_places", "relocalize_keeps_particles")
+# (what the own-map table names)
 
 
 def lost_rule_of_run(manifest: dict) -> dict | None:

@@ -466,6 +466,7 @@ def worlds_table(runs: list) -> str:
                 else []
             )
             + ([f"a relocalization also from {places} searched places"] if places else [])
+            + (["keeping its particles"] if r.setting("worlds.relocalize_keeps_particles") else [])
             + ([f"timeout only at agreement < {gate:g}"] if gate is not None else [])
             + (["modes' densest poses"] if r.setting("worlds.mode_pose") == "densest" else [])
             + (
@@ -522,13 +523,16 @@ def own_slam_map_table(records: list) -> str:
         if first.get("relocalize"):
             weighting += ", re-seeded when lost"
             rule = first.get("lost_rule") or {}  # (records before it: the rule of the session before, unnamed)
-            if rule.get("lost_agreement_updates", 1) > 1:
-                weighting += (
-                    f" (agreement < {rule['lost_agreement_below']:g} for {rule['lost_agreement_updates']} updates"
+            how = (
+                (
+                    [f"agreement < {rule['lost_agreement_below']:g} for {rule['lost_agreement_updates']} updates"]
+                    if rule.get("lost_agreement_updates", 1) > 1
+                    else []
                 )
-                weighting += f", {rule['relocalize_places']} searched places)" if rule.get("relocalize_places") else ")"
-            elif rule.get("relocalize_places"):
-                weighting += f" ({rule['relocalize_places']} searched places)"
+                + ([f"{rule['relocalize_places']} searched places"] if rule.get("relocalize_places") else [])
+                + (["keeping its particles"] if rule.get("relocalize_keeps_particles") else [])
+            )
+            weighting += f" ({', '.join(how)})" if how else ""
         t = [r["time_to_converge_s"] for r in runs if r["time_to_converge_s"] is not None]
         e = [r["location_rmse_cm"] for r in runs if r["location_rmse_cm"] is not None]
         conf = sum(bool(r["localized_at_end"]) for r in runs)
