@@ -1216,3 +1216,23 @@ def test_a_relocalization_can_weigh_the_particles_it_had_moved_by_the_odometry()
     assert plain.kept is None
     with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
         RelocalizePlaces(SimpleNamespace(relocalize_keeps_particles=True), agree, None, 1)
+
+
+def test_the_lost_rule_is_chosen_again_from_a_record_without_replaying(tmp_path):
+    """python -m eval.analyses.lost_rules --from-record: the rules of an earlier --out (rows written before the rules'
+    names were kept) are chosen among again and the choice written; run folders and a record together are an error."""
+    from eval.analyses.lost_rules import main
+
+    rows = [
+        dict(agreement_below=b, updates=n, detected_within_2s=d, kidnaps=23, false_alarms=0)
+        | dict(false_alarms_per_h=0.0, median_detection_s=m, tracking_right_h=1.0)
+        for b, n, d, m in ((0.0, 1, 16, 1.8), (0.4, 1, 22, 0.4), (0.4, 2, 22, 0.8), (0.4, 3, 21, 1.2))
+    ]
+    record = tmp_path / "tuning.json"
+    record.write_text(json.dumps({"runs": ["outputs/worlds/worlds/tuning-x"], "rules": rows}))
+    chosen = tmp_path / "lost_rule.txt"
+    out = main(["--from-record", str(record), "--choose", str(chosen)])
+    assert out["chosen"] == {"agreement_below": 0.4, "updates": 2}
+    assert chosen.read_text().startswith("lost_agreement_below=0.4 lost_agreement_updates=2: detected within 2 s 22/23")
+    with pytest.raises(ValueError, match="not both"):
+        main([str(tmp_path), "--from-record", str(record)])
