@@ -160,10 +160,19 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         lost_at_s=lost_at_s,
         places=places,
     )
+    again = "; starting again from a uniform spread" + (
+        ""
+        if places is None or not (places.places or places.keeps)
+        else " with "
+        + " and ".join(
+            (["the places the scan fits best"] if places.places else [])
+            + (["the particles it had"] if places.keeps else [])
+        )
+    )
     for t_lost in lost_at_s:
         print(
             f"{log.source}: lost {t_lost:.1f} s into the run (the confidence stayed low, or the scan left the map)"
-            + ("; starting again from a uniform spread" if loc.relocalize else "")
+            + (again if loc.relocalize else "")
         )
     ms_per_scan = 1e3 * (time.perf_counter() - t_run) / len(idx)
     stamps = log.stamps[idx]
