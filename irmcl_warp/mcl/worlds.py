@@ -11,8 +11,8 @@ scan's agreement with the map: irmcl_warp/mcl/confidence.py); with a calibration
 confidence, declares the robot localized at ``worlds.confident_above`` and lost when the confidence stays below
 ``worlds.lost_below`` for ``worlds.lost_after_s``, or the scan's agreement at the estimate below
 ``worlds.lost_agreement_below`` for ``worlds.lost_agreement_updates`` updates (``LostRule``; then, with
-``worlds.relocalize``, starts again from a uniform spread and says so; with ``worlds.relocalize_places`` its first
-update also weighs the places the scan fits best over the map: ``RelocalizePlaces``). With ``worlds.rival_seed_below`` a rival
+``worlds.relocalize``, starts again from a uniform spread and says so; its first update also weighs the places the
+scan fits best over the map and the particles it had: ``RelocalizePlaces``). With ``worlds.rival_seed_below`` a rival
 place that has explained the scans that much better than the estimate (the confidence's evidence) is given
 ``worlds.rival_seed_share`` of the particles (``seed_at``): resampling drops a look-alike place's particles before
 the scans can tell the two apart, and a set without particles there cannot come back to it by itself. The estimate
