@@ -108,6 +108,22 @@ def test_modes_find_two_clouds_with_their_weights_and_poses():
     assert np.allclose(m.poses[0], a, atol=0.02) and np.allclose(m.poses[1], b, atol=0.02)
 
 
+def test_a_cluster_on_cell_borders_outweighs_a_smaller_one_inside_a_cell():
+    """The densest pose's start: a cluster of 3000 centred on a corner of the 0.25 m cells and on a heading bin's
+    border (split over 8 cells) against one of 1500 inside one cell, 1.2 m away: the larger is the mode's pose (a cell
+    alone would hold at most about 450 of it and start the mean shift at the smaller)."""
+    from irmcl_warp.mcl.confidence import DENSEST_CELL_M, densest_pose
+
+    rng = np.random.default_rng()
+    a = np.array([4 * DENSEST_CELL_M, 4 * DENSEST_CELL_M, 0.0])  # a corner of four cells, on the 0 rad border
+    b = np.array([a[0] + 1.2 + DENSEST_CELL_M / 2, a[1] + DENSEST_CELL_M / 2, 0.2])  # inside one cell and bin
+    big = a + rng.normal(0, [0.06, 0.06, 0.02], (3000, 3))
+    small = b + rng.normal(0, [0.02, 0.02, 0.005], (1500, 3))
+    p = np.vstack([big, small])
+    pose = densest_pose(p, np.full(len(p), 1.0 / len(p)))
+    assert np.hypot(*(pose[:2] - a[:2])) < 0.05 and abs(np.angle(np.exp(1j * (pose[2] - a[2])))) < 0.02
+
+
 def test_a_modes_pose_is_its_densest_cluster_not_the_mean_of_its_block():
     """Two clusters 1.2 m apart in one 3 x 3 m block (a resampled set's look-alike poses) and, at the heavier one,
     a share of particles turned 1 rad: the block's weighted mean lies between the clusters and between the headings,

@@ -4,7 +4,8 @@ confidence built on them (issue 33).
 * ``modes(particles, log_w)``: the particle set's hypotheses, heaviest first: a weighted histogram of the
   positions in ``cell_m`` cells; the heaviest 3 x 3 block of cells is a mode (its weight), its particles are taken
   out, and so on. A mode's pose (``pose="densest"``) is that of its densest cluster: from its heaviest
-  ``DENSEST_CELL_M`` cell and ``DENSEST_YAW_BINS`` heading bin, the weighted mean of its particles within
+  ``DENSEST_CELL_M`` cell and ``DENSEST_YAW_BINS`` heading bin (each counted with its 26 neighbours, so that a
+  cluster straddling cell borders counts whole), the weighted mean of its particles within
   ``DENSEST_RADIUS_M`` and ``DENSEST_YAW_RAD`` of the pose, three times (a mean shift). The block's plain weighted
   mean (``pose="block"``, before the twenty-eighth session) lands between two clusters a block holds, or at a heading
   between two, where no scan fits. The heaviest mode's pose is the estimate a multi-hypothesis user reads.
@@ -79,10 +80,18 @@ def circular_mean(w: np.ndarray, yaw: np.ndarray) -> float:
 def densest_pose(p: np.ndarray, w: np.ndarray, steps: int = 3) -> np.ndarray:
     """The pose of the densest cluster of particles ``p`` [n, 3] weighted ``w`` [n] (see the module's text)."""
     cells = np.floor(p[:, :2] / DENSEST_CELL_M).astype(np.int64)
-    cells -= cells.min(0)  # (a mode's block: a few metres, so a dense histogram)
+    cells -= cells.min(0) - 1  # (a mode's block: a few metres, so a dense histogram; one empty cell of margin)
     bins = np.minimum(np.floor(np.mod(p[:, 2], 2 * np.pi) / (2 * np.pi / DENSEST_YAW_BINS)), DENSEST_YAW_BINS - 1)
-    key = (cells[:, 0] * (cells[:, 1].max() + 1) + cells[:, 1]) * DENSEST_YAW_BINS + bins.astype(np.int64)
-    heaviest = key == np.argmax(np.bincount(key, w))
+    bins = bins.astype(np.int64)
+    nx, ny = cells.max(0) + 2
+    key = (cells[:, 0] * ny + cells[:, 1]) * DENSEST_YAW_BINS + bins
+    hist = np.bincount(key, w, minlength=nx * ny * DENSEST_YAW_BINS).reshape(nx, ny, DENSEST_YAW_BINS)
+    # each cell with its 26 neighbours (the heading wraps round): a cluster that straddles cell borders (up to 8
+    # cells) is not outweighed by a smaller one that one cell holds whole
+    near = sum(
+        np.roll(hist, (dx, dy, dyaw), (0, 1, 2)) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dyaw in (-1, 0, 1)
+    )
+    heaviest = key == np.argmax(np.where(hist > 0, near, -1.0))  # (a cell with weight of its own)
     pose = np.array([*(w[heaviest] @ p[heaviest, :2] / w[heaviest].sum()), circular_mean(w[heaviest], p[heaviest, 2])])
     for _ in range(steps):
         d = p - pose
