@@ -1230,6 +1230,7 @@ def test_a_relocalization_can_weigh_the_particles_it_had_moved_by_the_odometry()
     plain = RelocalizePlaces(SimpleNamespace(relocalize_places=0), agree, None, 1)
     plain.remember(pf, [0.0, 0.0, 0.0])
     assert plain.kept is None
+    assert keep.describe() == "the particles it had" and plain.describe() == ""  # (an own-map run's lost line)
     with pytest.raises(ValueError, match="mcl.global_candidates > 1"):
         RelocalizePlaces(SimpleNamespace(relocalize_keeps_particles=True), agree, None, 1)
 

@@ -160,15 +160,8 @@ def localize_in_map(run: runs.Run, map_file: Path) -> Path:
         lost_at_s=lost_at_s,
         places=places,
     )
-    again = "; starting again from a uniform spread" + (
-        ""
-        if places is None or not (places.places or places.keeps)
-        else " with "
-        + " and ".join(
-            (["the places the scan fits best"] if places.places else [])
-            + (["the particles it had"] if places.keeps else [])
-        )
-    )
+    beside = places.describe() if places is not None else ""
+    again = "; starting again from a uniform spread" + (f" with {beside}" if beside else "")
     for t_lost in lost_at_s:
         print(
             f"{log.source}: lost {t_lost:.1f} s into the run (the confidence stayed low, or the scan left the map)"

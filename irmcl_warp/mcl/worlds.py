@@ -36,7 +36,7 @@ from omegaconf import OmegaConf
 from tqdm import tqdm
 
 from irmcl_warp import runs
-from irmcl_warp.geometry import compose, relative
+from irmcl_warp.geometry import compose, relative, wrap_angle
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
 from irmcl_warp.mcl.confidence import (
@@ -361,16 +361,20 @@ class RelocalizePlaces:
             about = [np.asarray(p, float) + pf.rng.normal(0.0, 1.0, (k, 3)) * np.asarray(SEED_STD) for p, _ in found]
             if about:
                 poses = np.vstack(about)
-                poses[:, 2] = np.angle(np.exp(1j * poses[:, 2]))
+                poses[:, 2] = wrap_angle(poses[:, 2])
                 pf.add_candidates(poses)
         if self.kept is not None and odom is not None:
             particles, then = self.kept
-            delta = relative(then[None], np.asarray(odom, float)[None])[0]
-            moved = compose(particles, np.repeat(delta[None], len(particles), 0))
-            moved[:, 2] = np.angle(np.exp(1j * moved[:, 2]))
-            pf.add_candidates(moved)
+            pf.add_candidates(compose(particles, relative(then, np.asarray(odom, float))))  # (compose wraps the yaw)
         self.kept = None
         return len(found)
+
+    def describe(self) -> str:
+        """What a relocalization's first update weighs beside the uniform candidates, in words ("" for nothing)."""
+        parts = (["the places the scan fits best"] if self.places > 0 else []) + (
+            ["the particles it had"] if self.keeps else []
+        )
+        return " and ".join(parts)
 
 
 def follow_with_confidence(
