@@ -1,6 +1,8 @@
 """``python -m eval.bench estimate``: IR-MCL's top-share estimate alone (``TopShareMean``: the top 80 % of the
-particles by weight, then their weighted mean), by Warp's radix sort against the radix select (``select``: as many
-particles a thread as ``select_per_thread`` chooses; ``select<P>``: P), side by side in one run. Each way is timed as the filter runs it (the keys written, then
+particles by weight, then their weighted mean), by Warp's radix sort against the radix select, side by side in one run:
+``select`` as the filter chooses (one block up to ``SELECT_ONE_BLOCK_MAX`` particles, else a launch per pass),
+``passes`` a launch per pass (as many particles a thread as ``select_per_thread`` chooses; ``select<P>``: P),
+``block`` every pass in one block. Each way is timed as the filter runs it (the keys written, then
 ``order`` and ``sum`` from the weights w), captured once as a CUDA graph on a GPU and replayed. Two weight sets:
 ``spread`` (log-weights as a scan's sum of beam log-likelihoods gives them: normal, sd 5) and ``ties`` (a resampled
 set: every value shared by about ten particles). Every way must give the same top share: the estimate of each is
@@ -36,14 +38,20 @@ def method_settings(method: str) -> dict:
     if method == "sort":
         return {"SELECT": False, "TILED": None}
     if method == "select":
-        return {"SELECT": True, "SELECT_PER_THREAD": None}
+        return {"SELECT": True, "SELECT_PER_THREAD": None, "ONE_BLOCK": None}
+    if method == "passes":
+        return {"SELECT": True, "SELECT_PER_THREAD": None, "ONE_BLOCK": False}
+    if method == "block":
+        return {"SELECT": True, "ONE_BLOCK": True}
     if method.startswith("select") and method[6:].isdigit():
-        return {"SELECT": True, "SELECT_PER_THREAD": int(method[6:])}
-    raise ValueError(f"eval.bench estimate: unknown method {method!r}: sort or select<particles a thread>")
+        return {"SELECT": True, "SELECT_PER_THREAD": int(method[6:]), "ONE_BLOCK": False}
+    raise ValueError(
+        f"eval.bench estimate: unknown method {method!r}: sort, select, passes, block or select<particles a thread>"
+    )
 
 
 def build(method: str, n: int, device: str) -> TopShareMean:
-    saved = {k: getattr(TopShareMean, k) for k in ("SELECT", "TILED", "SELECT_PER_THREAD")}
+    saved = {k: getattr(TopShareMean, k) for k in ("SELECT", "TILED", "SELECT_PER_THREAD", "ONE_BLOCK")}
     try:
         for k, v in method_settings(method).items():
             setattr(TopShareMean, k, v)
@@ -115,7 +123,7 @@ def add_parser(sub) -> None:
     t.add_argument("--device", default=None)
     t.add_argument("--particles", type=int, nargs="+", default=[100_000, 1_000_000])
     t.add_argument("--weights", nargs="+", default=["spread", "ties"], choices=["spread", "ties"])
-    t.add_argument("--methods", nargs="+", default=["sort", "select", "select1", "select4", "select8"])
+    t.add_argument("--methods", nargs="+", default=["sort", "select", "passes", "block"])
     t.add_argument("--steps", type=int, default=50)
     t.add_argument("--repeats", type=int, default=5)
     t.add_argument("--out", default="outputs/bench")
