@@ -185,6 +185,7 @@ ALL_INDICES = 0x7FFFFFFF  # an index threshold that takes every tied particle
 
 SELECT_BLOCKS = 128  # blocks the selection's launches aim at: about one per SM of an H100 (132)
 SELECT_ONE_BLOCK_MAX = 262_144  # sets up to this size are selected by one block (``select_block_kernel``)
+SELECT_ONE_BLOCK_THREADS = 1024  # that block's threads on a GPU
 
 
 def select_per_thread(num_particles: int) -> int:
@@ -269,9 +270,17 @@ def pick_counted(counts: wp.tile(dtype=int, shape=(SELECT_BINS,)), rank: int, la
 @wp.func
 def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.vec3i:
     """(digit, particles in the digits before it, particles in it) for the particle of rank ``rank`` among those a
-    pass counted in ``hist`` row ``row`` (``pick_counted``)."""
-    picked = pick_counted(wp.tile_load(hist, shape=SELECT_BINS, offset=row * SELECT_BINS), rank, lane)
-    return wp.vec3i(picked[0], picked[1], hist[row * SELECT_BINS + picked[0]])
+    pass counted in ``hist`` row ``row``: ``pick_counted`` written out on the loaded row (a tile passed to a function
+    costs registers that a launch of 1024 threads does not have)."""
+    counts = wp.tile_load(hist, shape=SELECT_BINS, offset=row * SELECT_BINS)
+    cum = wp.tile_scan_inclusive(counts)
+    digit = wp.tile_sum(wp.tile_map(before_rank, cum, rank))
+    before = wp.tile_max(wp.tile_map(count_before, cum, rank))
+    shared = wp.tile_zeros(shape=2, dtype=int, storage="shared")
+    wp.tile_scatter_masked(shared, 0, digit[0], lane == 0)
+    wp.tile_scatter_masked(shared, 1, before[0], lane == 0)
+    d = shared[0]
+    return wp.vec3i(d, shared[1], hist[row * SELECT_BINS + d])
 
 
 @wp.func
@@ -311,8 +320,21 @@ def threshold_after(
     index = state_int[3 * (j - 1)]
     rank = state_int[3 * (j - 1) + 1]
     done = state_int[3 * (j - 1) + 2]
-    if done == 0:  # the same in every thread: a cooperative pick
-        key, index, rank, done = narrow(key, index, rank, field, shift, pick_digit(hist, j - 1, rank, lane))
+    if done == 0:  # the same in every thread: a cooperative pick (``narrow`` written out)
+        picked = pick_digit(hist, j - 1, rank, lane)
+        low = (1 << shift) - 1
+        if field == KEY_DIGIT:
+            key = key | (wp.uint32(picked[0]) << wp.uint32(shift))
+        else:
+            index = index | (picked[0] << shift)
+        rank = rank - picked[1]
+        if rank == picked[2]:  # the whole digit is in: every bit below it is one
+            done = 1
+            if field == KEY_DIGIT:
+                key = key | wp.uint32(low)
+                index = ALL_INDICES
+            else:
+                index = index | low
     return key, index, rank, done
 
 
@@ -404,7 +426,7 @@ def select_block_kernel(
     block's pick cost more than the counting): each pass of ``passes`` (field, shift, width), as
     ``select_histogram_kernel`` counts it, into a histogram in shared memory, then the block's pick, the threshold
     kept in registers (every thread holds the same); the passes stop once it is complete. The threshold goes to row
-    ``last`` of the state, complete, where ``select_sums_kernel`` reads it (``picked``)."""
+    ``last`` of the state, complete, where ``picked_sums_kernel`` reads it."""
     _b, lane = wp.tid()
     n = keys.shape[0]
     key = wp.uint32(0)
@@ -460,23 +482,55 @@ def select_sums_kernel(
     last: int,
     prev_field: int,
     prev_shift: int,
-    picked: int,
     partials: wp.array(dtype=vec5),
 ):
-    """The threshold (the last pass's pick, block 0 keeping it in row ``last`` of the state; or, ``picked``, that row
-    as ``select_block_kernel`` left it), then the five sums over
+    """The threshold (the last pass's pick; block 0 keeps it in row ``last`` of the state), then the five sums over
     the block's ``span`` particles at or before it by a tile reduction into ``partials[b]`` (``moments_finish_kernel``
     adds the blocks). ``keys`` hold -log w (a copy: the filter's stream may reset the log-weights meanwhile); a
     weight is w[j] or exp(log w - top[0]) (``FROM_LOG_W``: ``top`` holds the largest)."""
     b, lane = wp.tid()
+    key, index, rank, done = threshold_after(hist, state_key, state_int, last, prev_field, prev_shift, lane)
+    if b == 0 and lane == 0:
+        keep_threshold(state_key, state_int, last, key, index, rank, done)
+    neg_top = float(0.0)
+    if source == FROM_LOG_W:
+        neg_top = -top[0]
+    acc = vec5()
+    for t in range(span // wp.block_dim()):
+        i = b * span + t * wp.block_dim() + lane
+        if i < keys.shape[0]:
+            k = heavy_first(-keys[i])
+            if k < key or (k == key and i <= index):
+                weight = float(0.0)
+                if source == FROM_LOG_W:
+                    weight = wp.exp(-keys[i] + neg_top)  # -keys[i] is log w: exp(log w - max)'s bits
+                else:
+                    weight = w[i]
+                acc += particle_moments(i, weight, cos_sin, particles, source)
+    block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
+    if lane == 0:
+        partials[b] = block_sums[0]
+
+
+@wp.kernel
+def picked_sums_kernel(
+    keys: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
+    w: wp.array(dtype=wp.float32),
+    cos_sin: wp.array(dtype=wp.vec2),
+    particles: wp.array(dtype=wp.vec3),
+    source: int,
+    state_key: wp.array(dtype=wp.uint32),
+    state_int: wp.array(dtype=int),
+    span: int,
+    last: int,
+    partials: wp.array(dtype=vec5),
+):
+    """``select_sums_kernel`` after ``select_block_kernel``: the threshold read from row ``last`` of the state, where
+    that kernel left it complete."""
+    b, lane = wp.tid()
     key = state_key[last]
     index = state_int[3 * last]
-    if picked == 0:
-        rank = int(0)
-        done = int(0)
-        key, index, rank, done = threshold_after(hist, state_key, state_int, last, prev_field, prev_shift, lane)
-        if b == 0 and lane == 0:
-            keep_threshold(state_key, state_int, last, key, index, rank, done)
     neg_top = float(0.0)
     if source == FROM_LOG_W:
         neg_top = -top[0]
@@ -502,6 +556,7 @@ class TopShareMean:
     SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
     SELECT_PER_THREAD = None  # particles a thread of the selection covers; None: ``select_per_thread(n)``
     ONE_BLOCK = None  # the whole selection in one block: None = up to SELECT_ONE_BLOCK_MAX particles (tests: forced)
+    ONE_BLOCK_THREADS = None  # that block's threads on a GPU; None: SELECT_ONE_BLOCK_THREADS
 
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -583,7 +638,8 @@ class TopShareMean:
             return
         if self.one_block:
             inputs = [self.keys, self.pass_table, self.k, self.state_key, self.state_int, len(self.passes)]
-            wp.launch_tiled(select_block_kernel, dim=[1], inputs=inputs, block_dim=self.block, device=self.device)
+            threads = tile_block(self.ONE_BLOCK_THREADS or SELECT_ONE_BLOCK_THREADS, self.device)
+            wp.launch_tiled(select_block_kernel, dim=[1], inputs=inputs, block_dim=threads, device=self.device)
             return
         self.hist.zero_()
         blocks = self.block_sums.shape[0]
@@ -614,10 +670,13 @@ class TopShareMean:
             if self.selects:  # the threshold, then a pass over every particle
                 last = len(self.passes)
                 prev_field, prev_shift = self.passes[-1][:2]
-                kernel = select_sums_kernel
-                inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key]
-                inputs += [self.state_int, self.span, last, prev_field, prev_shift, int(self.one_block)]
-                inputs += [self.block_sums]
+                kernel = picked_sums_kernel if self.one_block else select_sums_kernel
+                inputs = [self.keys, self.top, w, cos_sin, particles, source]
+                if self.one_block:  # the threshold complete in the state
+                    inputs += [self.state_key, self.state_int, self.span, last, self.block_sums]
+                else:
+                    inputs += [self.hist, self.state_key, self.state_int, self.span, last, prev_field, prev_shift]
+                    inputs += [self.block_sums]
             else:  # the first k ranks of the sort
                 kernel = top_sums_tiled_kernel
                 inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
