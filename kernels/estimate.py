@@ -184,8 +184,6 @@ ALL_INDICES = 0x7FFFFFFF  # an index threshold that takes every tied particle
 
 
 SELECT_BLOCKS = 128  # blocks the selection's launches aim at: about one per SM of an H100 (132)
-SELECT_ONE_BLOCK_MAX = 262_144  # sets up to this size are selected by one block (``select_block_kernel``)
-SELECT_ONE_BLOCK_THREADS = 1024  # that block's threads on a GPU
 
 
 def select_per_thread(num_particles: int) -> int:
@@ -254,24 +252,10 @@ def count_before(cum: int, rank: int) -> int:
 
 
 @wp.func
-def pick_counted(counts: wp.tile(dtype=int, shape=(SELECT_BINS,)), rank: int, lane: int) -> wp.vec2i:
-    """(digit, particles in the digits before it) for the particle of rank ``rank`` (1 = first) among those counted
-    per digit in ``counts``; every thread of the block gets them (tile reductions leave their result in thread 0,
-    passed on through shared memory)."""
-    cum = wp.tile_scan_inclusive(counts)
-    digit = wp.tile_sum(wp.tile_map(before_rank, cum, rank))
-    before = wp.tile_max(wp.tile_map(count_before, cum, rank))
-    shared = wp.tile_zeros(shape=2, dtype=int, storage="shared")
-    wp.tile_scatter_masked(shared, 0, digit[0], lane == 0)
-    wp.tile_scatter_masked(shared, 1, before[0], lane == 0)
-    return wp.vec2i(shared[0], shared[1])
-
-
-@wp.func
 def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.vec3i:
-    """(digit, particles in the digits before it, particles in it) for the particle of rank ``rank`` among those a
-    pass counted in ``hist`` row ``row``: ``pick_counted`` written out on the loaded row (a tile passed to a function
-    costs registers that a launch of 1024 threads does not have)."""
+    """(digit, particles in the digits before it, particles in it) for the particle of rank ``rank`` (1 = first)
+    among those a pass counted in ``hist`` row ``row``; every thread of the block gets them (tile reductions leave
+    their result in thread 0, passed on through shared memory)."""
     counts = wp.tile_load(hist, shape=SELECT_BINS, offset=row * SELECT_BINS)
     cum = wp.tile_scan_inclusive(counts)
     digit = wp.tile_sum(wp.tile_map(before_rank, cum, rank))
@@ -281,27 +265,6 @@ def pick_digit(hist: wp.array(dtype=int), row: int, rank: int, lane: int) -> wp.
     wp.tile_scatter_masked(shared, 1, before[0], lane == 0)
     d = shared[0]
     return wp.vec3i(d, shared[1], hist[row * SELECT_BINS + d])
-
-
-@wp.func
-def narrow(key: wp.uint32, index: int, rank: int, field: int, shift: int, picked: wp.vec3i):
-    """The threshold's key and index bits, the rank still sought and whether the threshold is complete after the
-    digit ``picked`` (digit, particles before it, particles in it) of ``field`` at ``shift``."""
-    done = int(0)
-    if field == KEY_DIGIT:
-        key = key | (wp.uint32(picked[0]) << wp.uint32(shift))
-    else:
-        index = index | (picked[0] << shift)
-    rank = rank - picked[1]
-    if rank == picked[2]:  # the whole digit is in: every bit below it is one
-        done = 1
-        low = (1 << shift) - 1
-        if field == KEY_DIGIT:
-            key = key | wp.uint32(low)
-            index = ALL_INDICES
-        else:
-            index = index | low
-    return key, index, rank, done
 
 
 @wp.func
@@ -320,7 +283,7 @@ def threshold_after(
     index = state_int[3 * (j - 1)]
     rank = state_int[3 * (j - 1) + 1]
     done = state_int[3 * (j - 1) + 2]
-    if done == 0:  # the same in every thread: a cooperative pick (``narrow`` written out)
+    if done == 0:  # the same in every thread: a cooperative pick
         picked = pick_digit(hist, j - 1, rank, lane)
         low = (1 << shift) - 1
         if field == KEY_DIGIT:
@@ -414,60 +377,6 @@ def select_histogram_kernel(
 
 
 @wp.kernel
-def select_block_kernel(
-    keys: wp.array(dtype=wp.float32),
-    passes: wp.array2d(dtype=int),
-    k: int,
-    state_key: wp.array(dtype=wp.uint32),
-    state_int: wp.array(dtype=int),
-    last: int,
-):
-    """The whole radix select in one block (``SELECT_ONE_BLOCK_MAX``: small sets, where the passes' launches and every
-    block's pick cost more than the counting): each pass of ``passes`` (field, shift, width), as
-    ``select_histogram_kernel`` counts it, into a histogram in shared memory, then the block's pick, the threshold
-    kept in registers (every thread holds the same); the passes stop once it is complete. The threshold goes to row
-    ``last`` of the state, complete, where ``picked_sums_kernel`` reads it."""
-    _b, lane = wp.tid()
-    n = keys.shape[0]
-    key = wp.uint32(0)
-    index = int(0)
-    rank = k
-    done = int(0)
-    key_mask = wp.uint32(0)
-    index_mask = int(0)
-    bins = wp.tile_zeros(shape=SELECT_BINS, dtype=int, storage="shared")
-    for j in range(passes.shape[0]):
-        if done == 0:
-            field = passes[j, 0]
-            shift = passes[j, 1]
-            digit_mask = (1 << passes[j, 2]) - 1
-            if j > 0:  # the counts of the pass before, each thread its share of the bins
-                for t in range(SELECT_BINS // wp.block_dim()):
-                    wp.tile_scatter_masked(bins, t * wp.block_dim() + lane, 0, True)
-            for t in range((n + wp.block_dim() - 1) // wp.block_dim()):
-                i = t * wp.block_dim() + lane
-                digit = int(-1)
-                if i < n:
-                    kk = heavy_first(-keys[i])
-                    if (kk & key_mask) == (key & key_mask) and (i & index_mask) == (index & index_mask):
-                        if field == KEY_DIGIT:
-                            digit = int((kk >> wp.uint32(shift)) & wp.uint32(digit_mask))
-                        else:
-                            digit = (i >> shift) & digit_mask
-                wp.tile_scatter_add(bins, wp.max(digit, 0), 1, digit >= 0)
-            picked = pick_counted(bins, rank, lane)
-            count = bins[picked[0]]
-            wp.tile_scatter_masked(bins, 0, 0, False)  # a barrier: every thread has read its count before zeroing
-            key, index, rank, done = narrow(key, index, rank, field, shift, wp.vec3i(picked[0], picked[1], count))
-            if field == KEY_DIGIT:
-                key_mask = key_mask | (wp.uint32(digit_mask) << wp.uint32(shift))
-            else:
-                index_mask = index_mask | (digit_mask << shift)
-    if lane == 0:
-        keep_threshold(state_key, state_int, last, key, index, rank, 1)
-
-
-@wp.kernel
 def select_sums_kernel(
     keys: wp.array(dtype=wp.float32),
     top: wp.array(dtype=wp.float32),
@@ -512,51 +421,10 @@ def select_sums_kernel(
         partials[b] = block_sums[0]
 
 
-@wp.kernel
-def picked_sums_kernel(
-    keys: wp.array(dtype=wp.float32),
-    top: wp.array(dtype=wp.float32),
-    w: wp.array(dtype=wp.float32),
-    cos_sin: wp.array(dtype=wp.vec2),
-    particles: wp.array(dtype=wp.vec3),
-    source: int,
-    state_key: wp.array(dtype=wp.uint32),
-    state_int: wp.array(dtype=int),
-    span: int,
-    last: int,
-    partials: wp.array(dtype=vec5),
-):
-    """``select_sums_kernel`` after ``select_block_kernel``: the threshold read from row ``last`` of the state, where
-    that kernel left it complete."""
-    b, lane = wp.tid()
-    key = state_key[last]
-    index = state_int[3 * last]
-    neg_top = float(0.0)
-    if source == FROM_LOG_W:
-        neg_top = -top[0]
-    acc = vec5()
-    for t in range(span // wp.block_dim()):
-        i = b * span + t * wp.block_dim() + lane
-        if i < keys.shape[0]:
-            k = heavy_first(-keys[i])
-            if k < key or (k == key and i <= index):
-                weight = float(0.0)
-                if source == FROM_LOG_W:
-                    weight = wp.exp(-keys[i] + neg_top)  # -keys[i] is log w: exp(log w - max)'s bits
-                else:
-                    weight = w[i]
-                acc += particle_moments(i, weight, cos_sin, particles, source)
-    block_sums = wp.tile_sum(wp.tile(acc, preserve_type=True))
-    if lane == 0:
-        partials[b] = block_sums[0]
-
-
 class TopShareMean:
     TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
     SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
     SELECT_PER_THREAD = None  # particles a thread of the selection covers; None: ``select_per_thread(n)``
-    ONE_BLOCK = None  # the whole selection in one block: None = up to SELECT_ONE_BLOCK_MAX particles (tests: forced)
-    ONE_BLOCK_THREADS = None  # that block's threads on a GPU; None: SELECT_ONE_BLOCK_THREADS
 
     def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
         if not 0.0 < share <= 1.0:
@@ -584,8 +452,6 @@ class TopShareMean:
             self.keys = wp.zeros(num_particles, dtype=wp.float32, device=self.device)  # -log w, a copy
             self.values = wp.zeros(num_particles, dtype=wp.int32, device=self.device)  # (accumulate writes them)
             self.block = tile_block(SELECT_TILE, self.device)
-            self.one_block = num_particles <= SELECT_ONE_BLOCK_MAX if self.ONE_BLOCK is None else bool(self.ONE_BLOCK)
-            self.pass_table = wp.array(np.array(self.passes, np.int32).reshape(-1, 3), dtype=int, device=self.device)
             per_thread = self.SELECT_PER_THREAD or select_per_thread(num_particles)
             self.span = SELECT_TILE * max(1, int(per_thread))  # particles a block covers
             self.block_sums = wp.zeros(-(-num_particles // self.span), dtype=vec5, device=self.device)
@@ -636,11 +502,6 @@ class TopShareMean:
         if not self.selects:
             wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
             return
-        if self.one_block:
-            inputs = [self.keys, self.pass_table, self.k, self.state_key, self.state_int, len(self.passes)]
-            threads = tile_block(self.ONE_BLOCK_THREADS or SELECT_ONE_BLOCK_THREADS, self.device)
-            wp.launch_tiled(select_block_kernel, dim=[1], inputs=inputs, block_dim=threads, device=self.device)
-            return
         self.hist.zero_()
         blocks = self.block_sums.shape[0]
         for j, settings in enumerate(self.pass_settings):
@@ -670,13 +531,9 @@ class TopShareMean:
             if self.selects:  # the threshold, then a pass over every particle
                 last = len(self.passes)
                 prev_field, prev_shift = self.passes[-1][:2]
-                kernel = picked_sums_kernel if self.one_block else select_sums_kernel
-                inputs = [self.keys, self.top, w, cos_sin, particles, source]
-                if self.one_block:  # the threshold complete in the state
-                    inputs += [self.state_key, self.state_int, self.span, last, self.block_sums]
-                else:
-                    inputs += [self.hist, self.state_key, self.state_int, self.span, last, prev_field, prev_shift]
-                    inputs += [self.block_sums]
+                kernel = select_sums_kernel
+                inputs = [self.keys, self.top, w, cos_sin, particles, source, self.hist, self.state_key]
+                inputs += [self.state_int, self.span, last, prev_field, prev_shift, self.block_sums]
             else:  # the first k ranks of the sort
                 kernel = top_sums_tiled_kernel
                 inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]

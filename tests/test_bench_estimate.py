@@ -17,7 +17,7 @@ def test_the_estimate_benchmark_times_each_way_and_the_ways_agree(tmp_path):
         device="cpu",
         particles=[3000],
         weights=["spread", "ties"],
-        methods=["sort", "select", "select4", "passes", "block"],
+        methods=["sort", "select", "select4"],
         steps=2,
         repeats=2,
         out=str(tmp_path / "bench"),
@@ -28,7 +28,6 @@ def test_the_estimate_benchmark_times_each_way_and_the_ways_agree(tmp_path):
         assert r["repeats"] == 2 and r["step_ms_min"] > 0
         assert max(r["pose_diff_vs_first"]) < 1e-3, r  # the same top share as the sort's
     assert TopShareMean.SELECT is None and TopShareMean.SELECT_PER_THREAD is None  # the class settings restored
-    assert TopShareMean.ONE_BLOCK is None
     saved = json.loads((tmp_path / "bench" / "estimate-cpu.json").read_text())
     assert [r["pose"] for r in saved["rows"]] == [r["pose"] for r in rows]
     with pytest.raises(ValueError, match="unknown method"):

@@ -353,14 +353,12 @@ def test_the_tiled_top_share_sums_match_the_twin_and_repeat_themselves(rng, monk
             assert abs(np.angle(np.exp(1j * (ours[2] - twin[2])))) < 2e-3, f"n {n}, tiled {tiled}, seed {rng.seed}"
 
 
-@pytest.mark.parametrize("one_block", [False, True], ids=["a launch per pass", "one block"])
 @pytest.mark.parametrize("kind", ["spread", "ties"])
-def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind, one_block):
+def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind):
     """TopShareMean.SELECT (a GPU's way: a radix select, no sort): the particles at or before the threshold it finds
     are the first K of a stable sort of -log w (ties by index, -0 as +0), and the estimate is the numpy twin's, from the log-weights and
     from w given (numpy's exp: within rounding), the same bits on every call. Sizes around the tile and (on a GPU) above 1024 tiles, shares from
-    0.05 to 1; "ties": log-weights drawn from five values, so that equal weights straddle the threshold. The selection in one block
-    (small sets' way) or in a launch per pass."""
+    0.05 to 1; "ties": log-weights drawn from five values, so that equal weights straddle the threshold."""
     from irmcl_warp.kernels import ESTIMATE
     from irmcl_warp.kernels.estimate import SELECT_TILE, TopShareMean, select_passes, select_per_thread
     from irmcl_warp.reference.estimate import heavy_first_keys, top_share_mean
@@ -369,7 +367,6 @@ def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind, one_b
     assert select_passes(100_000) == [(0, 21, 11), (0, 10, 11), (0, 0, 10), (1, 6, 11), (1, 0, 6)]
     assert (select_per_thread(100_000), select_per_thread(1_000_000)) == (1, 8)  # ~128 blocks of 1024 threads
     monkeypatch.setattr(TopShareMean, "SELECT_PER_THREAD", int(rng.choice([1, 4])))
-    monkeypatch.setattr(TopShareMean, "ONE_BLOCK", one_block)
     span = SELECT_TILE * TopShareMean.SELECT_PER_THREAD
     sizes = [1, 2, span - 1, span + 3, int(rng.integers(3 * span, 40 * span))]
     if wp.get_device(DEVICE).is_cuda:
@@ -385,7 +382,7 @@ def test_the_selected_top_share_is_the_sorted_ones(rng, monkeypatch, kind, one_b
         )
         pw, lw = wp.array(particles, dtype=wp.vec3, device=DEVICE), wp.array(log_w, dtype=wp.float32, device=DEVICE)
         est = ESTIMATE.build("top_share", num_particles=n, share=share, device=DEVICE)
-        assert est.selects and est.one_block == one_block
+        assert est.selects
         ours = est(pw, lw)
         sums = est.sums.numpy().copy()
         top = np.zeros(n, bool)
