@@ -52,10 +52,7 @@ def pose_moments(w: float, p: wp.vec3) -> vec5:
 def mean_pose(sums: np.ndarray) -> np.ndarray:
     """[x, y, yaw] from the five pose moments (w, w x, w y, w cos, w sin)."""
     s = np.asarray(sums, np.float64)
-    if s[0] == 0.0:  # (no weight: numpy's nan, with its warning)
-        return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
-    s0, s1, s2, s3, s4 = s.tolist()  # Python floats: the same float64 bits, less host time per step
-    return np.array([s1 / s0, s2 / s0, np.arctan2(s4, s3)])
+    return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
 
 
 @wp.func

@@ -10,8 +10,6 @@ weighted mean pose (circular mean for yaw). Numpy twins: irmcl_warp/reference/re
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import warp as wp
 
@@ -358,7 +356,6 @@ class ParticleWeights:
         d = self.device
         self.keeps_cos_sin = not wp.get_device(d).is_cuda if keep_cos_sin is None else bool(keep_cos_sin)
         self.centre = wp.vec2(float(centre[0]), float(centre[1]))
-        self.centre_xy = (float(self.centre[0]), float(self.centre[1]))  # (as Python floats: ``summary``'s)
         self.w = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cdf = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cos_sin = wp.zeros(num_particles, dtype=wp.vec2, device=d)  # (cos yaw, sin yaw) per particle
@@ -463,18 +460,11 @@ class ParticleWeights:
         """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums;
         ``sums``: a copy already read back). spread = sqrt(var x + var y) of the weighted positions (m)."""
         s = (self.sums.numpy() if sums is None else np.asarray(sums)).astype(np.float64)
-        if s[5] == 0.0 or s[0] == 0.0:  # (no weight: numpy's inf and nan, with its warning)
-            total = s[5]
-            mx, my = s[1] / total, s[2] / total
-            pose = np.array([mx + self.centre_xy[0], my + self.centre_xy[1], np.arctan2(s[4], s[3])])
-            spread = np.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0))
-            return pose, total * total / s[0], float(spread)
-        # the same float64 operations on Python floats: the same bits, a few microseconds less of a GPU step's host time
-        s0, s1, s2, s3, s4, total, s6, s7 = s.tolist()
-        mx, my = s1 / total, s2 / total
-        pose = np.array([mx + self.centre_xy[0], my + self.centre_xy[1], np.arctan2(s4, s3)])
-        spread = math.sqrt(max(s6 / total - mx * mx + s7 / total - my * my, 0.0))
-        return pose, np.float64(total * total / s0), spread
+        total = s[5]
+        mx, my = s[1] / total, s[2] / total
+        pose = np.array([mx + self.centre[0], my + self.centre[1], np.arctan2(s[4], s[3])])
+        spread = np.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0))
+        return pose, total * total / s[0], float(spread)
 
 
 class Resampler:

@@ -553,37 +553,3 @@ def test_kld_count_follows_the_chi_square_quantile_and_the_levels_move_with_a_ma
     assert next_count(6250, k, 0.01, 0.99, counts) == 6250  # 2 x 3000 needs 6250: stays
     assert next_count(3125, k, 0.01, 0.99, counts) == 3125  # 3000 fits: no growth, and no shrink below it
     assert next_count(500, 10**6, 0.01, 0.99, counts) == 100_000  # capped at the most
-
-
-def test_the_host_read_back_is_numpys_bit_for_bit(rng):
-    """A step's read back on the host (``ParticleWeights.summary``, the top share's ``mean_pose``) and its seeds
-    (``wrap_int32``) are computed on Python floats and ints, for host time: the same bits as numpy's float64 arrays
-    and int64 -> int32 cast, on fresh random sums (and numpy's inf and nan where no weight was summed)."""
-    from irmcl_warp.kernels.estimate import mean_pose
-    from irmcl_warp.mcl.filter import wrap_int32
-
-    def numpy_summary(s, centre):
-        s = np.asarray(s).astype(np.float64)
-        total = s[5]
-        mx, my = s[1] / total, s[2] / total
-        pose = np.array([mx + centre[0], my + centre[1], np.arctan2(s[4], s[3])])
-        return pose, total * total / s[0], float(np.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0)))
-
-    centre = rng.uniform(-50, 50, 2)
-    weights = ParticleWeights(4, device="cpu", centre=centre)
-    for _ in range(200):
-        s = (rng.uniform(0, 1, 8) * rng.choice([1e-3, 1.0, 1e4], 8)).astype(np.float32)
-        s[[1, 2, 3, 4]] *= rng.choice([-1, 1], 4)
-        if rng.uniform() < 0.1:
-            s[[0, 5]] = 0.0
-        with np.errstate(all="ignore"):
-            got, want = weights.summary(s), numpy_summary(s, weights.centre_xy)
-            moments = s[[5, 1, 2, 3, 4]]
-            pose = np.asarray(moments, np.float64)
-            want_pose = np.array([pose[1] / pose[0], pose[2] / pose[0], np.arctan2(pose[4], pose[3])])
-            assert mean_pose(moments).tobytes() == want_pose.tobytes(), f"seed {rng.seed}"
-        assert got[0].tobytes() == want[0].tobytes() and np.float64(got[1]).tobytes() == np.float64(want[1]).tobytes()
-        assert np.float64(got[2]).tobytes() == np.float64(want[2]).tobytes(), f"seed {rng.seed}"
-    assert weights.centre_xy == (float(np.float32(centre[0])), float(np.float32(centre[1])))
-    seeds = rng.integers(-(2**62), 2**62, 500)
-    assert [wrap_int32(x) for x in seeds] == seeds.astype(np.int64).astype(np.int32, casting="unsafe").tolist()

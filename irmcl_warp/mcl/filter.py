@@ -60,24 +60,15 @@ class StepInputs:
         self._values, self._seeds = self.host_values.numpy(), self.host_seeds.numpy()  # views, made once
 
     def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
-        """Write a step's inputs into the host buffers (``send`` copies them to the device). Item by item, not through
-        small arrays: a step's host time counts in a GPU step (about a third of it at 100k particles on an H100,
-        thirty-second session)."""
+        """Write a step's inputs into the host buffers (``send`` copies them to the device)."""
         v = self._values
-        v[0], v[1], v[2] = odom_step
-        v[3] = draw
-        v[4:] = measured
-        self._seeds[0], self._seeds[1] = wrap_int32(motion_seed), wrap_int32(resample_seed)
+        v[0:3], v[3], v[4:] = odom_step, draw, measured
+        self._seeds[:] = np.array([motion_seed, resample_seed], np.int64).astype(np.int32, casting="unsafe")
 
     def send(self) -> None:
         if self.host_values is not self.values:
             wp.copy(self.values, self.host_values)
             wp.copy(self.seeds, self.host_seeds)
-
-
-def wrap_int32(x: int) -> int:
-    """x as an int32 holds it (two's complement wrap; numpy's unsafe cast of an int64)."""
-    return (int(x) + 2**31) % 2**32 - 2**31
 
 
 def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray:
