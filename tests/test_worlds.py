@@ -834,6 +834,34 @@ def test_the_lost_rules_timeout_waits_while_the_estimate_explains_the_scans():
     assert not one(0.0, 0.95, 1.0) and one(0.4, 0.95, 0.1)
 
 
+def test_the_lost_rule_reads_the_best_agreement_near_an_estimate_that_lags_its_scan(rng):
+    """worlds.lost_agreement_near_m / _rad: an estimate a fast turn left behind its scan (off by 0.1-0.25 rad and up to
+    0.15 m, drawn) agrees below lost_agreement_below, and the rule reads the best agreement within the neighbourhood,
+    which is high; a scan taken elsewhere in the box (a kidnapping) stays low; off (0), or above the threshold, the
+    agreement at the estimate is read unchanged; a NaN estimate is not searched."""
+    from irmcl_warp.mcl.worlds import LostRule
+
+    occ, origin, res = _box_map()
+    T, angles = np.array([0.1, 0.0, 0.0]), np.linspace(-2.3, 2.3, 180)
+    agree = ScanAgreement(occ, origin, res, tolerance_m=0.1, beam_step=1)
+    near = LostRule(_lost_settings(lost_agreement_below=0.4, lost_agreement_near_m=0.3, lost_agreement_near_rad=0.3))
+    off = LostRule(_lost_settings(lost_agreement_below=0.4))
+    for _ in range(5):
+        truth = np.array([rng.uniform(3.5, 6.5), rng.uniform(3.5, 6.5), rng.uniform(-np.pi, np.pi)])
+        r = _true_ranges(occ, res, truth, angles)
+        lag = truth + [rng.uniform(-0.15, 0.15), rng.uniform(-0.15, 0.15), rng.choice([-1, 1]) * rng.uniform(0.1, 0.25)]
+        at = agree(lag, r, angles, T)
+        assert at < 0.4, f"seed {rng.seed}"  # the lagging estimate's own agreement: the rule would count it low
+        assert near.seen(agree, lag, r, angles, T, at) >= 0.6, f"seed {rng.seed}"
+        assert off.seen(agree, lag, r, angles, T, at) == at
+        elsewhere = np.array([2.0, 2.0, truth[2] + np.pi / 2])  # the scan of a robot carried away
+        kidnapped = _true_ranges(occ, res, elsewhere, angles)
+        at = agree(truth, kidnapped, angles, T)
+        assert near.seen(agree, truth, kidnapped, angles, T, at) < 0.4, f"seed {rng.seed}"
+    assert near.seen(agree, truth, r, angles, T, 0.7) == 0.7  # above the threshold: not searched
+    assert near.seen(agree, np.full(3, np.nan), r, angles, T, 0.1) == 0.1
+
+
 def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger(tmp_path):
     """eval.analyses.lost_rules over a recorded kidnapped run (a synthetic trace: right until the jump at 10 s, then
     the agreement at once and the confidence slowly down): with the agreement trigger off the replay gives the events
