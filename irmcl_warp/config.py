@@ -400,7 +400,8 @@ class WorldsConfig:
     lost_agreement_near_m: float = 0.0  # > 0: an update counts as low (lost_agreement_below) only where no pose
     lost_agreement_near_rad: float = 0.0  # within +-near_m and +-near_rad of the estimate agrees at or above it: an
     # estimate a fast turn left a few degrees behind its scan is not lost (0: the agreement at the estimate alone, as
-    # runs before it; mcl/worlds.py rule_agreement)
+    # runs before it; mcl/worlds.py LostRule.seen)
+    lost_agreement_near_fit: float = 0.0  # ... and only where that best reaches this (0: lost_agreement_below)
     lost_timeout_agreement_below: Optional[float] = None  # the confidence's timeout (lost_below for lost_after_s)
     # counts only over updates whose scan agreement at the estimate (the feature agreement) is below this: an estimate
     # that explains the scans with another mode as likely is ambiguous, not lost, and a uniform re-seed would throw
@@ -630,6 +631,7 @@ RANGES = {
     "worlds.lost_agreement_updates": (1, None),
     "worlds.lost_agreement_near_m": (0, 5),
     "worlds.lost_agreement_near_rad": (0, 1),
+    "worlds.lost_agreement_near_fit": (0, 1),
     "worlds.lost_timeout_agreement_below": (0, None),
     "worlds.search_rivals_every": (0, None),
     "worlds.rival_seed_below": (0, None),

@@ -859,6 +859,15 @@ def test_the_lost_rule_reads_the_best_agreement_near_an_estimate_that_lags_its_s
         at = agree(truth, kidnapped, angles, T)
         assert near.seen(agree, truth, kidnapped, angles, T, at) < 0.4, f"seed {rng.seed}"
     assert near.seen(agree, truth, r, angles, T, 0.7) == 0.7  # above the threshold: not searched
+    strict = LostRule(
+        _lost_settings(
+            lost_agreement_below=0.4,
+            lost_agreement_near_m=0.3,
+            lost_agreement_near_rad=0.3,
+            lost_agreement_near_fit=1.01,
+        )
+    )
+    assert strict.seen(agree, lag, r, angles, T, 0.1) == 0.1  # the best near it below the bar: the estimate's own
     assert near.seen(agree, np.full(3, np.nan), r, angles, T, 0.1) == 0.1
 
 
