@@ -377,6 +377,51 @@ def test_a_robot_the_worlds_rule_declares_lost_starts_again_and_says_when(reloca
         assert pf.uniform_starts == 0 and judge.resets == 0 and np.isfinite(out[-1].pose).all()
 
 
+class _Near:
+    """A stand-in ScanAgreement for the lost rule's search near a low estimate: ``refine`` gives ``best``."""
+
+    def __init__(self, best):
+        self.best, self.asked = best, 0
+
+    def refine(self, pose, ranges_m, angles_rad, T_base_laser, step_m=0.1, step_rad=0.05):
+        self.asked += 1
+        return np.asarray(pose, float), self.best
+
+
+@pytest.mark.parametrize("best", [0.9, 0.2])
+def test_a_localizer_asks_near_a_low_estimate_before_it_counts_the_scan(best, rng):
+    """Localizer with conf/exp/worlds.yaml's rule (the search near a low estimate on): scans that agree 0.1 at the
+    estimate, the confidence high. Where a pose near it fits them (0.9, at or above lost_agreement_near_fit) the robot
+    is not lost; where none does (0.2) it is lost at the second low update, as lost_agreement_updates says. The search
+    is asked only at low updates."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
+    from irmcl_warp.config import own_map_lost_rule_settings
+    from irmcl_warp.mcl.confidence import FEATURES
+    from irmcl_warp.mcl.track import Localizer
+    from irmcl_warp.mcl.worlds import LostRule
+
+    w = own_map_lost_rule_settings()
+    assert w.lost_agreement_near_m > 0 and w.lost_agreement_updates == 2 and w.lost_agreement_near_fit == 0.8
+    m = OmegaConf.create(
+        {"update_min_trans_m": 0.2, "update_min_rot_rad": 0.5, "first_update": "motion", "reduce_to": 0}
+    )
+    pf, judge = _Counting(rng), _Scripted([0.95] * 6)
+    near = _Near(best)
+    judge.tracker = SimpleNamespace(agreement=near)
+    loc = Localizer(pf, m, judge=judge, report_pose="mode", lost_rule=LostRule(w), relocalize=False)
+    ranges = np.full(30, 3.0)
+    loc.update(0.0, ranges, [0.0, 0.0, 0.0])  # agreement 0.5: localized, nothing searched
+    assert near.asked == 0
+    judge.features[FEATURES.index("agreement")] = 0.1
+    for k in range(1, 4):
+        loc.update(0.5 * k, ranges, [0.3 * k, 0.0, 0.0])
+    assert near.asked >= 2
+    assert loc.lost_at_s == ([] if best >= w.lost_agreement_near_fit else [1.0])
+
+
 class _Places:
     """A stand-in RelocalizePlaces: how often a relocalization asked it for places."""
 

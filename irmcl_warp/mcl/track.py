@@ -155,10 +155,10 @@ class Localizer:
                 self.confidence = float(self.judge(*cloud, ranges_m, delta))
                 if self.report_mode:  # the pose the confidence judged, not a mean between two clusters
                     self.pose = self.judge.pose
-                seen = self.judge.features[AGREEMENT]
-                if getattr(self.lost_rule, "searches_near", False):  # (LostRule: the best near a low estimate)
+                seen, rule = self.judge.features[AGREEMENT], self.lost_rule
+                if getattr(rule, "searches_near", False) and seen < rule.agreement_below:  # the best near it
                     j = self.judge
-                    seen = self.lost_rule.seen(j.tracker.agreement, j.pose, ranges_m, j.angles, j.T, seen)
+                    seen = rule.seen(j.tracker.agreement, j.pose, ranges_m, j.angles, j.T, seen)
                 if self.lost_rule is not None and self.lost_rule(stamp, self.confidence, seen):
                     self.lost_at_s.append(float(stamp - self.t_start))
                     if self.relocalize:  # lost: a global start again (weighs once the robot moved)
