@@ -898,6 +898,12 @@ def test_replaying_a_recorded_run_gives_its_recorded_events_and_a_faster_trigger
     )
     recorded = replay({**trace, "lost_at_s": np.array([])}, rule_settings, agreement_rule(0.0, 1))
     assert recorded and 11.0 <= recorded[0] <= 12.5  # the confidence alone: > 1 s after the jump
+    searched = {**rule_settings, "lost_agreement_near_m": 0.3, "lost_agreement_near_rad": 0.3}
+    with pytest.warns(
+        UserWarning, match="holds no scans|hold no scans"
+    ):  # a run made with the search near the estimate
+        again = replay({**trace, "lost_at_s": np.array([])}, searched, agreement_rule(0.4, 1))
+    assert again == replay({**trace, "lost_at_s": np.array([])}, rule_settings, agreement_rule(0.4, 1))
     run = tmp_path / "run"
     run.mkdir()
     np.savez(run / "office-1-run1.npz", **trace, lost_at_s=np.array(recorded))

@@ -6,7 +6,10 @@ traces (``<world>-run<k>.npz``: the confidence and the features at every update)
 run is scored as the stage scores it (``score_run``: kidnappings detected within 2 s, false alarms per hour of right
 tracking). A replay is what the stage would have done as long as the filter was not started again: runs recorded
 with ``worlds.relocalize=false`` replay whole; in a run recorded with relocalization, only the updates before its
-first recorded lost event are replayed (``replayed_share`` says how much of the runs that was).
+first recorded lost event are replayed (``replayed_share`` says how much of the runs that was). The traces hold the
+scan's agreement at the estimate, not the scans: a replay cannot search near a low estimate
+(``worlds.lost_agreement_near_m``), so it reads the agreement at the estimate, and says so where a run was recorded
+with the search on (its replay may count events the run did not have).
 
 ``--amcl SLOW:FAST``: AMCL's w_slow / w_fast recovery read as a detector (``AmclRule``), at each ``--amcl-above``
 threshold, side by side; the threshold the rule below keeps is printed and recorded (``chosen_amcl``).
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from pathlib import Path
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -85,9 +89,14 @@ def agreement_rule(agreement_below: float, updates: int, timeout_below=AS_RECORD
 
     def make(w):
         gate = {} if timeout_below == AS_RECORDED else {"lost_timeout_agreement_below": timeout_below}
-        rule = LostRule(
-            SimpleNamespace(**{**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates, **gate})
-        )
+        if float(w.get("lost_agreement_near_m", 0.0) or 0.0) > 0:
+            warnings.warn(
+                "eval.analyses.lost_rules: a run was recorded with worlds.lost_agreement_near_m > 0; its traces hold no "
+                "scans, so the replay reads the agreement at the estimate without the search near it",
+                stacklevel=2,
+            )
+        settings = {**w, "lost_agreement_below": agreement_below, "lost_agreement_updates": updates, **gate}
+        rule = LostRule(SimpleNamespace(**{**settings, "lost_agreement_near_m": 0.0}))
         return lambda t, p, agreement, _mean: rule(t, p, agreement)
 
     name = "confidence" if agreement_below == 0 else f"agreement < {agreement_below:g} x {updates}"

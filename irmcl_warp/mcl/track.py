@@ -159,7 +159,7 @@ class Localizer:
                 if getattr(rule, "searches_near", False) and seen < rule.agreement_below:  # the best near it
                     j = self.judge
                     seen = rule.seen(j.tracker.agreement, j.pose, ranges_m, j.angles, j.T, seen)
-                if self.lost_rule is not None and self.lost_rule(stamp, self.confidence, seen):
+                if rule is not None and rule(stamp, self.confidence, seen):
                     self.lost_at_s.append(float(stamp - self.t_start))
                     if self.relocalize:  # lost: a global start again (weighs once the robot moved)
                         if self.places is not None:
