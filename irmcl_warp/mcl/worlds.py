@@ -308,7 +308,9 @@ class LostRule:
         kidnapped robot's scan fits nowhere near the old estimate. Searched only where the agreement is low; the best
         counts only where it reaches ``lost_agreement_near_fit`` (0: ``lost_agreement_below``), since the best of 250
         poses reaches a bar more easily than one pose does (on the kidnapped tuning floors, 0.4 delayed 8 detections
-        by an update and missed 3: a corridor's scan fits near any corridor pose)."""
+        by an update and missed 3: a corridor's scan fits near any corridor pose). The two grids can miss a best pose
+        that lies between the coarse grid's points: in a simulated box, 3-5 of 60 estimates lagging 0.1-0.25 rad and
+        up to 0.15 m stayed below 0.6 (a denser search is not measured yet)."""
         if not self.searches_near or not at_estimate < self.agreement_below:
             return at_estimate
         if not np.all(np.isfinite(pose)):
