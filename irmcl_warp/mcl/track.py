@@ -156,7 +156,7 @@ class Localizer:
                 if self.report_mode:  # the pose the confidence judged, not a mean between two clusters
                     self.pose = self.judge.pose
                 seen, rule = self.judge.features[AGREEMENT], self.lost_rule
-                if getattr(rule, "searches_near", False) and seen < rule.agreement_below:  # the best near it
+                if hasattr(rule, "searches_near") and rule.searches_near(seen):  # (LostRule: the best near it)
                     j = self.judge
                     seen = rule.seen(j.tracker.agreement, j.pose, ranges_m, j.angles, j.T, seen)
                 if rule is not None and rule(stamp, self.confidence, seen):

@@ -292,11 +292,10 @@ class LostRule:
         self.near_fit = float(getattr(w, "lost_agreement_near_fit", 0.0) or 0.0) or self.agreement_below
         self.reset()
 
-    @property
-    def searches_near(self) -> bool:
-        """Whether ``seen`` searches near a low estimate (``worlds.lost_agreement_near_m`` > 0 with the agreement
-        trigger on)."""
-        return self.near_m > 0 and self.agreement_below > 0
+    def searches_near(self, at_estimate: float) -> bool:
+        """Whether ``seen`` searches near an estimate whose scan agreed ``at_estimate`` (``worlds.lost_agreement_near_m``
+        > 0, the agreement trigger on, and the agreement below it)."""
+        return self.near_m > 0 and 0 < self.agreement_below and at_estimate < self.agreement_below
 
     def seen(self, agreement: ScanAgreement, pose, ranges_m, angles_rad, T_base_laser, at_estimate: float) -> float:
         """The scan agreement the rule reads at an update: ``at_estimate`` (the feature's, at the heaviest mode ``pose``),
@@ -311,9 +310,7 @@ class LostRule:
         by an update and missed 3: a corridor's scan fits near any corridor pose). The two grids can miss a best pose
         that lies between the coarse grid's points: in a simulated box, 3-5 of 60 estimates lagging 0.1-0.25 rad and
         up to 0.15 m stayed below 0.6 (a denser search is not measured yet)."""
-        if not self.searches_near or not at_estimate < self.agreement_below:
-            return at_estimate
-        if not np.all(np.isfinite(pose)):
+        if not self.searches_near(at_estimate) or not np.all(np.isfinite(pose)):
             return at_estimate
         scan = (ranges_m, angles_rad, T_base_laser)
         coarse, _ = agreement.refine(pose, *scan, step_m=self.near_m / 2, step_rad=self.near_rad / 2)
