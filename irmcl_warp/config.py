@@ -45,6 +45,7 @@ class DataConfig:
     max_speed_mps: float = 3.0  # odometry faster than this between scans is reported as a jump
     max_step_m: float = 2.0
     repair_reversing: bool = False  # bags: drive backwards the odometry steps whose velocity is negative (fr079)
+    scan_time_offset_s: float = 0.0  # bags: a scan's odometry is read at its stamp plus this (a scan stamped late: < 0)
     far_m: Optional[float] = (
         None  # the sensor's far bound for every stage (rendering, MCL, SLAM); None = floor(range_max)
     )

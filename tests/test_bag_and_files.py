@@ -93,3 +93,20 @@ def test_g2o_reader(tmp_path):
     graph = read_g2o(g)
     np.testing.assert_array_equal(graph.vertex_ids, [0, 1])
     assert graph.edges.shape == (1, 5) and graph.laser_stamps.tolist() == [12.25]
+
+
+def test_a_bag_scan_s_odometry_is_read_at_its_stamp_plus_the_offset(sim_bag, rng):
+    """data.scan_time_offset_s on a bag: the odometry messages interpolated at each scan's stamp plus the offset
+    (the simulator's bag holds one message per scan, at its stamp), the first scans clamped and counted."""
+    from irmcl_warp.geometry import interpolate_poses, wrap_angle
+    from irmcl_warp.io import LogDefectWarning
+
+    path, _ = sim_bag
+    plain = read_bag(path)
+    offset = float(rng.uniform(-0.3, -0.02))
+    with pytest.warns(LogDefectWarning, match="before the first or after the last odometry; clamped"):
+        shifted = read_bag(path, scan_time_offset_s=offset)
+    want = interpolate_poses(plain.stamps, plain.odom, plain.stamps + offset)
+    np.testing.assert_allclose(shifted.odom[:, :2], want[:, :2], atol=1e-6)
+    np.testing.assert_allclose(wrap_angle(shifted.odom[:, 2] - want[:, 2]), 0.0, atol=1e-6)
+    assert np.abs(shifted.odom - plain.odom).max() > 1e-3  # (the offset moved them)

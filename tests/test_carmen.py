@@ -176,3 +176,18 @@ def test_a_file_of_another_format_is_called_not_a_carmen_log(tmp_path):
     broken.write_text("ODOM 0 0 0 0 0 0 1.0 host 1.0\n0.5 0.6\n")
     with pytest.raises(LogFormatError, match=r"broken.log, line 2: .*a line broken in two\?"):
         read_carmen(broken)
+
+
+def test_a_scan_s_odometry_is_read_at_its_stamp_plus_the_offset(tmp_path, rng):
+    """data.scan_time_offset_s: between the scan lines' own poses (x = 0.5 m/s times t here), the ends clamped and
+    counted; a log whose scans go back in time is refused for it, naming the setting."""
+    offset = float(rng.uniform(-0.19, -0.01))
+    p = _write(tmp_path, small_log(6))
+    with pytest.warns(LogDefectWarning, match="falls outside the log; clamped"):
+        log = read_carmen(p, scan_time_offset_s=offset)
+    want = np.maximum(0.0, 0.5 * (0.2 * np.arange(6) + offset))
+    np.testing.assert_allclose(log.odom[:, 0], want, atol=1e-9)
+    np.testing.assert_allclose(read_carmen(p).odom[:, 0], 0.1 * np.arange(6), atol=1e-12)  # no offset: the lines
+    backwards = _write(tmp_path, small_log(4, stamps=[100.0, 100.2, 100.1, 100.4]), "back.clf")
+    with pytest.raises(LogFormatError, match=r"data\.scan_time_offset_s=.* 1 scans are stamped before"):
+        read_carmen(backwards, scan_time_offset_s=offset)

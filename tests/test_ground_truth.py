@@ -266,3 +266,46 @@ def test_real_corrected_logs_clock_offsets_are_found(data_dir):
     # csail's corrected log prints its stamps to 6 digits: 404 poses share a stamp with another pose
     with pytest.raises(LogFormatError, match=r"csail-corrected.log.gz, line \d+: stamp .* with another pose"):
         read_carmen_poses(data_dir / "corrected/csail-corrected.log.gz")
+
+
+def late_scans(rng, lag_s: float, n: int = 2000):
+    """(scan stamps, the odometry a reader gives each scan, the poses where the scans were taken) of a drive whose
+    scans are stamped ``lag_s`` after they were taken (the odometry's clock is right); heading noise on the odometry."""
+    stamps = 5000.0 + 0.2 * np.arange(n) + rng.uniform(-0.01, 0.01, n)
+    both = np.concatenate([stamps, stamps - lag_s])
+    order = np.argsort(both, kind="stable")
+    poses = np.empty((2 * n, 3))
+    poses[order] = drive(both[order])  # one integration grid for both: the same drive
+    odom, taken = poses[:n].copy(), poses[n:]
+    odom[:, 2] += np.cumsum(rng.normal(0, 0.002, n))
+    return stamps, odom, taken
+
+
+def test_scans_stamped_late_against_the_odometry_are_named_with_the_setting(tmp_path, rng):
+    """Keyframe poses stamped as the scans, where each scan was taken, turn as the odometry did ``lag`` earlier:
+    the reader's odometry belongs to another moment. The warning names the log, the file and the setting."""
+    lag = float(rng.uniform(0.08, 0.25))
+    stamps, odom, taken = late_scans(rng, lag)
+    path = tmp_path / "slam.tum"
+    write_tum(path, stamps[::4], taken[::4])  # keyframes: every fourth scan, stamped as it
+    log = make_log(stamps, odom)
+    with pytest.warns(LogDefectWarning, match=r"robot\.bag \(ground truth .*slam\.tum\): .*stamped 0\.\d+ s late") as w:
+        m = apply_ground_truth(log, path, gt_config())
+    assert m.mode == "keyframes" and m.share == 1.0
+    said = [str(x.message) for x in w if "scan_time_offset_s" in str(x.message)]
+    value = float(said[0].rsplit("data.scan_time_offset_s=", 1)[1])
+    assert abs(value + lag) < 0.03, (value, lag, rng.seed)  # 40 draws: median 7 ms, worst 19 ms
+    # the odometry read at the stamps plus that: nothing more is said
+    shifted = make_log(stamps, interpolate_poses(stamps, odom, stamps + value))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LogDefectWarning)
+        apply_ground_truth(shifted, path, gt_config(scan_time_offset_s=value))
+
+
+def test_scans_stamped_in_time_are_not_said_to_be_late(tmp_path, rng):
+    stamps, odom, taken = late_scans(rng, float(rng.uniform(-0.01, 0.01)))
+    path = tmp_path / "slam.tum"
+    write_tum(path, stamps[::4], taken[::4])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LogDefectWarning)
+        assert apply_ground_truth(make_log(stamps, odom), path, gt_config()).share == 1.0

@@ -77,6 +77,8 @@ def score_run(run: Path, ref_stamps: np.ndarray, ref: np.ndarray) -> dict:
         "global_candidates": OmegaConf.select(cfg, "mcl.global_candidates") or 1,  # (runs before the setting: 1)
         # the pose reported at each update: the judged mode's, or the filter's estimate (runs before the setting)
         "report_pose": OmegaConf.select(cfg, "localize.report_pose") or "filter",
+        # each scan's odometry read this long after its stamp (data.scan_time_offset_s; runs before the setting: 0)
+        "scan_time_offset_s": float(OmegaConf.select(cfg, "data.scan_time_offset_s") or 0.0),
         "device": manifest.get("device"),
         "wall_time_s": manifest.get("wall_time_s"),
         "scans": int(len(stamps)),

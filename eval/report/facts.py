@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+
 from eval.results.queries import converged, median_span, released_errors, slam_errors, slam_variant
 from eval.results.records import RESULTS, checks, find
 
@@ -308,9 +310,46 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
             out[f"reference_fit_{name}_auroc_at_{round(10 * t):02d}"] = (
                 "-" if row["auroc"] is None else f"{row['auroc']:.3f}"
             )
+    out.update(_scan_lag("mit_csail"))
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
+    return out
+
+
+def _scan_lag(log: str) -> dict[str, str]:
+    """The check study ``scan_lag_<log>``: the same runs with each scan's odometry read at its stamp and at its
+    stamp plus the lag the ground truth names (``data.scan_time_offset_s``): GMapping's relations error and the
+    localizer's heading and position against the ground truth's keyframes, each a median [min-max] over seeds,
+    with the Mann-Whitney p of the two sets."""
+    from eval.results.claims import mann_whitney
+
+    runs = checks(f"scan_lag_{log}")
+    lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
+    if len(lags) != 2 or 0.0 not in lags:
+        return {}
+    lag = [x for x in lags if x != 0.0][0]
+    out = {f"scan_lag_{log}_s": f"{-lag:.3f} s"}
+    measures = (
+        ("slam", "rot", lambda r: r["relations"]["rot_abs_mean_deg"], "{:.2f} deg"),
+        ("slam", "trans", lambda r: r["relations"]["trans_abs_mean_m"], "{:.3f} m"),
+        ("localize", "yaw", lambda r: r["aligned_to_ground_truth"]["yaw_mae_deg"], "{:.2f} deg"),
+        ("localize", "ate", lambda r: r["aligned_to_ground_truth"]["ate_rmse_m"], "{:.3f} m"),
+    )
+    for stage, name, value, fmt in measures:
+        sets = [
+            [value(r) for r in runs if r.stage == stage and r.setting("data.scan_time_offset_s", 0.0) == x]
+            for x in (lag, 0.0)
+        ]
+        if not all(sets):
+            continue
+        spans = [
+            f"{fmt.format(float(np.median(v)))} [{fmt.format(min(v)).split()[0]}-{fmt.format(max(v))}]" for v in sets
+        ]
+        out[f"scan_lag_{log}_{stage}_{name}"] = (
+            f"{spans[0]} against {spans[1]} over {len(sets[0])} and {len(sets[1])} seeds "
+            f"(Mann-Whitney p = {mann_whitney(*sets):.2g})"
+        )
     return out
 
 

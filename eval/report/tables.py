@@ -512,6 +512,7 @@ def own_slam_map_table(records: list) -> str:
             r["runs"][0].get("global_candidates") or 1,
             r["runs"][0].get("report_pose") or "filter",
             bool(r["runs"][0].get("relocalize")),
+            r["runs"][0].get("scan_time_offset_s") or 0.0,
         ),
     ):
         runs = rec["runs"]
@@ -520,6 +521,8 @@ def own_slam_map_table(records: list) -> str:
         weighting = first["weighting"].replace("_", " ") + (f", start from {k}x candidates" if k > 1 else "")
         if first.get("report_pose") == "mode":  # (records before the setting reported the filter's estimate)
             weighting += ", the judged mode's pose"
+        if first.get("scan_time_offset_s"):  # (records before the setting: read at the stamps)
+            weighting += f", each scan's odometry read {first['scan_time_offset_s']:+.3f} s from its stamp"
         if first.get("relocalize"):
             weighting += ", re-seeded when lost"
             rule = first.get("lost_rule") or {}  # (records before it: the rule of the session before, unnamed)

@@ -7,8 +7,8 @@ ground-truth poses by stamp, and the laser extrinsic from a bag when the log has
 from __future__ import annotations
 
 import copy
-
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +16,7 @@ import numpy as np
 
 from irmcl_warp.geometry import compose, interpolate_se2, relative
 from irmcl_warp.io.carmen import read_carmen, read_carmen_poses
-from irmcl_warp.io.clock import estimate_clock_offset
+from irmcl_warp.io.clock import estimate_clock_offset, scan_lag_note
 from irmcl_warp.io.errors import LogDefectWarning, LogFormatError
 from irmcl_warp.io.plausibility import check_beam_order
 from irmcl_warp.io.groundtruth import read_g2o, read_matched_csv, read_relations, read_splits, read_tum, write_tum
@@ -215,6 +215,10 @@ def apply_ground_truth(log: LaserLog, path, d) -> GroundTruthMatch:
         fill=d.get("ground_truth_fill", "none"),
     )
     check_ground_truth(path, log, stamps, poses, match, offset is not None)
+    if match.mode.startswith("keyframes") and not offset:  # poses stamped as the scans: does the odometry agree?
+        note = scan_lag_note(log.stamps, log.odom, stamps, poses, float(d.get("scan_time_offset_s") or 0.0))
+        if note:
+            warnings.warn(f"{log.source or 'the log'} (ground truth {path}): {note}", LogDefectWarning, stacklevel=2)
     return match
 
 
@@ -263,6 +267,7 @@ def read_log(cfg) -> LaserLog:
             beam_policy=d.beam_policy,
             max_speed_mps=d.max_speed_mps,
             max_step_m=d.max_step_m,
+            scan_time_offset_s=d.scan_time_offset_s,
         )
     elif d.format == "bag":
         log = read_bag(
@@ -275,6 +280,7 @@ def read_log(cfg) -> LaserLog:
             max_speed_mps=d.max_speed_mps,
             max_step_m=d.max_step_m,
             repair_reversing=d.repair_reversing,
+            scan_time_offset_s=d.scan_time_offset_s,
         )
     else:
         raise ValueError(f"data.format={d.format!r}: expected sim, carmen or bag")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.geometry import compose, inverse
+from irmcl_warp.geometry import compose, interpolate_poses, inverse
 from irmcl_warp.io.beams import BeamPolicy, check_geometry, harmonise_beams, mask_ranges
 from irmcl_warp.io.defects import count_stamps_backwards, count_velocity_contradictions, scan_defects
 from irmcl_warp.io.errors import LogFormatError, check_pose_stamps, warn_defects
@@ -213,8 +213,10 @@ def read_carmen(
     beam_policy: BeamPolicy = "error",
     max_speed_mps: float = 3.0,
     max_step_m: float = 2.0,
+    scan_time_offset_s: float = 0.0,
 ) -> LaserLog:
-    """Read a CARMEN log into a :class:`LaserLog` (scans in file order, odometry from each scan line)."""
+    """Read a CARMEN log into a :class:`LaserLog` (scans in file order, odometry from each scan line; with
+    ``scan_time_offset_s``, each scan's odometry read at its stamp plus that, between the scan lines' own poses)."""
     path = Path(path)
     c = parse_carmen(path)
     if not c.scans:
@@ -232,6 +234,8 @@ def read_carmen(
     )
     stamps = np.array([s.stamp for s in scans])
     odom = np.array([s.odom for s in scans])
+    if scan_time_offset_s:
+        odom = _odometry_shifted(path, stamps, odom, float(scan_time_offset_s), report)
     # the extrinsic is what separates the laser pose from the robot pose on the same line
     T_base_laser = compose(inverse(np.array(first.odom)), np.array(first.laser_pose))
     if np.hypot(*T_base_laser[:2]) > 2.0:  # fields hold different frames (corrected vs raw), not an extrinsic
@@ -266,6 +270,26 @@ def _geometry(path, scan: _Scan, fov_rad):
         return check_geometry(path, where, n, start, fov / max(n - 1, 1))
     range_max = 1.0 if scan.range_max == 0 else scan.range_max  # 0: "not recorded" in some converters
     return check_geometry(path, where, n, scan.start_angle, scan.fov / max(n - 1, 1), 0.0, range_max)
+
+
+def _odometry_shifted(path, stamps, odom, offset_s: float, report: DefectReport) -> np.ndarray:
+    """The scans' odometry read ``offset_s`` after their stamps: interpolated between the scan lines' own poses
+    (which sample the odometry at every scan), the first and last clamped (counted). Needs the scans in stamp order."""
+    backwards = int(np.sum(np.diff(stamps) < 0))
+    if backwards:
+        raise LogFormatError(
+            path,
+            None,
+            f"data.scan_time_offset_s={offset_s:g} reads each scan's odometry at another moment, between the scan "
+            f"lines' poses, which needs them in stamp order; {backwards} scans are stamped before the one before",
+        )
+    shifted = stamps + offset_s
+    report.add(
+        "scans_shifted_outside_odometry",
+        int(np.sum((shifted < stamps[0]) | (shifted > stamps[-1]))),
+        f"scans whose odometry, read {offset_s:+g} s from their stamps, falls outside the log; clamped",
+    )
+    return interpolate_poses(stamps, odom, shifted)
 
 
 def read_carmen_poses(path) -> tuple[np.ndarray, np.ndarray]:

@@ -23,6 +23,7 @@ class ClockOffset:
     compared: int  # ground-truth steps compared at that offset
     contrast: float  # the error over steps of ten scan periods, over its median at offsets 5 to 60 s away: small
     #                  when the turns line up
+    yaw_increment_error_at_zero_deg: float = float("nan")  # the same median with the stamps as they are
 
     @property
     def convincing(self) -> bool:
@@ -92,7 +93,37 @@ def estimate_clock_offset(log_stamps, log_odom, gt_stamps, gt_poses, min_overlap
     away = [_increment_error(lt, yaw_log, c_t, c_yaw, best[2] + d) for d in (-60, -30, -10, -5, 5, 10, 30, 60)]
     away = [e for e, m in away if m >= 10]
     contrast = here / float(np.median(away)) if away and np.median(away) > 0 else 1.0
-    return ClockOffset(float(best[2]), float(best[0]), int(best[1]), float(contrast))
+    at_zero, _ = _increment_error(lt, yaw_log, g_t, g_yaw, 0.0)
+    return ClockOffset(float(best[2]), float(best[0]), int(best[1]), float(contrast), float(at_zero))
+
+
+SCAN_LAG_MIN_S = 0.02  # a lag below this is not reported (a 100 deg/s turn moves 2 deg in it)
+SCAN_LAG_MIN_GAIN = 0.9  # ... nor one that lowers the yaw increments' error by less than 10 %
+
+
+def scan_lag_note(log_stamps, log_odom, pose_stamps, poses, applied_s: float = 0.0) -> str | None:
+    """Poses stamped as the scans (matched to them by stamp: each is where its scan was taken) that turn like the
+    odometry at another time say that the scans' stamps and the odometry's clock differ: the odometry a reader
+    gives each scan then belongs to another moment, and every turn puts the scan's heading off by the turn rate times
+    the lag (mit-csail's bag and CARMEN log, fr079's: the scans read ~0.13 s late, 13 deg at 100 deg/s). Returns a
+    sentence naming the lag and the setting that removes it (``data.scan_time_offset_s``, ``applied_s`` being the one
+    already applied), or None when the turns line up at the stamps (within SCAN_LAG_MIN_S, or the shift gains less
+    than SCAN_LAG_MIN_GAIN) or no lag lines them up convincingly."""
+    if len(pose_stamps) < 3 or len(log_stamps) < 3:
+        return None
+    c = estimate_clock_offset(log_stamps, log_odom, pose_stamps, poses)
+    if not c.convincing or abs(c.offset_s) < SCAN_LAG_MIN_S:
+        return None
+    if not c.yaw_increment_error_deg < SCAN_LAG_MIN_GAIN * c.yaw_increment_error_at_zero_deg:
+        return None
+    late = "late" if c.offset_s < 0 else "early"
+    return (
+        f"the poses stamped as its scans turn as its odometry did {abs(c.offset_s):.3f} s "
+        f"{'earlier' if c.offset_s < 0 else 'later'}: the scans appear stamped {abs(c.offset_s):.3f} s {late} "
+        f"against the odometry's clock (yaw steps agree with the odometry to {c.yaw_increment_error_deg:.2f} deg "
+        f"there, {c.yaw_increment_error_at_zero_deg:.2f} deg at the stamps), so each scan's odometry is read at "
+        f"another moment and turns put its heading off; set data.scan_time_offset_s={applied_s + c.offset_s:.3f}"
+    )
 
 
 def _thinned(stamps, yaw, min_step: float):

@@ -278,6 +278,7 @@ def read_bag(
     max_speed_mps: float = 3.0,
     max_step_m: float = 2.0,
     repair_reversing: bool = False,
+    scan_time_offset_s: float = 0.0,
 ) -> LaserLog:
     """``repair_reversing``: drive backwards the odometry steps whose messages report a negative forward
     velocity (io.defects.repair_reversing); the repair is counted in the log's defects."""
@@ -333,7 +334,7 @@ def read_bag(
     stamps = np.array([r[0] for r in scans])
     laser_frame = first[7].lstrip("/")
     T_base_laser, base = _extrinsic(s.tf_static, laser_frame, base_frame, report)
-    odom = _odometry_at(path, s, stamps, base, odom_frame, report, repair_reversing)
+    odom = _odometry_at(path, s, stamps + float(scan_time_offset_s), base, odom_frame, report, repair_reversing)
     scan_defects(report, stamps, odom, max_speed_mps=max_speed_mps, max_step_m=max_step_m)
     warn_defects(path, report)
     truth = None
