@@ -4,6 +4,7 @@ simulator against its exact ground truth."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -259,6 +260,7 @@ def test_slam_on_the_simulator_beats_odometry(tmp_path, monkeypatch):
     assert m["processed_scans"] > 20
     assert m["trajectory"]["ate_rmse_m"] < 0.1, m["trajectory"]
     assert m["trajectory"]["ate_rmse_m"] < 0.25 * m["trajectory_odometry"]["ate_rmse_m"], m
+    assert m["scan_lag"]["warned"] is False, m["scan_lag"]  # the simulator's scans and odometry share a clock
     rows = np.loadtxt(out / "trajectory.tum")
     assert rows.shape == (300, 8)
     for f in ("map.pgm", "map.yaml", "map.png", "neff.csv", "config.yaml", "manifest.json"):
@@ -713,3 +715,32 @@ def test_slam_maps_that_cannot_fit_are_refused_before_the_first_scan(tmp_path, m
     assert not started
     res = float(re.search(r"slam.resolution_m=([\d.]+)", str(refused.value))[1])
     assert stage.maps_memory(log, log.odom, 20.0, res, 30)[0] < 0.9 * (box // 2)
+
+
+def test_slam_names_scans_stamped_late_from_its_own_matched_poses(rng):
+    """A log without ground truth: the processed scans' matched poses stand in for it (slam/stage.py scan_lag). Poses
+    where the scans were taken, odometry read at stamps ``lag`` late: warned, naming the log and the setting; with
+    the offset applied, the odometry agrees and nothing is said."""
+    from tests.test_ground_truth import late_scans
+
+    from irmcl_warp.geometry import interpolate_poses
+    from irmcl_warp.io import LogDefectWarning
+    from irmcl_warp.slam.stage import scan_lag
+    from irmcl_warp.types import LaserInfo, LaserLog
+
+    lag = float(rng.uniform(0.08, 0.25))
+    stamps, odom, taken = late_scans(rng, lag)
+    processed = np.sort(rng.choice(len(stamps), 400, replace=False))  # GMapping processes some scans only
+    cfg = OmegaConf.create({"data": {"name": "user", "path": "/logs/robot.bag", "scan_time_offset_s": 0.0}})
+    log = LaserLog(stamps, np.ones((len(stamps), 4), np.float32), odom, LaserInfo(4, -1.0, 0.5, 0.0, 10.0, 10.0))
+    with pytest.warns(
+        LogDefectWarning, match=r"/logs/robot\.bag: GMapping's matched poses .*scan_time_offset_s=-0\."
+    ) as w:
+        got = scan_lag(cfg, log, processed, taken[processed])
+    assert got["warned"] and abs(got["offset_s"] + lag) < 0.03, (got, lag, rng.seed)
+    said = float(str(w[0].message).rsplit("=", 1)[1])
+    cfg.data.scan_time_offset_s = said
+    log.odom = interpolate_poses(stamps, odom, stamps + said)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LogDefectWarning)
+        assert not scan_lag(cfg, log, processed, taken[processed])["warned"]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,8 @@ from omegaconf import OmegaConf
 from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io import read_relations, resolve, write_tum
 from irmcl_warp.io.carmen import gfs_flaser_angles
+from irmcl_warp.io.clock import SCAN_LAG_MAX_S, estimate_clock_offset, scan_lag_note
+from irmcl_warp.io.errors import LogDefectWarning
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
 from irmcl_warp.io.groundtruth import g2o_scan_stamps, read_g2o
@@ -170,6 +173,35 @@ def run_slam(cfg) -> Path:
         return run.path if run.done else map_log(run)
 
 
+def scan_lag(cfg, log, scans: np.ndarray, poses: np.ndarray) -> dict:
+    """Do the processed scans' matched poses turn as the odometry does at their stamps? (io/clock.py: a lag says
+    the scans' stamps and the odometry's clock disagree; the same check as on ground truth, here for a log that has
+    none.) Warns naming the log and ``data.scan_time_offset_s``; returns what metrics.json keeps."""
+    applied = float(cfg.data.get("scan_time_offset_s") or 0.0)
+    if len(scans) < 3:
+        return {"compared": 0}
+    stamps = np.asarray(log.stamps, float)[scans]
+    c = estimate_clock_offset(log.stamps, log.odom, stamps, poses, max_offset_s=SCAN_LAG_MAX_S)
+    note = scan_lag_note(log.stamps, log.odom, stamps, poses, applied)
+    if note:
+        try:
+            where = resolve(cfg.data.path) if cfg.data.path else cfg.data.name
+        except FileNotFoundError:  # (a log given as arrays: its path as configured)
+            where = cfg.data.path
+        warnings.warn(
+            f"{where}: GMapping's matched poses of its processed scans: {note}", LogDefectWarning, stacklevel=2
+        )
+    return {
+        "offset_s": c.offset_s,
+        "yaw_increment_error_deg": c.yaw_increment_error_deg,
+        "yaw_increment_error_at_zero_deg": c.yaw_increment_error_at_zero_deg,
+        "contrast": c.contrast,
+        "compared": c.compared,
+        "applied_s": applied,
+        "warned": bool(note),
+    }
+
+
 def map_log(run: runs.Run) -> Path:
     cfg, out = run.cfg, run.dir
     device = pick_device(cfg.device)
@@ -208,6 +240,7 @@ def map_log(run: runs.Run) -> Path:
         ("scan,neff,resampled,match_rounds\n" + "".join(f"{k},{n:.4f},{r},{m}\n" for k, n, r, m in neff_rows)).encode(),
     )
     save_map(best_map(rbpf, best, log), out / "map")
+    lag = scan_lag(cfg, log, np.asarray(scans), poses)
     metrics = {
         "dataset": cfg.data.name,
         "particles": s.num_particles,
@@ -225,6 +258,7 @@ def map_log(run: runs.Run) -> Path:
         "time_s": dict(rbpf.timing),
         "ms_per_processed_scan": {k: 1e3 * v / max(len(scans) - 1, 1) for k, v in rbpf.timing.items()},
         "settings": OmegaConf.to_container(s),
+        "scan_lag": lag,
     }
     if cfg.data.relations_path:
         try:
