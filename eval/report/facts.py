@@ -311,6 +311,7 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
                 "-" if row["auroc"] is None else f"{row['auroc']:.3f}"
             )
     out.update(_scan_lag("mit_csail"))
+    out.update(_scan_lag("fr079"))
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
@@ -318,11 +319,13 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
 
 
 def _scan_lag(log: str) -> dict[str, str]:
-    """The check study ``scan_lag_<log>``: the same runs with each scan's odometry read at its stamp and at its
-    stamp plus the lag the ground truth names (``data.scan_time_offset_s``): GMapping's relations error and the
-    localizer's heading and position against the ground truth's keyframes, each a median [min-max] over seeds,
-    with the Mann-Whitney p of the two sets."""
-    from eval.results.claims import mann_whitney
+    """The check study ``scan_lag_<log>``: GMapping (30 seeds) and the localizer in its own SLAM map (10 seeds), each
+    scan's odometry read at its stamp and at its stamp plus the lag the ground truth names (``data.scan_time_offset_s``).
+    SLAM: the seeds that converged (relations error below CONVERGED_M; Fisher's exact test) and, over them, the
+    relations error; the localizer: its heading and position against the ground truth's keyframes. Each a median
+    [min-max], the lag's first, with the Mann-Whitney p of the two sets."""
+    from eval.results.claims import fisher, mann_whitney
+    from eval.results.queries import CONVERGED_M
 
     runs = checks(f"scan_lag_{log}")
     lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
@@ -330,22 +333,29 @@ def _scan_lag(log: str) -> dict[str, str]:
         return {}
     lag = [x for x in lags if x != 0.0][0]
     out = {f"scan_lag_{log}_s": f"{-lag:.3f} s"}
+
+    def of(stage, x):
+        return [r for r in runs if r.stage == stage and r.setting("data.scan_time_offset_s", 0.0) == x]
+
+    slam = [of("slam", x) for x in (lag, 0.0)]
+    if all(slam):
+        ok = [[r for r in s if r["relations"]["trans_abs_mean_m"] < CONVERGED_M] for s in slam]
+        (ka, na), (kb, nb) = ((len(k), len(s)) for k, s in zip(ok, slam))
+        out[f"scan_lag_{log}_slam_converged"] = (
+            f"{ka}/{na} against {kb}/{nb} (Fisher's exact p = {fisher(ka, na, kb, nb):.2g})"
+        )
+        slam = ok
     measures = (
-        ("slam", "rot", lambda r: r["relations"]["rot_abs_mean_deg"], "{:.2f} deg"),
-        ("slam", "trans", lambda r: r["relations"]["trans_abs_mean_m"], "{:.3f} m"),
-        ("localize", "yaw", lambda r: r["aligned_to_ground_truth"]["yaw_mae_deg"], "{:.2f} deg"),
-        ("localize", "ate", lambda r: r["aligned_to_ground_truth"]["ate_rmse_m"], "{:.3f} m"),
+        ("slam", "rot", lambda r: r["relations"]["rot_abs_mean_deg"], "{:.2f}", "deg"),
+        ("slam", "trans", lambda r: r["relations"]["trans_abs_mean_m"], "{:.3f}", "m"),
+        ("localize", "yaw", lambda r: r["aligned_to_ground_truth"]["yaw_mae_deg"], "{:.2f}", "deg"),
+        ("localize", "ate", lambda r: r["aligned_to_ground_truth"]["ate_rmse_m"], "{:.3f}", "m"),
     )
-    for stage, name, value, fmt in measures:
-        sets = [
-            [value(r) for r in runs if r.stage == stage and r.setting("data.scan_time_offset_s", 0.0) == x]
-            for x in (lag, 0.0)
-        ]
+    for stage, name, value, fmt, unit in measures:
+        sets = [[value(r) for r in s] for s in (slam if stage == "slam" else [of(stage, x) for x in (lag, 0.0)])]
         if not all(sets):
             continue
-        spans = [
-            f"{fmt.format(float(np.median(v)))} [{fmt.format(min(v)).split()[0]}-{fmt.format(max(v))}]" for v in sets
-        ]
+        spans = [f"{fmt.format(np.median(v))} [{fmt.format(min(v))}-{fmt.format(max(v))}] {unit}" for v in sets]
         out[f"scan_lag_{log}_{stage}_{name}"] = (
             f"{spans[0]} against {spans[1]} over {len(sets[0])} and {len(sets[1])} seeds "
             f"(Mann-Whitney p = {mann_whitney(*sets):.2g})"
