@@ -312,6 +312,7 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
             )
     out.update(_scan_lag("mit_csail"))
     out.update(_scan_lag("fr079"))
+    out.update(_scan_lag("mit_killian"))
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
