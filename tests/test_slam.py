@@ -737,7 +737,7 @@ def test_slam_names_scans_stamped_late_from_its_own_matched_poses(rng):
         LogDefectWarning, match=r"/logs/robot\.bag: GMapping's matched poses .*scan_time_offset_s=-0\."
     ) as w:
         got = scan_lag(cfg, log, processed, taken[processed])
-    assert got["warned"] and abs(got["offset_s"] + lag) < 0.03, (got, lag, rng.seed)
+    assert got["warned"] and abs(got["lag_s"] + lag) < 0.03, (got, lag, rng.seed)
     said = float(str(w[0].message).rsplit("=", 1)[1])
     cfg.data.scan_time_offset_s = said
     log.odom = interpolate_poses(stamps, odom, stamps + said)

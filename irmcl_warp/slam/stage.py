@@ -14,6 +14,7 @@ differs from the first is an error (the readers' data.beam_policy can reject or 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -27,7 +28,7 @@ from omegaconf import OmegaConf
 from irmcl_warp.geometry import compose, inverse
 from irmcl_warp.io import read_relations, resolve, write_tum
 from irmcl_warp.io.carmen import gfs_flaser_angles
-from irmcl_warp.io.clock import SCAN_LAG_MAX_S, estimate_clock_offset, scan_lag_note
+from irmcl_warp.io.clock import scan_lag as find_scan_lag, scan_lag_note
 from irmcl_warp.io.errors import LogDefectWarning
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.defects import count_odometry_jumps
@@ -178,11 +179,11 @@ def scan_lag(cfg, log, scans: np.ndarray, poses: np.ndarray) -> dict:
     the scans' stamps and the odometry's clock disagree; the same check as on ground truth, here for a log that has
     none.) Warns naming the log and ``data.scan_time_offset_s``; returns what metrics.json keeps."""
     applied = float(cfg.data.get("scan_time_offset_s") or 0.0)
-    if len(scans) < 3:
-        return {"compared": 0}
-    stamps = np.asarray(log.stamps, float)[scans]
-    c = estimate_clock_offset(log.stamps, log.odom, stamps, poses, max_offset_s=SCAN_LAG_MAX_S)
-    note = scan_lag_note(log.stamps, log.odom, stamps, poses, applied)
+    stamps = np.asarray(log.stamps, float)[np.asarray(scans, int)]
+    lag = find_scan_lag(log.stamps, log.odom, stamps, poses)
+    if lag is None:
+        return {"steps": 0, "applied_s": applied, "warned": False}
+    note = scan_lag_note(log.stamps, log.odom, stamps, poses, applied, lag)
     if note:
         try:
             where = resolve(cfg.data.path) if cfg.data.path else cfg.data.name
@@ -191,15 +192,7 @@ def scan_lag(cfg, log, scans: np.ndarray, poses: np.ndarray) -> dict:
         warnings.warn(
             f"{where}: GMapping's matched poses of its processed scans: {note}", LogDefectWarning, stacklevel=2
         )
-    return {
-        "offset_s": c.offset_s,
-        "yaw_increment_error_deg": c.yaw_increment_error_deg,
-        "yaw_increment_error_at_zero_deg": c.yaw_increment_error_at_zero_deg,
-        "contrast": c.contrast,
-        "compared": c.compared,
-        "applied_s": applied,
-        "warned": bool(note),
-    }
+    return {**dataclasses.asdict(lag), "applied_s": applied, "warned": bool(note)}
 
 
 def map_log(run: runs.Run) -> Path:
