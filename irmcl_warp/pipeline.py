@@ -165,6 +165,8 @@ def stage_summary(out: Path) -> dict:
             "odometry_ate_rmse_m": odo.get("ate_rmse_m"),
             "wall_time_s": m["wall_time_s"],
             "relations_m": rel["trans_abs_mean_m"] if isinstance(rel, dict) else None,
+            # the scans' lag against the odometry GMapping's matched poses named (slam/stage.py scan_lag), or None
+            "scan_lag": m["scan_lag"] if (m.get("scan_lag") or {}).get("warned") else None,
         }
     return {
         "run": out.name,

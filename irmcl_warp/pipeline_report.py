@@ -76,6 +76,20 @@ def failure_note(stamps, est, gt_map, loc: dict, reference: str = "truth") -> st
     )
 
 
+def scan_lag_line(slam: dict) -> str | None:
+    """The report's sentence on a lag GMapping's matched poses named between the scans and the odometry (the SLAM
+    summary's ``scan_lag``: slam/stage.py), or None."""
+    lag = slam.get("scan_lag")  # (summaries before the check have no key)
+    if not lag:
+        return None
+    s, applied = float(lag["lag_s"]), float(lag.get("applied_s") or 0.0)
+    return (
+        f"**The scans appear stamped {abs(s):.3f} s {'late' if s < 0 else 'early'} against the odometry** (GMapping's "
+        f"matched poses turn as the odometry did then): every stage read each scan's odometry at another moment; set "
+        f"data.scan_time_offset_s={applied + s:.3f} and run again."
+    )
+
+
 def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, est, gt_map, particles) -> Path:
     """``metrics``: the pipeline's, with the SLAM and NOF stages' figures (pipeline.stage_summary)."""
     plot_map(out / "map.png", slam_map, slam_poses, est, gt_map, particles)
@@ -117,6 +131,9 @@ def write_report(out: Path, cfg, metrics: dict, slam_map, slam_poses, stamps, es
         )
     if slam["relations_m"] is not None:
         lines.append(f"Relations metric: {slam['relations_m']:.3f} m.")
+    lag = scan_lag_line(slam)
+    if lag:
+        lines.append(lag)
     lines += ["", "## Localization (global, from a uniform start)", ""]
     own = metrics.get("against_slam_poses")
     if own:  # the mapping log localized again: its SLAM poses of the same scans, in the map's frame

@@ -145,3 +145,11 @@ def test_the_mapping_log_localized_again_is_scored_against_its_own_slam_poses(rn
     cfg = lambda path, fmt: OmegaConf.create({"pipeline": {"path": path}, "data": {"format": fmt}})  # noqa: E731
     assert localizes_mapping_log(cfg(None, "bag")) and not localizes_mapping_log(cfg("other.bag", "bag"))
     assert not localizes_mapping_log(cfg(None, "sim"))  # the simulator's second session is another drive
+
+
+def test_the_report_says_when_slam_named_the_scans_late():
+    from irmcl_warp.pipeline_report import scan_lag_line
+
+    assert scan_lag_line({"scan_lag": None}) is None and scan_lag_line({}) is None
+    line = scan_lag_line({"scan_lag": {"lag_s": -0.1394, "applied_s": -0.05, "warned": True}})
+    assert "stamped 0.139 s late" in line and "data.scan_time_offset_s=-0.189" in line
