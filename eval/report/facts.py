@@ -313,6 +313,8 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     out.update(_scan_lag("mit_csail"))
     out.update(_scan_lag("fr079"))
     out.update(_scan_lag("mit_killian"))
+    for log in ("fr079", "mit_csail"):
+        out.update(_scan_lag_tracking(log))
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
@@ -362,6 +364,32 @@ def _scan_lag(log: str) -> dict[str, str]:
             f"(Mann-Whitney p = {mann_whitney(*sets):.2g})"
         )
     return out
+
+
+def _scan_lag_tracking(log: str) -> dict[str, str]:
+    """The check study ``scan_lag_<log>_tracking``: the benchmark protocol's tracking runs (10 starts each) with each
+    scan's odometry read at its stamp and at the lag: per run the median over its starts of the heading RMSE, then
+    a median [min-max] over the runs of each setting, the lag's first, with the Mann-Whitney p."""
+    from eval.results.claims import mann_whitney
+
+    runs = checks(f"scan_lag_{log}_tracking")
+    lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
+    if len(lags) != 2 or 0.0 not in lags:
+        return {}
+    lag = [x for x in lags if x != 0.0][0]
+    sets = [
+        [
+            float(np.median([s["yaw_rmse_deg"] for s in r["runs"]]))
+            for r in runs
+            if r.setting("data.scan_time_offset_s", 0.0) == x
+        ]
+        for x in (lag, 0.0)
+    ]
+    spans = [f"{np.median(v):.2f} [{min(v):.2f}-{max(v):.2f}] deg" for v in sets]
+    return {
+        f"scan_lag_{log}_tracking_yaw": f"{spans[0]} against {spans[1]} over {len(sets[0])} and {len(sets[1])} seeds "
+        f"(Mann-Whitney p = {mann_whitney(*sets):.2g})"
+    }
 
 
 FACT = re.compile(r"<!-- fact:([a-z0-9_]+) -->(.*?)<!-- /fact -->", re.S)
