@@ -37,3 +37,16 @@ def test_which_pose_fits_a_wrong_scan_better_counts_only_beyond_the_margin():
     assert w["scans"] == 4 and w["estimate_fits_better"] == 0.25 and w["reference_fits_better"] == 0.25
     assert w["median_at_estimate"] == np.median(at_estimate) and w["median_at_reference"] == 0.70
     assert who_fits_better([], []) == {"scans": 0}
+
+
+def test_scans_are_found_by_stamp_in_a_log_whose_stamps_go_back(rng):
+    """intel's log keeps its scans in recording order, 631 of them stamped before the one before: the SLAM poses
+    (sorted by stamp) still find their scans."""
+    from eval.analyses.reference_fit import scans_at
+
+    stamps = 100.0 + 0.2 * np.arange(500)
+    log_order = rng.permutation(500)  # the log's scans in another order than their stamps
+    k, has = scans_at(stamps[log_order], stamps[::3])
+    assert has.all() and np.array_equal(stamps[log_order][k], stamps[::3])
+    k, has = scans_at(stamps[log_order], stamps[::3] + 0.05)  # no scan stamped there
+    assert not has.any()
