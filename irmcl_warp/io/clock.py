@@ -39,15 +39,22 @@ def _yaw_rate(stamps, yaw, t0, dt, n):
     return rate - rate.mean()
 
 
-def _increment_error(log_t, log_yaw_unwrapped, gt_t, gt_yaw, offset):
+def _step_errors(log_t, log_yaw_unwrapped, gt_t, gt_yaw, offset) -> np.ndarray:
+    """|yaw step of the poses - the odometry's over the same steps shifted by ``offset``| (radians), per step whose
+    shifted ends lie inside the log."""
     shifted = gt_t + offset
     ok = (shifted[:-1] >= log_t[0]) & (shifted[1:] <= log_t[-1])
-    if ok.sum() == 0:
-        return np.inf, 0
-    y = np.interp(shifted, log_t, log_yaw_unwrapped)
-    d_log = np.diff(y)[ok]
+    d_log = np.diff(np.interp(shifted, log_t, log_yaw_unwrapped))[ok]
     d_gt = wrap_angle(np.diff(gt_yaw))[ok]
-    return float(np.degrees(np.median(np.abs(wrap_angle(d_gt - d_log))))), int(ok.sum())
+    return np.abs(wrap_angle(d_gt - d_log))
+
+
+def _increment_error(log_t, log_yaw_unwrapped, gt_t, gt_yaw, offset):
+    """(the median of ``_step_errors`` in degrees, the steps compared); (inf, 0) with none."""
+    e = _step_errors(log_t, log_yaw_unwrapped, gt_t, gt_yaw, offset)
+    if len(e) == 0:
+        return np.inf, 0
+    return float(np.degrees(np.median(e))), int(len(e))
 
 
 def estimate_clock_offset(
@@ -135,13 +142,6 @@ class ScanLag:
             and self.held_out_p < SCAN_LAG_P
             and self.held_out_ratio <= SCAN_LAG_MAX_RATIO
         )
-
-
-def _step_errors(lt, yaw_u, t, yaw, offset):
-    """|yaw step of the poses - the odometry's over the same steps shifted by ``offset``| per step inside the log."""
-    shifted = t + offset
-    inside = (shifted[:-1] >= lt[0]) & (shifted[1:] <= lt[-1])
-    return np.abs(wrap_angle(np.diff(yaw) - np.diff(np.interp(shifted, lt, yaw_u))))[inside]
 
 
 def scan_lag(log_stamps, log_odom, pose_stamps, poses) -> ScanLag | None:
