@@ -34,6 +34,7 @@ from irmcl_warp.io import read_tum
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.confidence import ScanAgreement, auroc, right
 from irmcl_warp.services.cli import guard
+from irmcl_warp.types import match_stamps
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
 
@@ -75,24 +76,14 @@ def who_fits_better(at_estimate, at_reference, margin: float = MARGIN) -> dict:
     }
 
 
-def scans_at(log_stamps, stamps, tol_s: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
-    """(the index of the log's scan stamped within ``tol_s`` of each of ``stamps``, whether there is one). The log's
-    scans in their own order, which need not be the stamps' (intel's log keeps 631 scans stamped before the one
-    before them); where two scans share a stamp, the first in the log's order."""
-    log_stamps = np.asarray(log_stamps, np.float64)
-    order = np.argsort(log_stamps, kind="stable")
-    at = np.clip(np.searchsorted(log_stamps[order], np.asarray(stamps, np.float64) - 1e-6), 0, len(order) - 1)
-    k = order[at]
-    return k, np.abs(log_stamps[k] - stamps) < tol_s
-
-
 def reference_fit(slam: Path, runs: list[Path]) -> dict:
     cfg = OmegaConf.load(runs[0] / "config.yaml")  # the log the runs read (and the SLAM run made its map of)
     log = load_stream(cfg)
     grid = load_map(slam / "map.yaml")
     agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
     ref_stamps, ref = read_tum(slam / "trajectory.tum")
-    k, has_scan = scans_at(log.stamps, ref_stamps)
+    k = match_stamps(log.stamps, ref_stamps)  # (the log's scans in their own order: intel's stamps go back)
+    has_scan = k >= 0
     if has_scan.mean() < 0.9:
         raise ValueError(f"{slam}: fewer than 90 % of its poses have a scan of {cfg.data.name}'s log: another log?")
     scan = (log.info.angles_rad, log.T_base_laser)
