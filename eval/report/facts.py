@@ -321,6 +321,16 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     return out
 
 
+def _lag_study(study: str) -> tuple[list, float | None]:
+    """(the records of the check study ``study``, the one ``data.scan_time_offset_s`` they were run at besides 0), or
+    the lag None where the study is missing or holds another set of settings."""
+    runs = checks(study)
+    lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
+    if len(lags) != 2 or 0.0 not in lags:
+        return runs, None
+    return runs, [x for x in lags if x != 0.0][0]
+
+
 def _scan_lag(log: str) -> dict[str, str]:
     """The check study ``scan_lag_<log>``: GMapping (30 seeds) and the localizer in its own SLAM map (10 seeds), each
     scan's odometry read at its stamp and at its stamp plus the lag the ground truth names (``data.scan_time_offset_s``).
@@ -330,11 +340,9 @@ def _scan_lag(log: str) -> dict[str, str]:
     from eval.results.claims import fisher, mann_whitney
     from eval.results.queries import CONVERGED_M
 
-    runs = checks(f"scan_lag_{log}")
-    lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
-    if len(lags) != 2 or 0.0 not in lags:
+    runs, lag = _lag_study(f"scan_lag_{log}")
+    if lag is None:
         return {}
-    lag = [x for x in lags if x != 0.0][0]
     out = {f"scan_lag_{log}_s": f"{-lag:.3f} s"}
 
     def of(stage, x):
@@ -372,11 +380,9 @@ def _scan_lag_tracking(log: str) -> dict[str, str]:
     a median [min-max] over the runs of each setting, the lag's first, with the Mann-Whitney p."""
     from eval.results.claims import mann_whitney
 
-    runs = checks(f"scan_lag_{log}_tracking")
-    lags = sorted({r.setting("data.scan_time_offset_s", 0.0) for r in runs})
-    if len(lags) != 2 or 0.0 not in lags:
+    runs, lag = _lag_study(f"scan_lag_{log}_tracking")
+    if lag is None:
         return {}
-    lag = [x for x in lags if x != 0.0][0]
     sets = [
         [
             float(np.median([s["yaw_rmse_deg"] for s in r["runs"]]))
