@@ -451,6 +451,25 @@ def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bi
         assert np.array_equal(np.asarray(split), np.asarray(whole)), f"seed {seed}, {n} particles"
 
 
+def test_a_tracking_start_at_the_maps_edge_draws_its_particles_on_the_map_and_one_off_it_is_refused():
+    """A tracking start 0.1 m inside the map's edge with a 0.5 m spread once ended a run with "particles outside the
+    map" (sim_office, seed 1): the draws off the map are drawn again, every particle lies on the map, and the spread
+    on the map side is kept. A start off the map is an error naming the pose and the map's extent."""
+    log, nog = _world_and_map(duration_s=1.0)
+    pf = _filter(nog, MCLConfig(num_particles=4000, num_samples=32, seed=1), log)
+    res, H = nog.resolution_m, nog.shape[0]
+    left = nog.origin_xy[0] - res / 2
+    start = np.array([left + 0.1, nog.origin_xy[1] + H * res / 2, 0.0])
+    pf.init_gaussian(start, (0.5, 0.5, 0.3))
+    p = pf.particles.numpy()
+    assert not pf._outside(p).any() and p[:, 0].min() >= left
+    assert p[:, 0].max() - start[0] > 0.8  # the side on the map keeps its spread
+    with pytest.raises(ValueError, match=r"initial pose .* lies outside the map \(x "):
+        pf.init_gaussian(start - np.array([1.0, 0.0, 0.0]), (0.5, 0.5, 0.3))
+    with pytest.raises(ValueError, match="1 of 2 particles lie outside the map"):
+        pf.set_particles(np.array([start, start - np.array([1.0, 0.0, 0.0])]))
+
+
 def test_step_graph_refuses_what_it_cannot_capture():
     log, nog = _world_and_map(duration_s=2.0)
     for extra, why in [

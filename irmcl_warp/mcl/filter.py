@@ -247,9 +247,32 @@ class ParticleFilter:
         )
         return np.column_stack([xy, self.rng.uniform(-np.pi, np.pi, len(k))])
 
+    def _outside(self, poses: np.ndarray) -> np.ndarray:
+        """Which of ``poses`` [n, 3] lie off the map's nodes."""
+        H, W = self.free_space.shape
+        cells = self.free_space.node_of(np.asarray(poses, np.float32)[:, :2])
+        return np.any((cells < 0) | (cells >= np.array([W, H])), axis=1)
+
     def init_gaussian(self, pose, std=(0.5, 0.5, 0.3)) -> None:
-        """Pose tracking from a noisy initial pose."""
-        self.set_particles(np.asarray(pose) + self.rng.normal(0, 1, (self.cfg.num_particles, 3)) * np.asarray(std))
+        """Pose tracking from a noisy initial pose. The draws that land off the map are drawn again (a start near
+        the map's edge, e.g. a simulated floor's outer wall, once ended a tracking run with "particles outside the
+        map"); the draws on the map are those of one plain draw, so a start away from the edge is as before."""
+        pose, std = np.asarray(pose, float), np.asarray(std, float)
+        if self._outside(pose[None])[0]:
+            res, (H, W) = self.free_space.resolution_m, self.free_space.shape
+            lo = np.asarray(self.free_space.origin_xy) - res / 2
+            hi = lo + np.array([W, H]) * res
+            raise ValueError(
+                f"MCL: the initial pose {pose.round(3).tolist()} lies outside the map "
+                f"(x {lo[0]:.2f} to {hi[0]:.2f} m, y {lo[1]:.2f} to {hi[1]:.2f} m)"
+            )
+        poses = pose + self.rng.normal(0, 1, (self.cfg.num_particles, 3)) * std
+        for _ in range(100):
+            off = self._outside(poses)
+            if not off.any():
+                break
+            poses[off] = pose + self.rng.normal(0, 1, (int(off.sum()), 3)) * std
+        self.set_particles(poses)
 
     def set_particles(self, poses: np.ndarray) -> None:
         """Equal-weight particles at ``poses`` [n, 3], n up to ``mcl.num_particles`` (the arrays follow n)."""
@@ -258,10 +281,8 @@ class ParticleFilter:
             raise ValueError(
                 f"MCL: particles must be [n, 3] with 1 <= n <= {self.cfg.num_particles}, got {poses.shape}"
             )
-        H, W = self.free_space.shape
-        cells = self.free_space.node_of(poses[:, :2])
-        if np.any((cells < 0) | (cells >= np.array([W, H]))):
-            raise ValueError("MCL: particles outside the map")
+        if self._outside(poses).any():
+            raise ValueError(f"MCL: {int(self._outside(poses).sum())} of {len(poses)} particles lie outside the map")
         if len(poses) != self.num_particles:
             self._allocate(len(poses))
         self.particles.assign(wp.array(poses, dtype=wp.vec3, device=self.device))
