@@ -787,14 +787,18 @@ run on the H100). Kept as records of the check study results/checks/irmcl_refere
 
 `mcl.weighting=nog_table` reads IR-MCL's rendered ranges from a table that the march fills once from every
 NOG node at 720 headings (kernels/weighting.py `NogTable`), instead of marching 256 samples per beam at every
-step: an approximation, made for issue 18's step goals. Does it cost accuracy? Both on the same `fast` field,
-defaults otherwise (Thrun's motion model, sigma 0.5 m), 10 starts per run, 5 seeds, on the H100.
-Command: `python -m irmcl_warp.localize -m +exp=<log> train=fast localize.mode=global|tracking
+step: an approximation, made for issue 18's step goals. Does it cost accuracy? Both on the same field (`fast` on the
+real logs; on sim_office `quick`, the localization table's), defaults otherwise (Thrun's motion model, sigma 0.5 m),
+10 starts per run, 5 seeds, on the H100.
+Command: `python -m irmcl_warp.localize -m +exp=<log> train=fast|quick localize.mode=global|tracking
 mcl.num_particles=100000|10000 mcl.weighting=nog_raymarch,nog_table mcl.seed=0,1,2,3,4` (`eval/gpu/mcl.sh table`
 ran seed 0 first); kept in results/checks/nog_table.json, a record per seed (`python -m eval.keep --check nog_table
 <run folders>`). ms per step: the filter's median step, global runs at 5k particles after 20 s (`mcl.reduce_to`).
 mit_csail's runs (twenty-fifth session, an H100, the `fast` field trained there in 92 s) ran four at a time on the
-one GPU, so their ms per step are not timings; fr079's and intel's ran one at a time.
+one GPU, so their ms per step are not timings; fr079's and intel's ran one at a time. sim_office's (thirty-fourth
+session, the `quick` field trained there in 11 s) ran two at a time beside other work, so theirs are not timings either;
+its tracking seeds 1-4 ran after the fix for a start near the map's edge (8ecd6d0), which leaves a start away from the
+edge as it was.
 
 {table_table()}
 
