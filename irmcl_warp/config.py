@@ -183,7 +183,7 @@ class TrainConfig:
 class MCLConfig:
     """Monte Carlo localization; IR-MCL's values (Kuang et al. 2023, Sec. IV and their configs) cited."""
 
-    weighting: str = "nog_raymarch"  # nog_raymarch | nog_table (the march read from a range table) | nof_direct | likelihood_field | beam_model
+    weighting: str = "nog_table"  # nog_table (IR-MCL's march read from a range table) | nog_raymarch (the march per particle and beam) | nof_direct | likelihood_field | beam_model
     num_particles: int = 100_000  # IR-MCL global localization
     num_beams: int = 32  # IR-MCL: 32 beams evenly spread over the scan
     beam_pick: str = "spread"  # spread (the paper: first to last beam) | stride (the authors' code: every (n // num_beams)-th from the first)

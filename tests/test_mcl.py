@@ -39,7 +39,7 @@ def _world_and_map(duration_s=30.0, res=0.1, extra=()):
 
 def _filter(nog, cfg, log, weighting=None):
     """The filter on the stand-in NOG (its zero nodes: free space), weighted by ``weighting`` when given,
-    else by the NOG weighting ``cfg`` names (IR-MCL's nog_raymarch by default); 10 m far bound."""
+    else by the NOG weighting ``cfg`` names (IR-MCL's range table, nog_table, by default); 10 m far bound."""
     if weighting is None:
         return build_filter(cfg, nog, log.T_base_laser, log.info.angles_rad, 10.0, DEVICE, WeightingMaps(nog=nog))
     return ParticleFilter(nog, cfg, log.T_base_laser, log.info.angles_rad, 10.0, lambda n, b: weighting, DEVICE)
@@ -126,7 +126,7 @@ def test_bad_input_gives_clear_errors():
     pf = _filter(nog, MCLConfig(num_particles=16, num_samples=32), log)
     with pytest.raises(ValueError, match="scan of 180 beams, the filter was built for a sensor of 360"):
         pf.step((0.0, 0.0, 0.0), np.ones(180))
-    with pytest.raises(ValueError, match="particles outside the map"):
+    with pytest.raises(ValueError, match="16 of 16 particles lie outside the map"):
         pf.set_particles(np.array([[1e4, 0.0, 0.0]] * 16))
     empty = NOG(np.ones((20, 20), np.float32), nog.origin_xy, nog.resolution_m)
     pf_full = _filter(empty, MCLConfig(num_particles=16, num_samples=32), log)

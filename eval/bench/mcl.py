@@ -49,13 +49,15 @@ from irmcl_warp.kernels import SIM
 from irmcl_warp.kernels import WEIGHTING
 
 VARIANTS = {
-    "warp": dict(t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
-    "warp+et": dict(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
-    "warp+et+b4": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
-    "warp+et+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="beam"),
-    "warp+et+b4+beam": dict(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
-    "warp+et+skip": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
-    "warp+et+skip+beam": dict(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
+    "warp": dict(weighting="nog_raymarch", t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et+b4": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
+    "warp+et+beam": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=1, march_order="beam"),
+    "warp+et+b4+beam": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
+    "warp+et+skip": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
+    "warp+et+skip+beam": dict(
+        weighting="nog_raymarch", t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"
+    ),
     "table": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=720),
     "table360": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=360),
     "likelihood_field": dict(weighting="likelihood_field"),

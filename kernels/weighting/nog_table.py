@@ -173,7 +173,7 @@ class NogTable:
             raise ValueError(
                 f"nog_table: {H}x{W} nodes x {num_angles} headings need "
                 f"{H * W * num_angles * 2 / 2**30:.1f} GiB (at most {TABLE_MAX_BYTES / 2**30:.0f}); "
-                "lower mcl.table_angles or raise mcl.map_resolution_m"
+                "lower mcl.table_angles, raise mcl.map_resolution_m, or march instead (mcl.weighting=nog_raymarch)"
             )
         block = max(1, min(H * W, TABLE_BUILD_FLOATS // num_angles))
         march = NogRaymarch(
