@@ -4,6 +4,7 @@ when the prose and the results disagree."""
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -315,6 +316,7 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
     out.update(_scan_lag("mit_killian"))
     for log in ("fr079", "mit_csail"):
         out.update(_scan_lag_tracking(log))
+    out.update(_killian_maps())
     heading = {r.setting("slam.seed"): r for r in checks("gmapping_fr079_cpu_headings")}
     for seed, r in heading.items():  # the 2-core CPU's fr079 runs whose headings were compared
         out[f"fr079_cpu_seed{seed}_error"] = f"{r['relations']['trans_abs_mean_m']:.3f} m"
@@ -395,6 +397,45 @@ def _scan_lag_tracking(log: str) -> dict[str, str]:
     return {
         f"scan_lag_{log}_tracking_yaw": f"{spans[0]} against {spans[1]} over {len(sets[0])} and {len(sets[1])} seeds "
         f"(Mann-Whitney p = {mann_whitney(*sets):.2g})"
+    }
+
+
+def _killian_maps() -> dict[str, str]:
+    """The check ``own_slam_map_mit_killian_20k_maps``: the same 20k own-map runs (5 seeds) in several GMapping maps of
+    MIT Killian, each map's relations error read from the SLAM study ``scan_lag_mit_killian`` (the same seed and
+    setting). Successes per map, the README's map (seed 6, no lag) apart."""
+    path = RESULTS / "checks" / "own_slam_map_mit_killian_20k_maps.json"
+    if not path.exists():
+        return {}
+    relations = {
+        (r.setting("data.scan_time_offset_s", 0.0), r.setting("slam.seed")): r["relations"]["trans_abs_mean_m"]
+        for r in checks("scan_lag_mit_killian")
+    }
+    others, rows_map = [], None
+    for key, rec in json.loads(path.read_text())["maps"].items():
+        m = re.fullmatch(r"off(?P<off>-?[0-9.]+)-seed(?P<seed>\d+)", key)
+        off, seed = float(m["off"]), int(m["seed"])
+        entry = (rec["successes"], rec["of"], relations[(off, seed)])
+        if (off, seed) == (0.0, 6):
+            rows_map = entry
+        else:
+            others.append(entry)
+    others.sort()
+    errs = [e[2] for e in others]
+    failed = [r for rec in json.loads(path.read_text())["maps"].values() for r in rec["runs"] if not r["success"]]
+    never = [r for r in failed if r["time_to_converge_s"] is None]
+    off_share = [1 - r["scans_judged_right"] / r["scans_judged"] for r in failed if r["time_to_converge_s"] is not None]
+    return {
+        "killian_maps_failed": str(len(failed)),
+        "killian_maps_never_right": str(len(never)),
+        "killian_maps_off_a_stretch": str(len(off_share)),
+        "killian_maps_off_share": f"{100 * min(off_share):.0f}-{100 * max(off_share):.0f} %" if off_share else "-",
+        "killian_maps_count": str(len(others)),
+        "killian_maps_relations": f"{min(errs):.3f}-{max(errs):.3f} m",
+        "killian_maps_successes": ", ".join(f"{k}/{n}" for k, n, _ in others),
+        "killian_maps_pooled": f"{sum(e[0] for e in others)}/{sum(e[1] for e in others)}",
+        "killian_rows_map": f"{rows_map[0]}/{rows_map[1]}" if rows_map else "-",
+        "killian_rows_map_relations": f"{rows_map[2]:.3f} m" if rows_map else "-",
     }
 
 
