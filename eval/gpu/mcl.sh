@@ -12,7 +12,7 @@
 #            the authors' motion model (mcl.motion=odometry,irmcl), fr079 and intel
 #   width    issue 17: the NOG with the authors' motion model and sigma 0.25 m (the likelihood field's heading width
 #            per scan, docs/fidelity.md), global, 100k, train=fast, fr079 and intel
-#   hw       issue 36: fr079's NOF (train=fast) and its NOG, then the step benchmark on that NOG: the default march,
+#   hw       issue 36: fr079's NOF (train=fast) and its NOG, then the step benchmark on that NOG: the march,
 #            the table, and AMCL's grid models at 10k / 100k / 1M, 5 repeats, the torch reference up to 100k; the NOF
 #            and NOG come back in $OUT/fr079-nof-nog.tgz for the CPU measurements (python -m eval.bench mcl --device cpu)
 #   kidnap   tracking runs teleported 30 s in, recovery on, sim_office and fr079, nog_raymarch and likelihood_field

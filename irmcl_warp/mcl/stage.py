@@ -1,9 +1,9 @@
-"""The localize stage: ``python -m irmcl_warp.localize +exp=<name> [mcl.weighting=nog_raymarch|likelihood_field|beam_model]``
+"""The localize stage: ``python -m irmcl_warp.localize +exp=<name> [mcl.weighting=nog_table|nog_raymarch|likelihood_field|beam_model]``
 
 Runs MCL over the recorded stream (scans + odometry) from ``localize.num_starts`` start times spread over
 the sequence, each for ``localize.run_s`` seconds, globally (uniform over the free space) or tracking from a
 noisy pose (``localize.mode``). The map comes from the training split only: the NOF of ``train=<preset>`` baked into a NOG
-(nog_raymarch), or a log-odds grid of the training scans (grid baselines); particles start on the
+(nog_table, the default: the NOG's march read from a range table; nog_raymarch: marched per particle), or a log-odds grid of the training scans (grid baselines); particles start on the
 grid's known free cells for every method. As IR-MCL's code, the filter weighs and resamples only after
 the odometry moved (``mcl.update_min_*``), and a global run keeps the ``mcl.reduce_to`` heaviest
 particles ``localize.reduce_after_s`` into the run.
