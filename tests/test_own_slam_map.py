@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from omegaconf import OmegaConf
 
 from eval.analyses.own_slam_map import main as score
@@ -138,3 +139,25 @@ def test_a_lost_event_on_a_right_estimate_is_a_false_alarm():
     est[0] = np.nan  # no estimate at the first scan
     assert false_alarms([0.0, 3.5, 6.0, 8.5], stamps, est, ref) == 2  # 3.5 (right at 3 s), 8.5 (right at 8 s)
     assert false_alarms([], stamps, est, ref) == 0 and false_alarms(None, stamps, est, ref) is None
+
+
+def test_false_alarms_are_counted_per_hour_of_right_tracking():
+    """Issue 33 counts false alarms per hour of good tracking: a run right for a quarter of its scans contributes a
+    quarter of its hours; runs without the rule's record are left out, and none with it gives None."""
+    from eval.analyses.own_slam_map import false_alarm_rate
+
+    def run(log_s, right, judged, false, events, relocalize=False):
+        return dict(
+            log_s=log_s,
+            scans_judged_right=right,
+            scans_judged=judged,
+            false_alarms=false,
+            lost_at_s=[1.0] * events,
+            relocalize=relocalize,
+        )
+
+    rows = [run(3600.0, 250, 1000, 1, 3), run(7200.0, 1000, 1000, 2, 2), dict(run(3600.0, 0, 10, 0, 0), lost_at_s=None)]
+    rate = false_alarm_rate(rows)
+    assert rate["hours"] == pytest.approx(3.0) and rate["hours_right"] == pytest.approx(2.25)
+    assert rate["false"] == 3 and rate["events"] == 5 and rate["per_hour_right"] == pytest.approx(3 / 2.25)
+    assert false_alarm_rate([rows[2]]) is None

@@ -194,6 +194,25 @@ def judge_confidence(rows: list[dict], threshold: float = CONFIDENT_ABOVE) -> di
     }
 
 
+def false_alarm_rate(rows: list[dict]) -> dict | None:
+    """The lost-robot rule's events over the runs that ran it, and its false alarms (fired while the estimate was
+    right) per hour of right tracking, as issue 33 counts them: each run's hours times its share of scans judged
+    right (the scans come at a steady rate). None when no run ran the rule."""
+    lost = [r for r in rows if r["lost_at_s"] is not None]
+    if not lost:
+        return None
+    right = sum(r["log_s"] * r["scans_judged_right"] / r["scans_judged"] for r in lost if r["scans_judged"]) / 3600
+    false = sum(r["false_alarms"] or 0 for r in lost)
+    return {
+        "events": sum(len(r["lost_at_s"]) for r in lost),
+        "false": false,
+        "hours": sum(r["log_s"] for r in lost) / 3600,
+        "hours_right": right,
+        "per_hour_right": false / right if right else float("nan"),
+        "relocalize": bool(lost[0]["relocalize"]),
+    }
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m eval.analyses.own_slam_map", description=__doc__.split("\n\n")[1])
     ap.add_argument("--slam", required=True, type=Path, help="the SLAM run whose map.yaml the runs localized in")
@@ -213,19 +232,18 @@ def main(argv=None):
         conf = "-" if r["confidence_at_end"] is None else f"{r['confidence_at_end']:.2f}"
         print(f"| {r['seed']} | {r['scans']} | {conv} | {r['success']} | {rmse} | {end} | {conf} |")
     print(f"success {ok}/{len(rows)}")
-    lost = [r for r in rows if r["lost_at_s"] is not None]
-    if lost:
-        hours = sum(r["log_s"] for r in lost) / 3600
-        events, false = sum(len(r["lost_at_s"]) for r in lost), sum(r["false_alarms"] for r in lost)
-        print(
-            f"lost-robot rule: {events} events in {hours:.2f} h, {false} of them while the estimate was right "
-            f"({false / hours:.1f} false alarms an hour); "
-            + ("each re-seeded" if lost[0]["relocalize"] else "reported")
-        )
     judged = judge_confidence(rows)
     for r in rows:  # the per-scan arrays are pooled above; the record keeps each run's share of right scans
         conf, hit = r.pop("scan_confidence"), r.pop("scan_right")
         r["scans_judged"], r["scans_judged_right"] = len(conf), int(sum(hit))
+    alarms = false_alarm_rate(rows)
+    if alarms:
+        print(
+            f"lost-robot rule: {alarms['events']} events in {alarms['hours']:.2f} h, {alarms['false']} of them while "
+            f"the estimate was right, which it was for {alarms['hours_right']:.2f} h "
+            f"({alarms['per_hour_right']:.1f} false alarms an hour of right tracking); "
+            + ("each re-seeded" if alarms["relocalize"] else "reported")
+        )
     if judged["scans"]:
         auc = "-" if judged["auroc"] is None else f"{judged['auroc']:.3f}"
         print(
@@ -244,6 +262,7 @@ def main(argv=None):
                 "successes": ok,
                 "of": len(rows),
                 "confidence": judged,
+                "false_alarms": alarms,
             },
         )
         print(f"-> {a.out}")

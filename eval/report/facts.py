@@ -425,7 +425,21 @@ def _killian_maps() -> dict[str, str]:
     failed = [r for rec in json.loads(path.read_text())["maps"].values() for r in rec["runs"] if not r["success"]]
     never = [r for r in failed if r["time_to_converge_s"] is None]
     off_share = [1 - r["scans_judged_right"] / r["scans_judged"] for r in failed if r["time_to_converge_s"] is not None]
+    # the lag as a setting: every map with each setting, the session-33 seed-6 records included
+    sets = {0.0: [], -0.144: []}
+    for key, rec in json.loads(path.read_text())["maps"].items():
+        sets[float(re.fullmatch(r"off(-?[0-9.]+)-seed\d+", key)[1])].append(rec)
+    for name, off in (("own_slam_map_mit_killian_20k_stamps_lag", -0.144),):
+        sets[off].append(json.loads((RESULTS / "checks" / f"{name}.json").read_text()))
+    count = {}
+    for off, recs in sets.items():
+        runs = [r for rec in recs for r in rec["runs"]]
+        right_h = sum(r["log_s"] * r["scans_judged_right"] / r["scans_judged"] for r in runs) / 3600
+        count[off] = (sum(r["success"] for r in runs), len(runs), sum(r["false_alarms"] for r in runs), right_h)
+    lag, at = count[-0.144], count[0.0]
     return {
+        "killian_lag_successes": f"{lag[0]}/{lag[1]} against {at[0]}/{at[1]}",
+        "killian_lag_false_alarms": f"{lag[2]} times in {lag[3]:.1f} h of right tracking against {at[2]} in {at[3]:.1f} h",
         "killian_maps_failed": str(len(failed)),
         "killian_maps_never_right": str(len(never)),
         "killian_maps_off_a_stretch": str(len(off_share)),
