@@ -22,7 +22,7 @@ from eval.results.queries import (
     slam_errors,
     slam_variant,
 )  # noqa: F401
-from eval.results.records import describe, off_defaults
+from eval.results.records import describe, exp_defaults, off_defaults
 from irmcl_warp.config import GlobLocConfig
 from irmcl_warp.services.metrics import FULL_COVERAGE
 
@@ -506,6 +506,11 @@ def worlds_table(runs: list) -> str:
     return "\n".join(rows)
 
 
+def _log_scan_offset(log: str) -> float:
+    """``data.scan_time_offset_s`` as ``+exp=<log>`` composes it (the primary config's for a log without one)."""
+    return float(exp_defaults(log, "localize")["data"].get("scan_time_offset_s") or 0.0)
+
+
 def own_slam_map_table(records: list) -> str:
     """Real logs localized globally from their first scan, over the whole log, in their own SLAM map (issue 33): one
     row per record of eval.analyses.own_slam_map (results/own_slam_map/), its runs scored against the SLAM poses, with
@@ -533,8 +538,13 @@ def own_slam_map_table(records: list) -> str:
         weighting = first["weighting"].replace("_", " ") + (f", start from {k}x candidates" if k > 1 else "")
         if first.get("report_pose") == "mode":  # (records before the setting reported the filter's estimate)
             weighting += ", the judged mode's pose"
-        if first.get("scan_time_offset_s"):  # (records before the setting: read at the stamps)
-            weighting += f", each scan's odometry read {first['scan_time_offset_s']:+.3f} s from its stamp"
+        offset = first.get("scan_time_offset_s") or 0.0  # (records before the setting: read at the stamps)
+        if offset != _log_scan_offset(rec["log"]):  # a row not made as the log's config reads it says how it was
+            weighting += (
+                f", each scan's odometry read {offset:+.3f} s from its stamp"
+                if offset
+                else ", each scan's odometry read at its stamp"
+            )
         if first.get("relocalize"):
             weighting += ", re-seeded when lost"
             rule = first.get("lost_rule") or {}  # (records before it: the rule of the session before, unnamed)
