@@ -190,12 +190,14 @@ SWEEPS = (
         )
         for e in GLOBLOC
     ]
-    # ablations, one setting at a time around IR-MCL's global localization (100k particles, NOG 5 cm, 32 beams)
+    # ablations, one setting at a time around IR-MCL's global localization by the paper's march (100k particles, NOG
+    # 5 cm, 32 beams; the package's default weighting is the march's range table since the thirty-fourth session)
     + [
         Sweep(
             "ablation",
             "irmcl_warp.localize",
-            [f"+exp={e}", f"train={p}", "localize.mode=global", "mcl.num_particles=100000"],
+            [f"+exp={e}", f"train={p}", "localize.mode=global", "mcl.num_particles=100000"]
+            + ([] if key == "mcl.weighting" else ["mcl.weighting=nog_raymarch"]),
             {key: values},
             gpu=True,
         )
