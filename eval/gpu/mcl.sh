@@ -43,7 +43,7 @@ for part in "$@"; do
     tracking) sweep tracking "${N_TRACK:-10000}" mcl.weighting=nog_raymarch,likelihood_field,beam_model mcl.map_resolution_m=0.05,0.1 ;;
     real) python -m irmcl_warp.train +exp=fr079 train=fast 2>&1 | grep -v "^\[" | tail -3
           python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=global mcl.num_particles=100000 \
-            mcl.reduce_to=0 localize.num_starts=${STARTS:-3} 2>&1 | grep -E "start|ms|Error" | tail -8
+            mcl.weighting=nog_raymarch mcl.reduce_to=0 localize.num_starts=${STARTS:-3} 2>&1 | grep -E "start|ms|Error" | tail -8
           python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --particles 100000 \
             --variants warp+et warp+et+beam warp+et+skip+beam --step-graph both --torch-max 0 --out "$OUT/bench-fr079" \
             2>&1 | tail -10
@@ -76,7 +76,7 @@ for part in "$@"; do
            done ;;
     hw) python -m irmcl_warp.train +exp=fr079 train=fast 2>&1 | grep -v "^\[" | tail -3
         python -m irmcl_warp.localize +exp=fr079 train=fast localize.mode=tracking localize.num_starts=1 localize.run_s=5 \
-          mcl.num_particles=1000 2>&1 | grep -E "success|Error" | tail -3  # bakes the NOG (outputs/fr079/nog/)
+          mcl.num_particles=1000 mcl.weighting=nog_raymarch 2>&1 | grep -E "success|Error" | tail -3  # bakes the NOG
         python -m eval.bench mcl --device cuda:0 --nog "$(ls outputs/fr079/nog/nog-*.npz | head -1)" --step-graph on \
           --variants warp+et+beam table likelihood_field beam_model --repeats 5 --torch-max 100000 --out "$OUT/bench-hw" \
           2>&1 | grep -v "^{" | tail -24
