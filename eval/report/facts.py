@@ -411,10 +411,14 @@ def _killian_maps() -> dict[str, str]:
         (r.setting("data.scan_time_offset_s", 0.0), r.setting("slam.seed")): r["relations"]["trans_abs_mean_m"]
         for r in checks("scan_lag_mit_killian")
     }
-    others, rows_map = [], None
+    from eval.analyses.own_slam_map import false_alarm_rate
+
+    maps = []  # (offset, SLAM seed, record) from the keys "off<offset>-seed<seed>"
     for key, rec in json.loads(path.read_text())["maps"].items():
         m = re.fullmatch(r"off(?P<off>-?[0-9.]+)-seed(?P<seed>\d+)", key)
-        off, seed = float(m["off"]), int(m["seed"])
+        maps.append((float(m["off"]), int(m["seed"]), rec))
+    others, rows_map = [], None
+    for off, seed, rec in maps:
         entry = (rec["successes"], rec["of"], relations[(off, seed)])
         if (off, seed) == (0.0, 6):
             rows_map = entry
@@ -422,24 +426,20 @@ def _killian_maps() -> dict[str, str]:
             others.append(entry)
     others.sort()
     errs = [e[2] for e in others]
-    failed = [r for rec in json.loads(path.read_text())["maps"].values() for r in rec["runs"] if not r["success"]]
+    failed = [r for _, _, rec in maps for r in rec["runs"] if not r["success"]]
     never = [r for r in failed if r["time_to_converge_s"] is None]
     off_share = [1 - r["scans_judged_right"] / r["scans_judged"] for r in failed if r["time_to_converge_s"] is not None]
-    # the lag as a setting: every map with each setting, the session-33 seed-6 records included
-    sets = {0.0: [], -0.144: []}
-    for key, rec in json.loads(path.read_text())["maps"].items():
-        sets[float(re.fullmatch(r"off(-?[0-9.]+)-seed\d+", key)[1])].append(rec)
-    for name, off in (("own_slam_map_mit_killian_20k_stamps_lag", -0.144),):
-        sets[off].append(json.loads((RESULTS / "checks" / f"{name}.json").read_text()))
-    count = {}
-    for off, recs in sets.items():
-        runs = [r for rec in recs for r in rec["runs"]]
-        right_h = sum(r["log_s"] * r["scans_judged_right"] / r["scans_judged"] for r in runs) / 3600
-        count[off] = (sum(r["success"] for r in runs), len(runs), sum(r["false_alarms"] for r in runs), right_h)
-    lag, at = count[-0.144], count[0.0]
+    # the lag as a setting: every map of each setting, session 33's seed-6 map of the lag included
+    runs_at = {}
+    extra = json.loads((RESULTS / "checks" / "own_slam_map_mit_killian_20k_stamps_lag.json").read_text())
+    for off, rec in [(off, rec) for off, _, rec in maps] + [(extra["runs"][0]["scan_time_offset_s"], extra)]:
+        runs_at.setdefault(off, []).extend(rec["runs"])
+    count = {off: (sum(r["success"] for r in runs), len(runs), false_alarm_rate(runs)) for off, runs in runs_at.items()}
+    lag, at = count[min(count)], count[0.0]  # (the lag is negative: the scans read late)
     return {
         "killian_lag_successes": f"{lag[0]}/{lag[1]} against {at[0]}/{at[1]}",
-        "killian_lag_false_alarms": f"{lag[2]} times in {lag[3]:.1f} h of right tracking against {at[2]} in {at[3]:.1f} h",
+        "killian_lag_false_alarms": f"{lag[2]['false']} times in {lag[2]['hours_right']:.1f} h of right tracking "
+        f"against {at[2]['false']} in {at[2]['hours_right']:.1f} h",
         "killian_maps_failed": str(len(failed)),
         "killian_maps_never_right": str(len(never)),
         "killian_maps_off_a_stretch": str(len(off_share)),

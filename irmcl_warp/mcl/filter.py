@@ -281,8 +281,9 @@ class ParticleFilter:
             raise ValueError(
                 f"MCL: particles must be [n, 3] with 1 <= n <= {self.cfg.num_particles}, got {poses.shape}"
             )
-        if self._outside(poses).any():
-            raise ValueError(f"MCL: {int(self._outside(poses).sum())} of {len(poses)} particles lie outside the map")
+        off = self._outside(poses)
+        if off.any():
+            raise ValueError(f"MCL: {int(off.sum())} of {len(poses)} particles lie outside the map")
         if len(poses) != self.num_particles:
             self._allocate(len(poses))
         self.particles.assign(wp.array(poses, dtype=wp.vec3, device=self.device))
