@@ -48,16 +48,20 @@ from irmcl_warp.sim import simulate
 from irmcl_warp.kernels import SIM
 from irmcl_warp.kernels import WEIGHTING
 
+
+def _march(**settings) -> dict:
+    """A variant of the paper's march (``nog_raymarch``; the default weighting is its range table)."""
+    return dict(weighting="nog_raymarch", **settings)
+
+
 VARIANTS = {
-    "warp": dict(weighting="nog_raymarch", t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
-    "warp+et": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
-    "warp+et+b4": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
-    "warp+et+beam": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=1, march_order="beam"),
-    "warp+et+b4+beam": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
-    "warp+et+skip": dict(weighting="nog_raymarch", t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
-    "warp+et+skip+beam": dict(
-        weighting="nog_raymarch", t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"
-    ),
+    "warp": _march(t_min=0.0, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et": _march(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="particle"),
+    "warp+et+b4": _march(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="particle"),
+    "warp+et+beam": _march(t_min=1e-3, empty_below=0.0, march_batch=1, march_order="beam"),
+    "warp+et+b4+beam": _march(t_min=1e-3, empty_below=0.0, march_batch=4, march_order="beam"),
+    "warp+et+skip": _march(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="particle"),
+    "warp+et+skip+beam": _march(t_min=1e-3, empty_below=0.01, march_batch=1, march_order="beam"),
     "table": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=720),
     "table360": dict(weighting="nog_table", t_min=1e-3, empty_below=0.0, table_angles=360),
     "likelihood_field": dict(weighting="likelihood_field"),
