@@ -21,8 +21,16 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from irmcl_warp.kernels.radix import SELECT_BINS, SELECT_BITS, heavy_first
 from irmcl_warp.kernels.resample import max_kernel, tile_block
-from irmcl_warp.kernels.registry import ESTIMATE, PartialSums, launch_reduction, pick_device, reduction_threads
+from irmcl_warp.kernels.registry import (
+    ESTIMATE,
+    PartialSums,
+    launch_reduction,
+    pick_device,
+    reduction_threads,
+    sums_array,
+)
 
 
 @wp.kernel
@@ -50,9 +58,11 @@ def pose_moments(w: float, p: wp.vec3) -> vec5:
 
 
 def mean_pose(sums: np.ndarray) -> np.ndarray:
-    """[x, y, yaw] from the five pose moments (w, w x, w y, w cos, w sin)."""
-    s = np.asarray(sums, np.float64)
-    return np.array([s[1] / s[0], s[2] / s[0], np.arctan2(s[4], s[3])])
+    """[x, y, yaw] from the five pose moments (w, w x, w y, w cos, w sin), in float64 on Python floats (a GPU step's
+    host time; the division by a float64 weight keeps numpy's inf and nan)."""
+    s = np.asarray(sums).tolist()
+    total = np.float64(s[0])
+    return np.array([s[1] / total, s[2] / total, np.arctan2(s[4], s[3])])
 
 
 @wp.func
@@ -152,9 +162,14 @@ def top_sums_tiled_kernel(
 
 
 @wp.kernel
-def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.array(dtype=wp.float32)):
+def moments_finish_kernel(
+    partials: wp.array(dtype=vec5), count: int, sums: wp.array(dtype=wp.float32), hist: wp.array(dtype=int)
+):
     """One block: the ``count`` blocks' five sums into ``sums``, each thread adding a run of ceil(count / threads)
-    blocks in order and the threads' runs joined by a tile reduction (a fixed order)."""
+    blocks in order and the threads' runs joined by a tile reduction (a fixed order). ``hist``: the selection's
+    histograms, read by nothing after its sums kernel, set back to zero for the next selection (or empty: the
+    sort's sums); that saves the next step a memset launch, and the accumulate that counts the first pass
+    (kernels/resample.py ``accumulate_max_kernel``) finds them zero."""
     _b, lane = wp.tid()
     run = (count + wp.block_dim() - 1) // wp.block_dim()
     lo = wp.min(lane * run, count)
@@ -165,6 +180,8 @@ def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.a
     if lane == 0:
         for c in range(5):
             sums[c] = total[0][c]
+    for j in range(lane, hist.shape[0], wp.block_dim()):
+        hist[j] = 0
 
 
 # The top share by a radix select (a GPU's way; ``TopShareMean.SELECT``). The particles' order is (key, index), key
@@ -177,8 +194,6 @@ def moments_finish_kernel(partials: wp.array(dtype=vec5), count: int, sums: wp.a
 # count nothing ("done": no tie straddles the threshold, the usual case). A particle is in the top share when its
 # (key, index) is at or before the threshold (``select_sums_kernel``).
 SELECT_TILE = 1024  # threads of a block of the selection's launches on a GPU
-SELECT_BITS = 11  # bits a histogram pass resolves: 2048 bins, 8 KB of shared memory
-SELECT_BINS = 1 << SELECT_BITS
 KEY_DIGIT, INDEX_DIGIT = wp.constant(0), wp.constant(1)
 ALL_INDICES = 0x7FFFFFFF  # an index threshold that takes every tied particle
 
@@ -219,20 +234,6 @@ def select_pass_settings(passes: list[tuple[int, int, int]]) -> list[tuple[int, 
         else:
             index_mask |= bits
     return out
-
-
-@wp.func
-def heavy_first(log_w: float) -> wp.uint32:
-    """A key whose ascending order is the descending order of the log-weight (the float's bits, negatives as they
-    are, non-negatives with their 31 low bits flipped); -0 counts as +0, as the comparison of a sort does.
-    Numpy twin: irmcl_warp/reference/estimate.py ``heavy_first_keys``."""
-    x = log_w
-    if x == 0.0:
-        x = 0.0
-    bits = wp.cast(x, wp.uint32)
-    if (bits >> wp.uint32(31)) != wp.uint32(0):
-        return bits
-    return bits ^ wp.uint32(0x7FFFFFFF)
 
 
 @wp.func
@@ -425,8 +426,11 @@ class TopShareMean:
     TILED = None  # the sums by tiled launches (``top_sums_tiled_kernel``): None = on a GPU (tests: any device)
     SELECT = None  # the top share by a radix select instead of a sort: None = on a GPU (tests: any device)
     SELECT_PER_THREAD = None  # particles a thread of the selection covers; None: ``select_per_thread(n)``
+    FIRST_IN_ACCUMULATE = True  # a filter's accumulate counts the selection's first pass (``rank_buffers``; tests: off)
 
-    def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto"):
+    def __init__(self, num_particles: int, share: float = 0.8, device: str = "auto", sums: wp.array | None = None):
+        """``sums``: where the five sums go (a view of a filter's read-back buffer: one copy back a step), else an
+        array of its own."""
         if not 0.0 < share <= 1.0:
             raise ValueError(f"top_share: share must lie in (0, 1], got {share}")
         self.device, self.n = pick_device(device), num_particles
@@ -434,8 +438,10 @@ class TopShareMean:
         on_gpu = wp.get_device(self.device).is_cuda
         self.selects = on_gpu if self.SELECT is None else bool(self.SELECT)
         self.tiled = (on_gpu if self.TILED is None else bool(self.TILED)) and not self.selects
-        self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
+        self.sums = sums_array(sums, 5, self.device, "top_share")
         self.weights = None
+        self._counts = False  # counts left in the selection's histograms (``_clear_histograms``)
+        self.nothing_int = wp.empty(0, dtype=int, device=self.device)
         self.nothing = (  # what a sums kernel is given for the arrays its source does not read
             wp.empty(0, dtype=wp.float32, device=self.device),
             wp.empty(0, dtype=wp.vec2, device=self.device),
@@ -484,10 +490,23 @@ class TopShareMean:
         self.order()
         self.sum(particles, log_w)
 
-    def rank_buffers(self) -> tuple[wp.array, wp.array]:
-        """(keys, values) to sort or select from: ``rank`` fills them, or a GPU filter's ParticleWeights.accumulate
-        (the keys are a copy of -log w that the filter's stream does not touch while the estimate's runs)."""
-        return self.keys, self.values
+    def rank_buffers(self) -> tuple[wp.array, ...]:
+        """(keys, values) to sort, or (keys, values, first_hist) to select from: ``rank`` fills them, or a GPU filter's
+        ParticleWeights.accumulate (the keys are a copy of -log w that the filter's stream does not touch while the
+        estimate's runs). ``first_hist`` is the selection's first histogram, zero now: the accumulate counts the first
+        pass into it, and ``order(counted=True)`` starts from the second."""
+        if not (self.selects and self.FIRST_IN_ACCUMULATE):
+            return self.keys, self.values
+        self._clear_histograms()
+        self._counts = True
+        return self.keys, self.values, self.hist[:SELECT_BINS]
+
+    def _clear_histograms(self) -> None:
+        """The histograms back to zero where counts are left in them (a selection not summed since: ``sum``'s finish
+        zeroes them, so a filter's step launches no memset)."""
+        if self._counts:
+            self.hist.zero_()
+            self._counts = False
 
     def rank(self, log_w: wp.array) -> None:
         """The keys -log w and the indices; when selecting, also the largest log-weight (for ``sum`` without w)."""
@@ -496,15 +515,20 @@ class TopShareMean:
             self.top.fill_(-3.0e38)
             launch_reduction(max_kernel, self.n, [log_w, self.top], self.device)
 
-    def order(self) -> None:
+    def order(self, counted: bool = False) -> None:
         """The particles by weight, heaviest first (Warp's radix sort of the keys ``rank`` wrote; ties keep their
-        index order), or the selection's histogram passes over those keys."""
+        index order), or the selection's histogram passes over those keys; ``counted``: the first pass was counted
+        with the keys (``rank_buffers``' first_hist), so the passes start from the second."""
         if not self.selects:
             wp.utils.radix_sort_pairs(self.keys, self.values, self.n)
             return
-        self.hist.zero_()
+        if not counted:
+            self._clear_histograms()
+        self._counts = True
         blocks = self.block_sums.shape[0]
         for j, settings in enumerate(self.pass_settings):
+            if counted and j == 0:
+                continue
             inputs = [self.keys, self.hist, self.state_key, self.state_int, self.span, j, *settings]
             wp.launch_tiled(
                 select_histogram_kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device
@@ -529,6 +553,8 @@ class TopShareMean:
         if self.selects or self.tiled:  # the blocks' sums by one tiled launch, then one block adds them
             blocks = self.block_sums.shape[0]
             if self.selects:  # the threshold, then a pass over every particle
+                if not self._counts:  # summed again: the last sums' finish zeroed the histograms, count them again
+                    self.order()
                 last = len(self.passes)
                 prev_field, prev_shift = self.passes[-1][:2]
                 kernel = select_sums_kernel
@@ -538,8 +564,9 @@ class TopShareMean:
                 kernel = top_sums_tiled_kernel
                 inputs = [self.values, self.keys, log_w, w, cos_sin, particles, source, self.k, self.block_sums]
             wp.launch_tiled(kernel, dim=[blocks], inputs=inputs, block_dim=self.block, device=self.device)
-            finish = [self.block_sums, blocks, self.sums]
+            finish = [self.block_sums, blocks, self.sums, self.hist if self.selects else self.nothing_int]
             wp.launch_tiled(moments_finish_kernel, dim=[1], inputs=finish, block_dim=self.block, device=self.device)
+            self._counts = False  # (the finish zeroed the histograms)
             return
         inputs = [self.values, self.keys, log_w, w, cos_sin, particles, self.partial.partials, source, self.k]
         threads = launch_reduction(top_sums_kernel, self.k, inputs, self.device)
@@ -613,7 +640,15 @@ def heaviest_bin(hist: np.ndarray) -> tuple[int, int, int]:
 
 
 class BestCluster:
-    def __init__(self, num_particles: int, bounds, cell_m: float = 0.5, yaw_bins: int = 8, device: str = "auto"):
+    def __init__(
+        self,
+        num_particles: int,
+        bounds,
+        cell_m: float = 0.5,
+        yaw_bins: int = 8,
+        device: str = "auto",
+        sums: wp.array | None = None,
+    ):
         xmin, ymin, xmax, ymax = map(float, bounds)
         if not (xmax > xmin and ymax > ymin and cell_m > 0 and yaw_bins >= 1):
             raise ValueError(
@@ -624,7 +659,7 @@ class BestCluster:
         self.nx, self.ny = int(np.ceil((xmax - xmin) / cell_m)) + 1, int(np.ceil((ymax - ymin) / cell_m)) + 1
         self.hist = wp.zeros(self.nyaw * self.ny * self.nx, dtype=wp.float32, device=self.device)
         self.top = wp.zeros(1, dtype=wp.float32, device=self.device)
-        self.sums = wp.zeros(5, dtype=wp.float32, device=self.device)
+        self.sums = sums_array(sums, 5, self.device, "best_cluster")
         self.partial = PartialSums(5, self.device, reduction_threads(num_particles, self.device))
 
     def __call__(self, particles: wp.array, log_w: wp.array) -> np.ndarray:

@@ -182,6 +182,18 @@ def reduction_threads(n: int, device: str) -> int:
     return min(n, REDUCE_THREADS)
 
 
+def sums_array(given, size: int, device: str, who: str) -> wp.array:
+    """Where a part writes its ``size`` float32 sums: ``given`` (a view of a filter's read-back buffer, so that one
+    copy brings every part's sums back) or, when None, zeros of its own on ``device``."""
+    if given is None:
+        return wp.zeros(size, dtype=wp.float32, device=device)
+    if given.dtype != wp.float32 or given.shape != (size,) or str(given.device) != str(wp.get_device(device)):
+        raise ValueError(
+            f"{who}: sums must be {size} float32 on {device}, got {given.shape} {given.dtype.__name__} on {given.device}"
+        )
+    return given
+
+
 def launch_reduction(kernel, n: int, inputs: list, device: str) -> int:
     """Launch a reduction over n items on ``reduction_threads(n, device)`` threads and return that number; the
     kernel's last argument is the stride: thread t accumulates items t, t + stride, ... in registers and then

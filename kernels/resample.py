@@ -10,10 +10,20 @@ weighted mean pose (circular mean for yaw). Numpy twins: irmcl_warp/reference/re
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import warp as wp
 
-from irmcl_warp.kernels.registry import RESAMPLE, PartialSums, launch_reduction, pick_device, reduction_threads
+from irmcl_warp.kernels.radix import SELECT_BINS, first_digit
+from irmcl_warp.kernels.registry import (
+    RESAMPLE,
+    PartialSums,
+    launch_reduction,
+    pick_device,
+    reduction_threads,
+    sums_array,
+)
 
 
 @wp.kernel
@@ -50,11 +60,14 @@ def accumulate_max_kernel(
     keys: wp.array(dtype=wp.float32),
     values: wp.array(dtype=wp.int32),
     rank: int,
+    first_hist: wp.array(dtype=int),
 ):
     """``accumulate_kernel`` and ``max_kernel`` in one tiled launch (a GPU's step, one launch and one pass over the
     log-weights fewer): each block's largest new log-weight by a tile reduction, then one atomic max per block (a
     maximum: the same bits in any order). With ``rank``, also the top-share estimate's sort keys -log w and
-    indices (``rank_keys_kernel`` in kernels/estimate.py)."""
+    indices (``rank_keys_kernel`` in kernels/estimate.py). Given ``first_hist`` (SELECT_BINS counts, zero before),
+    also the radix select's first pass: each block counts its new keys' first digits in shared memory and adds the
+    counts into ``first_hist`` (integers: the same counts in any order; ``select_histogram_kernel`` pass 0)."""
     b, lane = wp.tid()
     i = b * wp.block_dim() + lane
     v = float(-3.0e38)
@@ -67,6 +80,17 @@ def accumulate_max_kernel(
     m = wp.tile_max(wp.tile(v))
     if lane == 0:
         wp.atomic_max(top, 0, m[0])
+    if first_hist.shape[0] > 0:  # the same in every thread of the block
+        bins = wp.tile_zeros(shape=SELECT_BINS, dtype=int, storage="shared")
+        digit = int(0)
+        if i < log_w.shape[0]:
+            digit = first_digit(-keys[i])  # the key's bits as the select reads them (-(-v): v's bits)
+        wp.tile_scatter_add(bins, digit, 1, i < log_w.shape[0])
+        for t in range(SELECT_BINS // wp.block_dim()):
+            d = t * wp.block_dim() + lane
+            c = bins[d]
+            if c != 0:
+                wp.atomic_add(first_hist, d, c)
 
 
 SCAN_TILE = 1024  # elements a block scans at once on a GPU (``ordered_scan``)
@@ -213,9 +237,11 @@ def weigh_finish_kernel(
     partials: wp.array(dtype=vec8),
     count: int,
     sums: wp.array(dtype=wp.float32),
+    top: wp.array(dtype=wp.float32),
 ):
     """One block after ``weigh_scan_kernel``: the ``count`` blocks' totals into their running sums, and their eight
-    sums into ``sums``. The running sums are ``ordered_scan``'s to the bit: one tile scan while each thread holds at
+    sums into ``sums``; ``top`` (the maximum ``weigh_scan_kernel`` read, read by nothing after it) back to -3e38 for
+    the next ``accumulate`` (its fill is one launch fewer). The running sums are ``ordered_scan``'s to the bit: one tile scan while each thread holds at
     most one block (a GPU, up to SCAN_TILE^2 particles), else one thread adding them in order (runs joined by a tile
     scan were tried: their float rounding let the cdf step down at a join). For the eight sums a thread adds a run
     of ceil(count / threads) blocks in order and the runs are joined by a tile reduction (a fixed order)."""
@@ -241,6 +267,7 @@ def weigh_finish_kernel(
     if lane == 0:
         for c in range(8):
             sums[c] = total[0][c]
+        top[0] = -3.0e38
 
 
 @wp.func
@@ -350,17 +377,27 @@ class ParticleWeights:
     TILED = None  # accumulate in one tiled launch: None = on a GPU (tests set True or False on any device)
     ORDERED_SCAN = None  # the cdf by ordered_scan: None = on a GPU (tests set True or False on any device)
     FUSED = None  # w, the eight sums and the block scan in one pass (``weigh``): None = on a GPU (tests: any device)
+    KEEP_COS_SIN = None  # keep_cos_sin's default: None = on a CPU (tests set False to build a GPU's weights on a CPU)
 
-    def __init__(self, num_particles: int, device: str = "auto", centre=(0.0, 0.0), keep_cos_sin: bool | None = None):
+    def __init__(
+        self,
+        num_particles: int,
+        device: str = "auto",
+        centre=(0.0, 0.0),
+        keep_cos_sin: bool | None = None,
+        sums: wp.array | None = None,
+    ):
         self.device = pick_device(device)
         d = self.device
-        self.keeps_cos_sin = not wp.get_device(d).is_cuda if keep_cos_sin is None else bool(keep_cos_sin)
+        if keep_cos_sin is None:
+            keep_cos_sin = not wp.get_device(d).is_cuda if self.KEEP_COS_SIN is None else self.KEEP_COS_SIN
+        self.keeps_cos_sin = bool(keep_cos_sin)
         self.centre = wp.vec2(float(centre[0]), float(centre[1]))
         self.w = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cdf = wp.zeros(num_particles, dtype=wp.float32, device=d)
         self.cos_sin = wp.zeros(num_particles, dtype=wp.vec2, device=d)  # (cos yaw, sin yaw) per particle
         self.top = wp.zeros(1, dtype=wp.float32, device=d)
-        self.sums = wp.zeros(8, dtype=wp.float32, device=d)
+        self.sums = sums_array(sums, 8, d, "ParticleWeights")  # (a filter's read-back buffer: one copy back a step)
         self.partial = PartialSums(8, d, reduction_threads(num_particles, d))
         on_gpu = wp.get_device(d).is_cuda
         self.tiled = on_gpu if self.TILED is None else bool(self.TILED)  # see ``accumulate``
@@ -371,23 +408,33 @@ class ParticleWeights:
         # ``weigh`` in one pass (weigh_scan_kernel): needs the ordered scan's blocks and no cos/sin kept
         self.fused = (on_gpu if self.FUSED is None else bool(self.FUSED)) and self.ordered and not self.keeps_cos_sin
         self.block_sums = wp.zeros(self.scan_totals.shape[0], dtype=vec8, device=d)  # weigh_scan_kernel's, a block each
-        self._no_keys = wp.zeros(1, dtype=wp.float32, device=d)  # accumulate's keys when there are none to write
-        self._no_values = wp.zeros(1, dtype=wp.int32, device=d)
+        self._no_hist = wp.zeros(0, dtype=int, device=d)  # accumulate's first_hist when no select is counted
+        self._no_ranks = (  # accumulate's keys, values and first_hist when there are none to write
+            wp.zeros(1, dtype=wp.float32, device=d),
+            wp.zeros(1, dtype=wp.int32, device=d),
+            self._no_hist,
+        )
+        self._top_reset = False  # ``top`` holds -3e38 already (the fused weigh left it so for the next accumulate)
 
     def accumulate(self, log_w: wp.array, log_lik: wp.array, temper: float, ranks=None) -> None:
         """log_w += temper * log_lik (``accumulate_kernel``) and the new maximum into ``top``; then ``weigh`` and
         ``cumulate`` finish what ``update`` does. On a GPU one tiled launch (``accumulate_max_kernel``), which also
-        writes the top-share estimate's sort keys when given ``ranks`` = (keys, values); on a CPU two launches, as
-        before (``ranks`` must be None there: the estimate ranks its own keys). ``TILED`` overrides the choice."""
+        writes the top-share estimate's sort keys when given ``ranks`` = (keys, values) or (keys, values, first_hist),
+        and with ``first_hist`` (an array of SELECT_BINS zeros, or empty) counts its radix select's first pass; on a
+        CPU two launches, as before (``ranks`` must be None there: the estimate ranks its own keys). ``TILED``
+        overrides the choice. The maximum starts from -3e38: filled here, unless the fused ``weigh`` of the step
+        before left it so (``weigh_finish_kernel``: one launch fewer a step)."""
         self._check(log_w)
-        self.top.fill_(-3.0e38)
+        if not self._top_reset:
+            self.top.fill_(-3.0e38)
+        self._top_reset = False
         n, d = log_w.shape[0], self.device
         if self.tiled:
-            keys, values = ranks if ranks is not None else (self._no_keys, self._no_values)
+            keys, values, first_hist = (*ranks, self._no_hist)[:3] if ranks is not None else self._no_ranks
             wp.launch_tiled(
                 accumulate_max_kernel,
                 dim=[-(-n // self.block)],
-                inputs=[log_w, log_lik, float(temper), self.top, keys, values, int(ranks is not None)],
+                inputs=[log_w, log_lik, float(temper), self.top, keys, values, int(ranks is not None), first_hist],
                 block_dim=self.block,
                 device=d,
             )
@@ -416,8 +463,9 @@ class ParticleWeights:
             blocks = -(-n // block)
             inputs = [log_w, self.top, particles, self.centre, self.w, self.cdf, self.scan_totals, self.block_sums]
             wp.launch_tiled(weigh_scan_kernel, dim=[blocks], inputs=inputs, block_dim=block, device=d)
-            finish = [self.scan_totals, self.block_sums, blocks, self.sums]
+            finish = [self.scan_totals, self.block_sums, blocks, self.sums, self.top]
             wp.launch_tiled(weigh_finish_kernel, dim=[1], inputs=finish, block_dim=block, device=d)
+            self._top_reset = True
             return
         threads = launch_reduction(
             exp_kernel,
@@ -458,13 +506,15 @@ class ParticleWeights:
 
     def summary(self, sums: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
         """(weighted mean pose [x, y, yaw], N_eff, spread): the one small read back per step (eight sums;
-        ``sums``: a copy already read back). spread = sqrt(var x + var y) of the weighted positions (m)."""
-        s = (self.sums.numpy() if sums is None else np.asarray(sums)).astype(np.float64)
-        total = s[5]
+        ``sums``: a copy already read back). spread = sqrt(var x + var y) of the weighted positions (m). In float64,
+        on Python floats where numpy's small arrays would cost a GPU step's host time (the same bits: the divisions
+        by a float64 total keep numpy's inf and nan, the yaw keeps numpy's arctan2)."""
+        s = (self.sums.numpy() if sums is None else np.asarray(sums)).tolist()
+        total = np.float64(s[5])
         mx, my = s[1] / total, s[2] / total
         pose = np.array([mx + self.centre[0], my + self.centre[1], np.arctan2(s[4], s[3])])
-        spread = np.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0))
-        return pose, total * total / s[0], float(spread)
+        spread = math.sqrt(max(s[6] / total - mx * mx + s[7] / total - my * my, 0.0))
+        return pose, total * total / s[0], spread
 
 
 class Resampler:

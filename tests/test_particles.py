@@ -553,3 +553,65 @@ def test_kld_count_follows_the_chi_square_quantile_and_the_levels_move_with_a_ma
     assert next_count(6250, k, 0.01, 0.99, counts) == 6250  # 2 x 3000 needs 6250: stays
     assert next_count(3125, k, 0.01, 0.99, counts) == 3125  # 3000 fits: no growth, and no shrink below it
     assert next_count(500, 10**6, 0.01, 0.99, counts) == 100_000  # capped at the most
+
+
+def test_accumulate_counts_the_selects_first_pass_as_the_twin_does(rng, monkeypatch):
+    """The tiled accumulate given the selection's first histogram (a GPU filter's step: one histogram pass fewer)
+    counts each new log-weight's first digit, the top SELECT_BITS bits of its heavy-first key, as numpy counts them
+    (ties, +0 and -0 among them); the estimate that starts from those counts (``order(counted=True)``) finds the
+    threshold and the five sums of the one that counted all its passes itself, to the bit."""
+    from irmcl_warp.kernels import ESTIMATE
+    from irmcl_warp.kernels.estimate import TopShareMean
+    from irmcl_warp.kernels.radix import FIRST_SHIFT, SELECT_BINS
+    from irmcl_warp.reference.estimate import heavy_first_keys
+
+    monkeypatch.setattr(ParticleWeights, "TILED", True)
+    monkeypatch.setattr(TopShareMean, "SELECT", True)
+    n, temper = int(rng.integers(300, 3000)), float(rng.uniform(0.1, 1.0))
+    log_w = rng.normal(0, 30, n).astype(np.float32)
+    log_lik = rng.normal(0, 3, n).astype(np.float32)
+    log_w[rng.random(n) < 0.2], log_lik[rng.random(n) < 0.2] = -0.0, 0.0  # ties, and -0 beside +0
+    particles = rng.normal(0, 5, (n, 3)).astype(np.float32)
+    pw = wp.array(particles, dtype=wp.vec3, device=DEVICE)
+    counted = ESTIMATE.build("top_share", num_particles=n, share=float(rng.uniform(0.05, 1.0)), device=DEVICE)
+    keys, values, first = counted.rank_buffers()
+    assert first.shape == (SELECT_BINS,) and not first.numpy().any()
+    weights = ParticleWeights(n, device=DEVICE)
+    lw = wp.array(log_w, dtype=wp.float32, device=DEVICE)
+    weights.accumulate(lw, wp.array(log_lik, dtype=wp.float32, device=DEVICE), temper, (keys, values, first))
+    new = lw.numpy()
+    twin = np.bincount(heavy_first_keys(new) >> FIRST_SHIFT, minlength=SELECT_BINS)
+    assert np.array_equal(first.numpy(), twin), f"seed {rng.seed}"
+    weights.weigh(lw, pw)  # w, as a GPU filter's estimate sums it
+    counted.order(counted=True)
+    counted.sum(pw, lw, weights.w)
+    alone = ESTIMATE.build("top_share", num_particles=n, share=counted.k / n, device=DEVICE)
+    assert alone.k == counted.k
+    alone.rank(lw)
+    alone.order()
+    alone.sum(pw, lw, weights.w)
+    assert counted.threshold() == alone.threshold(), f"seed {rng.seed}"
+    assert np.array_equal(counted.sums.numpy(), alone.sums.numpy()), f"seed {rng.seed}"
+    assert not counted.hist.numpy().any() and not alone.hist.numpy().any()  # the finish left them zero
+
+
+def test_the_fused_weigh_leaves_the_maximum_ready_for_the_next_accumulate(rng, monkeypatch):
+    """The fused weigh (a GPU's) sets the maximum back to -3e38 for the next accumulate, which then launches no
+    fill: over steps whose log-weights fall far below the last step's maximum, every step's maximum and weights are
+    still those of a fill before each accumulate."""
+    monkeypatch.setattr(ParticleWeights, "TILED", True)
+    monkeypatch.setattr(ParticleWeights, "ORDERED_SCAN", True)
+    monkeypatch.setattr(ParticleWeights, "FUSED", True)
+    n = int(rng.integers(300, 3000))
+    particles = wp.array(rng.normal(0, 5, (n, 3)).astype(np.float32), dtype=wp.vec3, device=DEVICE)
+    weights = ParticleWeights(n, device=DEVICE, keep_cos_sin=False)
+    assert weights.fused
+    lw = wp.zeros(n, dtype=wp.float32, device=DEVICE)
+    for step in range(4):
+        lik = rng.normal(-40.0 * (step + 1), 2.0, n).astype(np.float32)  # each step far below the one before
+        before = lw.numpy().copy()
+        weights.accumulate(lw, wp.array(lik, dtype=wp.float32, device=DEVICE), 1.0)
+        assert weights.top.numpy()[0] == np.max(before + lik), f"step {step}, seed {rng.seed}"
+        weights.weigh(lw, particles)
+        assert weights.top.numpy()[0] == np.float32(-3.0e38)
+        assert np.allclose(weights.w.numpy(), np.exp(lw.numpy() - lw.numpy().max()), rtol=1e-5), f"step {step}"
