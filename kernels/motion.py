@@ -48,16 +48,13 @@ def odometry_step(odom_from, odom_to, min_trans_m: float = 0.01) -> tuple[float,
     return rot1, trans, rot2
 
 
-def make_kernel(a1: float, a2: float, a3: float, a4: float):
-    @wp.kernel(module="unique")
-    def sample(
-        particles: wp.array(dtype=wp.vec3),
-        step: wp.array(dtype=wp.float32),
-        seed: wp.array(dtype=wp.int32),
-        first: int,
-    ):
-        i = wp.tid()
-        state = wp.rand_init(seed[0], first + i)  # particle first + i's numbers, whatever block it is launched in
+def make_move(a1: float, a2: float, a3: float, a4: float):
+    """Thrun's odometry sample for one particle: a function (pose, step [3], seed [1], particle index) -> pose, which
+    the motion kernel launches and an observation model may call before it weighs (``Motion.move``)."""
+
+    @wp.func
+    def move(p: wp.vec3, step: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32), index: int) -> wp.vec3:
+        state = wp.rand_init(seed[0], index)  # the particle's numbers, whatever block or kernel moves it
         r1 = step[0]
         t = step[1]
         r2 = step[2]
@@ -67,22 +64,39 @@ def make_kernel(a1: float, a2: float, a3: float, a4: float):
         r1h = r1 - s1 * wp.randn(state)
         th = t - st * wp.randn(state)
         r2h = r2 - s2 * wp.randn(state)
-        p = particles[i]
         heading = p[2] + r1h
         yaw = p[2] + r1h + r2h
         yaw = wp.atan2(wp.sin(yaw), wp.cos(yaw))
-        particles[i] = wp.vec3(p[0] + th * wp.cos(heading), p[1] + th * wp.sin(heading), yaw)
+        return wp.vec3(p[0] + th * wp.cos(heading), p[1] + th * wp.sin(heading), yaw)
+
+    return move
+
+
+def make_kernel(move):
+    """The motion kernel of a per-particle ``move`` (``make_move``, ``make_irmcl_move``): particle first + i moved."""
+
+    @wp.kernel(module="unique")
+    def sample(
+        particles: wp.array(dtype=wp.vec3),
+        step: wp.array(dtype=wp.float32),
+        seed: wp.array(dtype=wp.int32),
+        first: int,
+    ):
+        i = wp.tid()
+        particles[i] = move(particles[i], step, seed, first + i)
 
     return sample
 
 
 class Motion:
-    """One motion kernel (``kernel(particles, step [3], seed [1])``) with the host-side call and the
-    device-side launch every model shares."""
+    """One motion kernel (``kernel(particles, step [3], seed [1])``) made of a per-particle ``move`` (a Warp function
+    (pose, step, seed, index) -> pose, which an observation model may call itself: kernels/weighting/ ``moving``),
+    with the host-side call and the device-side launch every model shares."""
 
-    def __init__(self, kernel, device: str = "auto", cpu_threads: int | None = None):
+    def __init__(self, move, device: str = "auto", cpu_threads: int | None = None):
         self.device = pick_device(device)
-        self.kernel = kernel
+        self.move = move
+        self.kernel = make_kernel(move)
         # on the CPU a block per core, from 2 x CPU_MIN_BLOCK particles (kernels/registry.py says why)
         self.blocks = ParticleBlocks(self.device, cpu_threads, min_block=CPU_MIN_BLOCK)
         self._step = wp.zeros(3, dtype=wp.float32, device=self.device)
@@ -109,7 +123,7 @@ class OdometryMotion(Motion):
     def __init__(self, alphas=(0.05, 0.005, 0.05, 0.005), device: str = "auto", cpu_threads: int | None = None):
         if len(alphas) != 4 or min(alphas) < 0:
             raise ValueError(f"motion: expected 4 non-negative alphas (Thrun a1..a4), got {list(alphas)}")
-        super().__init__(make_kernel(*map(float, alphas)), device, cpu_threads)
+        super().__init__(make_move(*map(float, alphas)), device, cpu_threads)
 
 
 @MOTION.register("odometry")
@@ -121,18 +135,13 @@ def make_odometry(**settings) -> OdometryMotion:
 IRMCL_NOISE = (0.01, 0.0005, 0.0002, 0.0005, 0.0001, 0.0001, 0.001, 0.00001, 0.05)
 
 
-def make_irmcl_kernel(c):
+def make_irmcl_move(c):
+    """IR-MCL's motion for one particle (see the module's docstring): a function (pose, step, seed, index) -> pose."""
     c = [float(v) for v in c]
 
-    @wp.kernel(module="unique")
-    def sample(
-        particles: wp.array(dtype=wp.vec3),
-        step: wp.array(dtype=wp.float32),
-        seed: wp.array(dtype=wp.int32),
-        first: int,
-    ):
-        i = wp.tid()
-        state = wp.rand_init(seed[0], first + i)  # particle first + i's numbers, whatever block it is launched in
+    @wp.func
+    def move(p: wp.vec3, step: wp.array(dtype=wp.float32), seed: wp.array(dtype=wp.int32), index: int) -> wp.vec3:
+        state = wp.rand_init(seed[0], index)  # the particle's numbers, whatever block or kernel moves it
         dx = step[1] * wp.cos(step[0])
         dy = step[1] * wp.sin(step[0])
         dt = step[0] + step[2]
@@ -142,13 +151,12 @@ def make_irmcl_kernel(c):
         nx = dx + wp.sqrt(wp.static(c[0]) * ax + wp.static(c[1]) * ay + wp.static(c[2]) * at) * wp.randn(state)
         ny = dy + wp.sqrt(wp.static(c[3]) * ax + wp.static(c[4]) * ay + wp.static(c[5]) * at) * wp.randn(state)
         nt = dt + wp.sqrt(wp.static(c[6]) * ax + wp.static(c[7]) * ay + wp.static(c[8]) * at) * wp.randn(state)
-        p = particles[i]
         co = wp.cos(p[2])
         si = wp.sin(p[2])
         yaw = p[2] + nt
-        particles[i] = wp.vec3(p[0] + co * nx - si * ny, p[1] + si * nx + co * ny, wp.atan2(wp.sin(yaw), wp.cos(yaw)))
+        return wp.vec3(p[0] + co * nx - si * ny, p[1] + si * nx + co * ny, wp.atan2(wp.sin(yaw), wp.cos(yaw)))
 
-    return sample
+    return move
 
 
 class IrmclMotion(Motion):
@@ -159,7 +167,7 @@ class IrmclMotion(Motion):
             raise ValueError(
                 f"motion irmcl: expected 9 non-negative noise coefficients (C row by row), got {list(noise)}"
             )
-        super().__init__(make_irmcl_kernel(noise), device, cpu_threads)
+        super().__init__(make_irmcl_move(noise), device, cpu_threads)
 
 
 @MOTION.register("irmcl")

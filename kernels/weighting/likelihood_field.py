@@ -11,7 +11,7 @@ import warp as wp
 
 from irmcl_warp.kernels.raycast import distance_to_occupied
 from irmcl_warp.kernels.registry import WEIGHTING
-from irmcl_warp.kernels.weighting.common import GridModel, beam_origin
+from irmcl_warp.kernels.weighting.common import GridModel, beam_origin, moving_kernel
 
 
 def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, far_m: float, max_dist: float):
@@ -29,23 +29,20 @@ def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, far_m: floa
     return log_q
 
 
-@wp.kernel
-def likelihood_field_kernel(
+@wp.func
+def field_log_weight(
     log_q: wp.array2d(dtype=wp.float32),
     origin: wp.vec2,
     res: float,
-    particles: wp.array(dtype=wp.vec3),
+    pose: wp.vec3,
     T_base_laser: wp.vec3,
     beam_cs: wp.array(dtype=wp.vec2),
     measured: wp.array(dtype=wp.float32),
-    log_lik: wp.array(dtype=wp.float32),
-):
-    """log w = sum over valid beams of log q at the end point's cell (``log_q``: the map's cells, then one more
-    row whose first entry is log q at the capped distance, for end points off the map). A beam's direction is
-    its precomputed (cos, sin) in the laser frame (``beam_cs``) turned by the laser's heading: one cosine and
-    one sine per particle instead of per beam."""
-    p = wp.tid()
-    pose = particles[p]
+) -> float:
+    """log w of one particle: the sum over valid beams of log q at the end point's cell (``log_q``: the map's cells,
+    then one more row whose first entry is log q at the capped distance, for end points off the map). A beam's
+    direction is its precomputed (cos, sin) in the laser frame (``beam_cs``) turned by the laser's heading: one
+    cosine and one sine per particle instead of per beam."""
     o = beam_origin(pose, T_base_laser)  # once per particle, not per beam
     heading = pose[2] + T_base_laser[2]
     c = wp.cos(heading)
@@ -65,7 +62,48 @@ def likelihood_field_kernel(
                 s += log_q[iy, ix]
             else:
                 s += off_map
-    log_lik[p] = s
+    return s
+
+
+@wp.kernel
+def likelihood_field_kernel(
+    log_q: wp.array2d(dtype=wp.float32),
+    origin: wp.vec2,
+    res: float,
+    particles: wp.array(dtype=wp.vec3),
+    T_base_laser: wp.vec3,
+    beam_cs: wp.array(dtype=wp.vec2),
+    measured: wp.array(dtype=wp.float32),
+    log_lik: wp.array(dtype=wp.float32),
+):
+    """``field_log_weight`` of each particle, a thread per particle."""
+    p = wp.tid()
+    log_lik[p] = field_log_weight(log_q, origin, res, particles[p], T_base_laser, beam_cs, measured)
+
+
+def make_move_field_kernel(move):
+    """``likelihood_field_kernel`` after moving each particle by ``move`` (a motion model's per-particle function,
+    kernels/motion.py ``Motion.move``) and writing it back: one launch and one pass over the particles fewer."""
+
+    @wp.kernel(module="unique")
+    def move_and_weigh(
+        log_q: wp.array2d(dtype=wp.float32),
+        origin: wp.vec2,
+        res: float,
+        particles: wp.array(dtype=wp.vec3),
+        T_base_laser: wp.vec3,
+        beam_cs: wp.array(dtype=wp.vec2),
+        measured: wp.array(dtype=wp.float32),
+        log_lik: wp.array(dtype=wp.float32),
+        step: wp.array(dtype=wp.float32),
+        seed: wp.array(dtype=wp.int32),
+    ):
+        p = wp.tid()
+        moved = move(particles[p], step, seed, p)
+        particles[p] = moved
+        log_lik[p] = field_log_weight(log_q, origin, res, moved, T_base_laser, beam_cs, measured)
+
+    return move_and_weigh
 
 
 class LikelihoodField(GridModel):
@@ -105,6 +143,21 @@ class LikelihoodField(GridModel):
             device=self.device,
         )
         self.kernel = likelihood_field_kernel
+        self._moving = {}  # id(motion.move) -> (the move, its move-and-weigh kernel) (``moving``)
+
+    def moving(self, motion):
+        """A launch that moves each particle by ``motion`` (kernels/motion.py) and weighs it in one kernel: a function
+        (particles, step, seed, T_base_laser, angles, measured, log_lik) -> None, the same particles and weights as
+        ``motion.launch`` then this call, one launch fewer (a GPU filter's step: ParticleFilter._move_and_observe).
+        One block of all the particles: the motion's random numbers are those of its own launch (index = particle)."""
+        kernel = moving_kernel(self._moving, motion, make_move_field_kernel)
+
+        def launch(particles, step, seed, T_base_laser, angles, measured, log_lik) -> None:
+            T = wp.vec3(*map(float, T_base_laser))
+            inputs = [self.grid, self.origin, self.res, particles, T, self.beams(angles), measured, log_lik, step, seed]
+            wp.launch(kernel, particles.shape[0], inputs, device=self.device)
+
+        return launch
 
     def beams(self, angles: wp.array) -> wp.array:
         """The beams' (cos, sin) in the laser frame, computed on the device once per angles array and shared by

@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.kernels.registry import CPU_MIN_BLOCK, WEIGHTING, ParticleBlocks, pick_device
-from irmcl_warp.kernels.weighting.common import laser_pose, mean_l1_log_weight
+from irmcl_warp.kernels.weighting.common import laser_pose, mean_l1_log_weight, moving_kernel
 from irmcl_warp.kernels.weighting.nog_raymarch import NogRaymarch
 
 
@@ -86,12 +86,60 @@ def table_ranges(
     )
 
 
-def make_table_likelihood_kernel(sigma: float):
+def make_table_likelihood_kernel(sigma: float, move=None):
     """IR-MCL eq. 6 on the table's ranges, one thread per particle: its beams read one node's row of the
-    table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array."""
+    table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array. With
+    ``move`` (a motion model's per-particle function, kernels/motion.py ``Motion.move``) the thread first moves its
+    particle and writes it back: the motion kernel's launch and its pass over the particles fewer (``moving``)."""
+
+    @wp.func
+    def log_weight(
+        table: wp.array2d(dtype=wp.uint16),
+        width: int,
+        height: int,
+        origin: wp.vec2,
+        res: float,
+        quantum: float,
+        particle: wp.vec3,
+        T_base_laser: wp.vec3,
+        angles: wp.array(dtype=wp.float32),
+        measured: wp.array(dtype=wp.float32),
+    ) -> float:
+        pose = laser_pose(particle, T_base_laser)
+        n = float(0.0)
+        err = float(0.0)
+        for b in range(measured.shape[0]):
+            m = measured[b]
+            if m == m:  # NaN: invalid beam
+                n += 1.0
+                err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
+        return mean_l1_log_weight(err, n, wp.static(sigma * sigma))
+
+    if move is None:
+
+        @wp.kernel(module="unique")
+        def likelihood(
+            table: wp.array2d(dtype=wp.uint16),
+            width: int,
+            height: int,
+            origin: wp.vec2,
+            res: float,
+            quantum: float,
+            particles: wp.array(dtype=wp.vec3),
+            T_base_laser: wp.vec3,
+            angles: wp.array(dtype=wp.float32),
+            measured: wp.array(dtype=wp.float32),
+            log_weights: wp.array(dtype=wp.float32),
+        ):
+            p = wp.tid()
+            log_weights[p] = log_weight(
+                table, width, height, origin, res, quantum, particles[p], T_base_laser, angles, measured
+            )
+
+        return likelihood
 
     @wp.kernel(module="unique")
-    def likelihood(
+    def move_and_weigh(
         table: wp.array2d(dtype=wp.uint16),
         width: int,
         height: int,
@@ -103,19 +151,15 @@ def make_table_likelihood_kernel(sigma: float):
         angles: wp.array(dtype=wp.float32),
         measured: wp.array(dtype=wp.float32),
         log_weights: wp.array(dtype=wp.float32),
+        step: wp.array(dtype=wp.float32),
+        seed: wp.array(dtype=wp.int32),
     ):
         p = wp.tid()
-        pose = laser_pose(particles[p], T_base_laser)
-        n = float(0.0)
-        err = float(0.0)
-        for b in range(measured.shape[0]):
-            m = measured[b]
-            if m == m:  # NaN: invalid beam
-                n += 1.0
-                err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
-        log_weights[p] = mean_l1_log_weight(err, n, wp.static(sigma * sigma))
+        moved = move(particles[p], step, seed, p)
+        particles[p] = moved
+        log_weights[p] = log_weight(table, width, height, origin, res, quantum, moved, T_base_laser, angles, measured)
 
-    return likelihood
+    return move_and_weigh
 
 
 class NogTable:
@@ -160,7 +204,9 @@ class NogTable:
         self.table = table
         self.num_particles = num_particles
         self._rendered = None  # [P, B] for render() only: a filter step never fills it
+        self.sigma_m = float(sigma_m)
         self.likelihood_kernel = make_table_likelihood_kernel(sigma_m)
+        self._moving = {}  # id(motion.move) -> (the move, its move-and-weigh kernel) (``moving``)
 
     @staticmethod
     def build(nog, num_angles, num_samples, near_m, far_m, t_min, empty_below, device) -> wp.array:
@@ -234,17 +280,34 @@ class NogTable:
     def __call__(
         self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array
     ) -> None:
+        self._check(angles, measured)
+        self.blocks.run(self.block(particles, T_base_laser, angles, measured, log_weights), particles.shape[0])
+
+    def _check(self, angles: wp.array, measured: wp.array) -> None:
         if angles.shape[0] != self.num_beams or measured.shape[0] != self.num_beams:
             raise ValueError(
                 f"nog_table: {measured.shape[0]} measured ranges / {angles.shape[0]} angles, "
                 f"built for {self.num_beams} beams"
             )
-        self.blocks.run(self.block(particles, T_base_laser, angles, measured, log_weights), particles.shape[0])
 
     def block(self, particles: wp.array, T_base_laser, angles: wp.array, measured: wp.array, log_weights: wp.array):
         """The call for one block of particles: a function (p0, p1) -> None (``ParticleBlocks.block``)."""
         inputs = self._args(particles, T_base_laser, angles) + [measured, log_weights]
         return self.blocks.block(self.likelihood_kernel, particles.shape[0], inputs, per_particle=(6, 10))
+
+    def moving(self, motion):
+        """A launch that moves each particle by ``motion`` (kernels/motion.py) and weighs it in one kernel: a function
+        (particles, step, seed, T_base_laser, angles, measured, log_weights) -> None, the same particles and weights
+        as ``motion.launch`` then this call, one launch fewer (a GPU filter's step: ParticleFilter._move_and_observe).
+        One block of all the particles: the motion's random numbers are those of its own launch (index = particle)."""
+        kernel = moving_kernel(self._moving, motion, lambda move: make_table_likelihood_kernel(self.sigma_m, move))
+
+        def launch(particles, step, seed, T_base_laser, angles, measured, log_weights) -> None:
+            self._check(angles, measured)
+            inputs = self._args(particles, T_base_laser, angles) + [measured, log_weights, step, seed]
+            wp.launch(kernel, particles.shape[0], inputs, device=self.device)
+
+        return launch
 
 
 def table_headings(num_angles: int) -> np.ndarray:
