@@ -428,6 +428,71 @@ def test_the_estimate_on_a_second_stream_keeps_every_bit(graph, rng, monkeypatch
         assert np.array_equal(forked, one), f"seed {seed} on {DEVICE}"
 
 
+@pytest.mark.parametrize("graph", ["on", "off"])
+def test_a_gpus_step_counting_the_selects_first_pass_in_the_accumulate_keeps_every_bit(graph, rng, monkeypatch):
+    """A GPU filter's step as a GPU builds it (the motion inside the weighting's kernel, tiled accumulate, fused
+    weigh, ordered scan, no cos and sin kept, the top share by a radix select), here on any device: the accumulate counting the selection's first pass (one
+    launch fewer) against the selection counting all its passes, the same estimates, N_eff and particles; and within
+    float32 rounding of the default build of this device (the fused weigh's maximum set back for the next step, the
+    sums read back in one copy)."""
+    from eval.analyses.determinism import run
+    from irmcl_warp.kernels.estimate import TopShareMean
+    from irmcl_warp.kernels.resample import ParticleWeights
+    from irmcl_warp.mcl.filter import ParticleFilter
+
+    log, nog = _world_and_map(duration_s=4.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed = int(rng.integers(1 << 16))
+    default = run(log, nog, maps, "likelihood_field", seed, graph, DEVICE)
+    for switch in ("TILED", "ORDERED_SCAN", "FUSED"):
+        monkeypatch.setattr(ParticleWeights, switch, True)
+    monkeypatch.setattr(ParticleWeights, "KEEP_COS_SIN", False)
+    monkeypatch.setattr(TopShareMean, "SELECT", True)
+    monkeypatch.setattr(ParticleFilter, "MOVE_IN_WEIGHTING", True)
+    runs = {}
+    for first in (False, True):
+        monkeypatch.setattr(TopShareMean, "FIRST_IN_ACCUMULATE", first)
+        poses, neffs, pf = run(log, nog, maps, "likelihood_field", seed, graph, DEVICE)
+        assert pf.weights.fused and pf.estimator.selects and pf._moving is not None
+        assert len(pf.estimator.rank_buffers()) == (3 if first else 2)
+        runs[first] = (poses, neffs, pf.particles.numpy())
+    for counted, apart in zip(runs[True], runs[False]):
+        assert np.array_equal(counted, apart), f"seed {seed} on {DEVICE}"
+    assert np.allclose(runs[True][0][:, :2], default[0][:, :2], atol=1e-3), f"seed {seed} on {DEVICE}"
+    assert np.allclose(runs[True][1], default[1], rtol=1e-3), f"seed {seed} on {DEVICE}"
+
+
+@pytest.mark.parametrize(
+    "weighting, motion, graph",
+    [
+        ("nog_table", "odometry", "on"),
+        ("nog_table", "irmcl", "off"),
+        ("likelihood_field", "odometry", "off"),
+        ("likelihood_field", "irmcl", "on"),
+    ],
+)
+def test_moving_the_particles_inside_the_weighting_keeps_every_bit(weighting, motion, graph, rng, monkeypatch):
+    """The weighting's one kernel that moves each particle and weighs it (a GPU's step: ParticleFilter._moving)
+    against the motion's launch and then the weighting's: the same estimates, N_eff and particles, for the range
+    table and the likelihood field, either motion model, in a graph and launched one by one (through a reduce)."""
+    from eval.analyses.determinism import run
+    from irmcl_warp.mcl.filter import ParticleFilter
+
+    log, nog = _world_and_map(duration_s=4.0)
+    corner = (nog.origin_xy[0] - nog.resolution_m / 2, nog.origin_xy[1] - nog.resolution_m / 2)
+    maps = WeightingMaps(nog=nog, occupancy=nog.walls, origin_xy=corner, resolution_m=nog.resolution_m)
+    seed = int(rng.integers(1 << 16))
+    runs = {}
+    for inside in (False, True):
+        monkeypatch.setattr(ParticleFilter, "MOVE_IN_WEIGHTING", inside)
+        poses, neffs, pf = run(log, nog, maps, weighting, seed, graph, DEVICE, motion=motion, table_angles=36)
+        assert (pf._moving is not None) == inside
+        runs[inside] = (poses, neffs, pf.particles.numpy())
+    for one, two in zip(runs[True], runs[False]):
+        assert np.array_equal(one, two), f"{weighting} {motion} seed {seed} on {DEVICE}"
+
+
 @pytest.mark.cpu_only
 def test_a_cpu_step_split_over_the_cores_then_replayed_as_a_graph_keeps_every_bit(rng):
     """On a CPU with two cores' blocks (mcl.cpu_threads=2, more than 2 x CPU_MIN_BLOCK particles) the motion and the
@@ -574,3 +639,32 @@ def test_global_candidates_cover_the_robot_more_often_at_a_global_start():
                 pf.step(odometry_step(log.odom[2], log.odom[3]), log.ranges_m[3])
                 assert pf.plain_steps == 1 and np.all(pf.log_w.numpy() == 0.0)
     assert covered[16] >= covered[1] + 4, covered
+
+
+def test_a_steps_inputs_go_in_one_buffer_and_its_sums_come_back_in_one(rng):
+    """StepInputs: the odometry step, the draw, the ranges and the two int32 seeds written into one host buffer and
+    sent in one copy are what the kernels' views of the device buffer read (seeds beyond float32's integers too);
+    the filter's weights and estimator write their sums into views of one buffer, read back in one copy, and a sums
+    array of the wrong size is refused by name."""
+    from irmcl_warp.kernels import ESTIMATE
+    from irmcl_warp.mcl.filter import StepInputs
+
+    beams = int(rng.integers(1, 40))
+    inputs = StepInputs(beams, DEVICE)
+    odom, draw = rng.normal(size=3).astype(np.float32), float(rng.uniform())
+    ranges = rng.uniform(0.1, 20.0, beams).astype(np.float32)
+    seeds = (int(rng.integers(1 << 24, 1 << 31)), -int(rng.integers(1, 1 << 31)))
+    inputs.upload(odom, draw, ranges, *seeds)
+    inputs.send()
+    assert np.array_equal(inputs.odom.numpy(), odom) and inputs.draw.numpy()[0] == np.float32(draw)
+    assert np.array_equal(inputs.measured.numpy(), ranges)
+    assert (int(inputs.motion_seed.numpy()[0]), int(inputs.resample_seed.numpy()[0])) == seeds
+    log, nog = _world_and_map(duration_s=2.0)
+    pf = _filter(nog, MCLConfig(num_particles=64, num_samples=32, seed=int(rng.integers(1 << 16))), log)
+    pf.init_gaussian(log.ground_truth[0], (0.2, 0.2, 0.1))
+    pf.step(odometry_step(log.odom[0], log.odom[1]), log.ranges_m[1])
+    both = pf.sums.numpy()
+    assert np.array_equal(both[:8], pf.weights.sums.numpy()) and np.array_equal(both[8:], pf.estimator.sums.numpy())
+    assert np.array_equal(pf._readback, both) and both[5] > 0  # (sum w > 0: the weights' sums were written)
+    with pytest.raises(ValueError, match="top_share: sums must be 5 float32"):
+        ESTIMATE.build("top_share", num_particles=8, device=DEVICE, sums=pf.sums)

@@ -3,8 +3,11 @@ chosen from a registry once, in ``__init__``; particle arrays are allocated once
 ``reduce`` shrinks the set) and only launched on.
 
 Per step the host sends what the step takes (``StepInputs``: the odometry step, the measured ranges of
-the chosen beams, the motion seed and the resampling draw; two copies) and reads back once after
+the chosen beams, the motion seed and the resampling draw; one copy) and reads back once after
 everything is launched: the eight weight sums (mean, N_eff, spread) and the estimate's five (one copy).
+On a GPU a step is about ten dependent launches: the copy in, motion and weighting in one kernel (``_moving``),
+the accumulate (which also counts the estimate's first select pass), then the weights' sums, scan and resampling
+beside the estimate's select and sums on a second stream, and the copy back.
 Resampling runs when N_eff < ``resample_threshold`` * N (selective resampling; 1.0 = every step),
 decided on the device. With recovery on, the log mean likelihood is read back as well.
 
@@ -24,51 +27,76 @@ from irmcl_warp.kernels import ESTIMATE, MOTION, RESAMPLE, pick_device
 from irmcl_warp.kernels.kld import OccupiedBins, levels, next_count
 from irmcl_warp.kernels.resample import LogMeanLikelihood, ParticleWeights, Resampler, inject_kernel
 
-# mcl.estimate -> (cfg, num_particles, map bounds, device) -> the estimator (None: the weighted mean of all)
+# mcl.estimate -> (cfg, num_particles, map bounds, device, where its five sums go) -> the estimator (None: the
+# weighted mean of all)
 ESTIMATORS = {
-    "top_share": lambda cfg, n, bounds, d: ESTIMATE.build(
-        "top_share", num_particles=n, share=cfg.estimate_share, device=d
+    "top_share": lambda cfg, n, bounds, d, sums: ESTIMATE.build(
+        "top_share", num_particles=n, share=cfg.estimate_share, device=d, sums=sums
     ),
-    "best_cluster": lambda cfg, n, bounds, d: ESTIMATE.build(
+    "best_cluster": lambda cfg, n, bounds, d, sums: ESTIMATE.build(
         "best_cluster",
         num_particles=n,
         bounds=bounds,
         cell_m=cfg.cluster_cell_m,
         yaw_bins=cfg.cluster_yaw_bins,
         device=d,
+        sums=sums,
     ),
-    "mean": lambda cfg, n, bounds, d: None,
+    "mean": lambda cfg, n, bounds, d, sums: None,
 }
 
 
 class StepInputs:
-    """What one step takes from the host, written into one host buffer per type and copied to the device in
-    two copies: float32 [rot1, trans, rot2, resampling draw, measured ranges of the B beams] and int32
-    [motion seed, multinomial seed]. The kernels get views of the device buffers (``odom``, ``draw``,
-    ``measured``, ``motion_seed``, ``resample_seed``), so a captured step reads each scan's values. On a
-    GPU the host buffers are pinned and ``send()``'s two copies are the first launches of a step (a captured
-    step copies the values the host wrote before replaying it); on a CPU they are the device buffers."""
+    """What one step takes from the host, written into one host buffer and copied to the device in one copy: float32
+    [rot1, trans, rot2, resampling draw, measured ranges of the B beams, then two int32 (their bits): motion seed,
+    multinomial seed]. The kernels get views of the device buffer (``odom``, ``draw``, ``measured``, and the int32
+    ``motion_seed`` and ``resample_seed`` over its last eight bytes), so a captured step reads each scan's values. On a
+    GPU the host buffer is pinned and ``send()``'s copy is the first launch of a step (a captured step copies the
+    values the host wrote before replaying it); on a CPU it is the device buffer."""
 
     def __init__(self, num_beams: int, device: str):
-        self.values = wp.zeros(4 + num_beams, dtype=wp.float32, device=device)
-        self.seeds = wp.zeros(2, dtype=wp.int32, device=device)
         on_gpu = device.startswith("cuda")
+        self.values = wp.zeros(4 + num_beams + 2, dtype=wp.float32, device=device)
         self.host_values = wp.zeros_like(self.values, device="cpu", pinned=True) if on_gpu else self.values
-        self.host_seeds = wp.zeros_like(self.seeds, device="cpu", pinned=True) if on_gpu else self.seeds
-        self.odom, self.draw, self.measured = self.values[0:3], self.values[3:4], self.values[4:]
-        self.motion_seed, self.resample_seed = self.seeds[0:1], self.seeds[1:2]
-        self._values, self._seeds = self.host_values.numpy(), self.host_seeds.numpy()  # views, made once
+        self.odom, self.draw, self.measured = self.values[0:3], self.values[3:4], self.values[4 : 4 + num_beams]
+        seeds = wp.array(  # the last two floats' bytes as int32 (a view: ``values`` owns the memory)
+            ptr=self.values.ptr + 4 * (4 + num_beams), dtype=wp.int32, shape=(2,), device=device
+        )
+        self._keep = seeds  # (the views below are of it)
+        self.motion_seed, self.resample_seed = seeds[0:1], seeds[1:2]
+        self._values = self.host_values.numpy()  # a view, made once
+        self._ranges = self._values[4 : 4 + num_beams]
+        self._seeds = self._values[4 + num_beams :].view(np.uint32)
+        self._bad, self._far = np.zeros(num_beams, bool), np.zeros(num_beams, bool)  # (upload_scan's scratch)
 
     def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
-        """Write a step's inputs into the host buffers (``send`` copies them to the device)."""
+        """Write a step's inputs into the host buffer (``send`` copies it to the device); ``measured``: the chosen
+        beams' ranges, NaN where not weighed (``upload_scan`` picks them from a whole scan)."""
+        self._ranges[:] = measured
+        self._set(odom_step, draw, motion_seed, resample_seed)
+
+    def upload_scan(self, odom_step, draw, scan, beam_index, near_m, far_m, motion_seed, resample_seed) -> None:
+        """``upload`` with ``measured`` = ``ParticleFilter.chosen_ranges(scan)`` written into the buffer in place (the
+        beams picked by ``beam_index``, NaN at or below ``near_m`` and at or beyond ``far_m``; NaN stays NaN): the
+        same values with four small numpy calls and no array made, a step's host time on a GPU's fast path."""
+        r, bad, far = self._ranges, self._bad, self._far
+        np.take(scan, beam_index, out=r)
+        np.less_equal(r, near_m, out=bad)
+        np.greater_equal(r, far_m, out=far)
+        np.logical_or(bad, far, out=bad)
+        np.copyto(r, np.float32(np.nan), where=bad)
+        self._set(odom_step, draw, motion_seed, resample_seed)
+
+    def _set(self, odom_step, draw: float, motion_seed: int, resample_seed: int) -> None:
         v = self._values
-        v[0:3], v[3], v[4:] = odom_step, draw, measured
-        self._seeds[:] = np.array([motion_seed, resample_seed], np.int64).astype(np.int32, casting="unsafe")
+        v[0], v[1], v[2] = odom_step
+        v[3] = draw
+        seeds = self._seeds  # uint32 view: the seeds' low 32 bits, as an int32 cast wraps them
+        seeds[0], seeds[1] = motion_seed & 0xFFFFFFFF, resample_seed & 0xFFFFFFFF
 
     def send(self) -> None:
         if self.host_values is not self.values:
             wp.copy(self.values, self.host_values)
-            wp.copy(self.seeds, self.host_seeds)
 
 
 def pick_beams(n_sensor: int, num_beams: int, how: str = "spread") -> np.ndarray:
@@ -106,6 +134,7 @@ def log_running_average(l_old: float, l_new: float, rate: float) -> float:
 
 class ParticleFilter:
     SECOND_STREAM = True  # on a GPU, the top-share estimate's sort and sums beside the rest of the step (_normalise)
+    MOVE_IN_WEIGHTING = None  # the motion inside the weighting's kernel where it can (``moving``): None = on a GPU
 
     def __init__(
         self,
@@ -186,13 +215,21 @@ class ParticleFilter:
         included (again after ``reduce`` and when a run starts with another count)."""
         cfg, d = self.cfg, self.device
         centre = ((self.bounds[0] + self.bounds[2]) / 2, (self.bounds[1] + self.bounds[3]) / 2)
-        self.weights = ParticleWeights(n, device=d, centre=centre)
-        self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d)
+        # the weights' 8 sums, then the estimator's 5: one buffer, so one copy brings them back (``_copy_sums``)
+        self.sums = wp.zeros(13, dtype=wp.float32, device=d)
+        self.weights = ParticleWeights(n, device=d, centre=centre, sums=self.sums[0:8])
+        self.estimator = ESTIMATORS[cfg.estimate](cfg, n, self.bounds, d, self.sums[8:13])
         if hasattr(self.estimator, "share_weights") and self.weights.keeps_cos_sin:  # w and the yaws' cos, sin
             self.estimator.share_weights(self.weights)
         self.weighting = None  # the old set's scratch is released before the new one is allocated
         self.weighting = self.make_weighting(n, len(self.beam_index))
+        # one kernel that moves each particle and weighs it (kernels/weighting/ ``moving``): a GPU's step, one launch
+        # and one pass over the particles fewer; the same particles and weights as the two launches (tested)
+        fuse = wp.get_device(d).is_cuda if self.MOVE_IN_WEIGHTING is None else bool(self.MOVE_IN_WEIGHTING)
+        moving = getattr(self.weighting, "moving", None) if fuse else None
+        self._moving = moving(self.motion) if moving is not None else None
         self.graphs = {}  # captured on the old arrays: capture again
+        self._split = None  # whether the motion or the weighting splits this count over the CPU's cores (_replay)
         self.particles = wp.zeros(n, dtype=wp.vec3, device=d)
         self.scratch = wp.zeros(n, dtype=wp.vec3, device=d)
         self.log_w = wp.zeros(n, dtype=wp.float32, device=d)  # accumulated since the last resampling
@@ -340,8 +377,12 @@ class ParticleFilter:
         if self.use_graph and self.plain_steps > 0:  # (the first step launches one by one: it loads the kernels)
             self._replay(limit)  # the four calls below, captured once as one CUDA graph
         else:
-            self._move()  # x_t ~ p(x_t | u_t, x_t-1): sample_motion_model_odometry (Table 5.6)
-            self._weigh()  # w_t = w_t-1 p(z_t | x_t, m) (IR-MCL eq. 6), N_eff and the estimate of the weighted set
+            if self._moving is not None:  # the two below, motion and weighting in one kernel
+                self._move_and_observe()
+                self._normalise()
+            else:
+                self._move()  # x_t ~ p(x_t | u_t, x_t-1): sample_motion_model_odometry (Table 5.6)
+                self._weigh()  # w_t = w_t-1 p(z_t | x_t, m) (IR-MCL eq. 6), N_eff and the estimate of the weighted set
             p_inject = self.recovery_probability()  # max(0, 1 - w_fast / w_slow) (Table 8.3)
             self._resample(np.inf if p_inject > 0 else limit)  # low-variance resampling (Table 4.4) if N_eff < limit
         wp.synchronize_device(self.device)
@@ -418,18 +459,21 @@ class ParticleFilter:
                 f"for a sensor of {self.num_sensor_beams}"
             )
         self.steps += 1
-        draw = float(self.rng.uniform())
-        self.inputs.upload(
+        draw = self.rng.random()  # (uniform(0, 1)'s number: 0 + 1 x the same double)
+        self.inputs.upload_scan(
             odom_step,
             draw,
-            self.chosen_ranges(ranges_m),
+            ranges_m,
+            self.beam_index,
+            self.cfg.near_m,
+            self.far_m,
             self.cfg.seed * 1_000_003 + self.steps,
             Resampler.seed_of(draw),
         )
         return self.cfg.resample_threshold * self.num_particles
 
     def _move(self) -> None:
-        """The inputs to the device (two copies on a GPU) and the motion model's launch."""
+        """The inputs to the device (one copy on a GPU) and the motion model's launch."""
         self.inputs.send()
         self.motion.launch(self.particles, self.inputs.odom, self.inputs.motion_seed)
 
@@ -461,7 +505,7 @@ class ParticleFilter:
         if side is not None:  # sorted (or selected) on the side while the weights are computed
             side.wait_event(wp.get_stream(self.device).record_event(self._ranked))
             with wp.ScopedStream(side, sync_enter=False):
-                estimator.order()
+                estimator.order(counted=len(ranks) == 3)
         weights.weigh(self.log_w, self.particles)
         if side is not None:  # summed on the side while the weights are scanned and the particles resampled
             side.wait_event(wp.get_stream(self.device).record_event(self._weighed))
@@ -473,7 +517,7 @@ class ParticleFilter:
         if ranks is None:
             estimator.launch(self.particles, self.log_w)
         else:  # ranked by the accumulate launch
-            estimator.order()
+            estimator.order(counted=len(ranks) == 3)
             estimator.sum(self.particles, self.log_w, weights.w)
 
     def _side_stream(self):
@@ -503,14 +547,12 @@ class ParticleFilter:
         self._copy_sums()
 
     def _copy_sums(self) -> None:
-        """The weights' eight sums and the estimator's five into the pinned read-back buffer (one copy each), after
-        the estimate's stream, where it has one, is joined to the filter's."""
+        """The weights' eight sums and the estimator's five (one device buffer, ``_allocate``) into the pinned read-back
+        buffer in one copy, after the estimate's stream, where it has one, is joined to the filter's."""
         if self._forked:
             wp.get_stream(self.device).wait_stream(self._side)
             self._forked = False
-        wp.copy(self.readback, self.weights.sums, 0, 0, 8)
-        if self.estimator is not None:
-            wp.copy(self.readback, self.estimator.sums, 8, 0, 5)
+        wp.copy(self.readback, self.sums, 0, 0, 8 if self.estimator is None else 13)
 
     def _replay(self, limit: float) -> None:
         """``_move``, ``_weigh`` and ``_resample`` as one graph from the current particle buffer, captured on
@@ -518,12 +560,18 @@ class ParticleFilter:
         weighting splits its particles over the cores (``ParticleBlocks``; a graph would record one core's
         launch), those two run split before the graph, which then holds the rest of the step."""
         key = self.particles.ptr
-        split = self._splits_on_cpu()
+        if self._moving is not None:
+            self._split = False
+        if self._split is None:  # (found once per particle count: its Python cost a GPU step's host time)
+            self._split = self._splits_on_cpu()
+        split = self._split
         if split:
             self._move_and_observe()
         if key not in self.graphs:
             with wp.ScopedCapture(device=self.device) as capture:
-                if not split:
+                if self._moving is not None:  # (never split: one kernel moves and weighs)
+                    self._move_and_observe()
+                elif not split:
                     self._move()
                     self._observe()
                 self._normalise()
@@ -532,9 +580,17 @@ class ParticleFilter:
         wp.capture_launch(self.graphs[key])
 
     def _move_and_observe(self) -> None:
-        """``_move`` then ``_observe``; where both split their particles into the same blocks, one pass: each core
-        moves its block and weighs it at once (one wait for the cores instead of two, the block still in its cache)."""
+        """``_move`` then ``_observe``: in one kernel where the weighting moves the particles itself (``_moving``, a
+        GPU's step); where both split their particles into the same blocks, one pass: each core moves its block and
+        weighs it at once (one wait for the cores instead of two, the block still in its cache)."""
         n, motion, weighting = self.num_particles, self.motion, self.weighting
+        if self._moving is not None:
+            self.inputs.send()
+            inp = self.inputs
+            self._moving(
+                self.particles, inp.odom, inp.motion_seed, self.T_base_laser, self.angles, inp.measured, self.log_lik
+            )
+            return
         if not all(hasattr(part, "block") and hasattr(part, "blocks") for part in (motion, weighting)) or (
             motion.blocks.blocks_for(n) != weighting.blocks.blocks_for(n)
         ):
