@@ -67,7 +67,7 @@ class StepInputs:
         self._values = self.host_values.numpy()  # a view, made once
         self._ranges = self._values[4 : 4 + num_beams]
         self._seeds = self._values[4 + num_beams :].view(np.uint32)
-        self._bad, self._far = np.zeros(num_beams, bool), np.zeros(num_beams, bool)  # (upload_scan's scratch)
+        self._bad, self._beyond = np.zeros(num_beams, bool), np.zeros(num_beams, bool)  # (upload_scan's scratch)
 
     def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
         """Write a step's inputs into the host buffer (``send`` copies it to the device); ``measured``: the chosen
@@ -79,11 +79,11 @@ class StepInputs:
         """``upload`` with ``measured`` = ``ParticleFilter.chosen_ranges(scan)`` written into the buffer in place (the
         beams picked by ``beam_index``, NaN at or below ``near_m`` and at or beyond ``far_m``; NaN stays NaN): the
         same values with four small numpy calls and no array made, a step's host time on a GPU's fast path."""
-        r, bad, far = self._ranges, self._bad, self._far
+        r, bad, beyond = self._ranges, self._bad, self._beyond
         np.take(scan, beam_index, out=r)
         np.less_equal(r, near_m, out=bad)
-        np.greater_equal(r, far_m, out=far)
-        np.logical_or(bad, far, out=bad)
+        np.greater_equal(r, far_m, out=beyond)
+        np.logical_or(bad, beyond, out=bad)
         np.copyto(r, np.float32(np.nan), where=bad)
         self._set(odom_step, draw, motion_seed, resample_seed)
 
@@ -377,9 +377,9 @@ class ParticleFilter:
         if self.use_graph and self.plain_steps > 0:  # (the first step launches one by one: it loads the kernels)
             self._replay(limit)  # the four calls below, captured once as one CUDA graph
         else:
-            if self._moving is not None:  # the two below, motion and weighting in one kernel
-                self._move_and_observe()
-                self._normalise()
+            if self._moving is not None:  # the two below, motion and weighting in one kernel:
+                self._move_and_observe()  # x_t ~ p(x_t | u_t, x_t-1), then p(z_t | x_t, m) of each particle
+                self._normalise()  # w_t = w_t-1 p(z_t | x_t, m), N_eff and the estimate of the weighted set
             else:
                 self._move()  # x_t ~ p(x_t | u_t, x_t-1): sample_motion_model_odometry (Table 5.6)
                 self._weigh()  # w_t = w_t-1 p(z_t | x_t, m) (IR-MCL eq. 6), N_eff and the estimate of the weighted set
