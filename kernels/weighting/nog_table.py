@@ -86,21 +86,11 @@ def table_ranges(
     )
 
 
-UNROLL_BEAMS = 64  # up to this many beams a particle's loop over them is unrolled (``make_table_likelihood_kernel``)
-
-
-def make_table_likelihood_kernel(sigma: float, num_beams: int, move=None):
+def make_table_likelihood_kernel(sigma: float, move=None):
     """IR-MCL eq. 6 on the table's ranges, one thread per particle: its beams read one node's row of the
     table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array. With
     ``move`` (a motion model's per-particle function, kernels/motion.py ``Motion.move``) the thread first moves its
-    particle and writes it back: the motion kernel's launch and its pass over the particles fewer (``moving``).
-
-    The ``num_beams`` beams are a constant of the kernel: up to UNROLL_BEAMS the loop is unrolled and every beam's
-    table entries are read whether or not the beam is valid (the table's indices are clamped, so any pose reads
-    inside it; an invalid beam's range is not added), so the reads of all beams can be in flight at once instead of
-    one beam's after another's (the table's reads are scattered: their latency, not the memory's rate, set the
-    kernel's time). The same sums in the same order: the same bits."""
-    nb = int(num_beams)
+    particle and writes it back: the motion kernel's launch and its pass over the particles fewer (``moving``)."""
 
     @wp.func
     def log_weight(
@@ -118,18 +108,16 @@ def make_table_likelihood_kernel(sigma: float, num_beams: int, move=None):
         pose = laser_pose(particle, T_base_laser)
         n = float(0.0)
         err = float(0.0)
-        for b in range(nb):
+        for b in range(measured.shape[0]):
             m = measured[b]
-            r = table_range(table, width, height, origin, res, quantum, pose, angles[b])
             if m == m:  # NaN: invalid beam
                 n += 1.0
-                err += wp.abs(r - m)
+                err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
         return mean_l1_log_weight(err, n, wp.static(sigma * sigma))
 
-    options = {"max_unroll": UNROLL_BEAMS}
     if move is None:
 
-        @wp.kernel(module="unique", module_options=options)
+        @wp.kernel(module="unique")
         def likelihood(
             table: wp.array2d(dtype=wp.uint16),
             width: int,
@@ -150,7 +138,7 @@ def make_table_likelihood_kernel(sigma: float, num_beams: int, move=None):
 
         return likelihood
 
-    @wp.kernel(module="unique", module_options=options)
+    @wp.kernel(module="unique")
     def move_and_weigh(
         table: wp.array2d(dtype=wp.uint16),
         width: int,
@@ -217,7 +205,7 @@ class NogTable:
         self.num_particles = num_particles
         self._rendered = None  # [P, B] for render() only: a filter step never fills it
         self.sigma_m = float(sigma_m)
-        self.likelihood_kernel = make_table_likelihood_kernel(sigma_m, num_beams)
+        self.likelihood_kernel = make_table_likelihood_kernel(sigma_m)
         self._moving = {}  # id(motion.move) -> (the move, its move-and-weigh kernel) (``moving``)
 
     @staticmethod
@@ -312,9 +300,7 @@ class NogTable:
         (particles, step, seed, T_base_laser, angles, measured, log_weights) -> None, the same particles and weights
         as ``motion.launch`` then this call, one launch fewer (a GPU filter's step: ParticleFilter._move_and_observe).
         One block of all the particles: the motion's random numbers are those of its own launch (index = particle)."""
-        kernel = moving_kernel(
-            self._moving, motion, lambda move: make_table_likelihood_kernel(self.sigma_m, self.num_beams, move)
-        )
+        kernel = moving_kernel(self._moving, motion, lambda move: make_table_likelihood_kernel(self.sigma_m, move))
 
         def launch(particles, step, seed, T_base_laser, angles, measured, log_weights) -> None:
             self._check(angles, measured)
