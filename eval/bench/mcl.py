@@ -235,6 +235,10 @@ def table_error(pf, nog, cfg, far_m, device) -> dict:
     got = pf.weighting.render(pf.particles, pf.T_base_laser, pf.angles).numpy()
     both = (want > 0) & (got > 0)
     off = np.abs(got - want)[both]
+    if (
+        not off.size
+    ):  # no ray hits a wall in both (e.g. many --steps of the bench's odometry drove the cloud off the map)
+        return {"median": None, "p90": None, "max": None, "rays": 0}
     return {
         "median": float(np.median(off)),
         "p90": float(np.quantile(off, 0.9)),
@@ -334,6 +338,9 @@ def run_mcl_bench(a) -> list[dict]:
         if "table_vs_march_m" in r:
             e = r["table_vs_march_m"]
             how = "read from the disk cache" if r.get("table_from_cache") else "built"
+            if not e["rays"]:
+                print(f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; no ray hits a wall")
+                continue
             print(
                 f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; |table - march| median "
                 f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays"
