@@ -86,12 +86,6 @@ def table_ranges(
     )
 
 
-# beams a particle's thread reads per round of its loop: their table entries are read whether or not the beam is
-# valid (the indices are clamped), so the reads can be in flight together (the kernel's time is their latency:
-# scattered 32-byte reads). 32 (the whole loop unrolled) made the kernel 2.7x slower on an H200 (thirty-fifth session)
-BEAMS_IN_FLIGHT = 4
-
-
 def make_table_likelihood_kernel(sigma: float, move=None):
     """IR-MCL eq. 6 on the table's ranges, one thread per particle: its beams read one node's row of the
     table (nearby headings), added in beam order as ``make_likelihood_kernel`` adds them; no [P, B] array. With
@@ -114,17 +108,11 @@ def make_table_likelihood_kernel(sigma: float, move=None):
         pose = laser_pose(particle, T_base_laser)
         n = float(0.0)
         err = float(0.0)
-        nb = measured.shape[0]
-        b0 = int(0)
-        while b0 < nb:  # BEAMS_IN_FLIGHT beams a round, their table reads issued together, added in beam order
-            for k in range(wp.static(BEAMS_IN_FLIGHT)):
-                b = wp.min(b0 + k, nb - 1)  # (past the last beam: the last beam read again, not added)
-                m = measured[b]
-                r = table_range(table, width, height, origin, res, quantum, pose, angles[b])
-                if b0 + k < nb and m == m:  # NaN: invalid beam
-                    n += 1.0
-                    err += wp.abs(r - m)
-            b0 += wp.static(BEAMS_IN_FLIGHT)
+        for b in range(measured.shape[0]):
+            m = measured[b]
+            if m == m:  # NaN: invalid beam
+                n += 1.0
+                err += wp.abs(table_range(table, width, height, origin, res, quantum, pose, angles[b]) - m)
         return mean_l1_log_weight(err, n, wp.static(sigma * sigma))
 
     if move is None:
