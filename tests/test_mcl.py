@@ -642,22 +642,28 @@ def test_global_candidates_cover_the_robot_more_often_at_a_global_start():
 
 
 def test_a_steps_inputs_go_in_one_buffer_and_its_sums_come_back_in_one(rng):
-    """StepInputs: the odometry step, the draw, the ranges and the two int32 seeds written into one host buffer and
-    sent in one copy are what the kernels' views of the device buffer read (seeds beyond float32's integers too);
+    """StepInputs: the odometry step, the draw, a scan's chosen beams (masked at near and far as chosen_ranges masks
+    them) and the two int32 seeds written into one host buffer and sent in one copy are what the kernels' views of the
+    device buffer read (seeds beyond float32's integers too);
     the filter's weights and estimator write their sums into views of one buffer, read back in one copy, and a sums
     array of the wrong size is refused by name."""
     from irmcl_warp.kernels import ESTIMATE
     from irmcl_warp.mcl.filter import StepInputs
 
-    beams = int(rng.integers(1, 40))
-    inputs = StepInputs(beams, DEVICE)
+    sensor = 100
+    index = np.r_[0, 1, 2, np.sort(rng.choice(np.arange(3, sensor), int(rng.integers(1, 40)), replace=False))]
+    inputs = StepInputs(len(index), DEVICE)
     odom, draw = rng.normal(size=3).astype(np.float32), float(rng.uniform())
-    ranges = rng.uniform(0.1, 20.0, beams).astype(np.float32)
+    scan = rng.uniform(0.0, 12.0, sensor).astype(np.float32)
+    scan[rng.random(sensor) < 0.1] = np.nan
+    scan[:3] = (0.05, 10.0, 9.99)  # at near, at far, just inside
     seeds = (int(rng.integers(1 << 24, 1 << 31)), -int(rng.integers(1, 1 << 31)))
-    inputs.upload(odom, draw, ranges, *seeds)
+    inputs.upload_scan(odom, draw, scan, index, 0.05, 10.0, *seeds)
     inputs.send()
     assert np.array_equal(inputs.odom.numpy(), odom) and inputs.draw.numpy()[0] == np.float32(draw)
-    assert np.array_equal(inputs.measured.numpy(), ranges)
+    picked = scan[index]
+    twin = np.where((picked > 0.05) & (picked < 10.0), picked, np.nan)  # ParticleFilter.chosen_ranges' rule
+    assert np.array_equal(inputs.measured.numpy(), twin, equal_nan=True), f"seed {rng.seed}"
     assert (int(inputs.motion_seed.numpy()[0]), int(inputs.resample_seed.numpy()[0])) == seeds
     log, nog = _world_and_map(duration_s=2.0)
     pf = _filter(nog, MCLConfig(num_particles=64, num_samples=32, seed=int(rng.integers(1 << 16))), log)

@@ -69,16 +69,11 @@ class StepInputs:
         self._seeds = self._values[4 + num_beams :].view(np.uint32)
         self._bad, self._beyond = np.zeros(num_beams, bool), np.zeros(num_beams, bool)  # (upload_scan's scratch)
 
-    def upload(self, odom_step, draw: float, measured: np.ndarray, motion_seed: int, resample_seed: int) -> None:
-        """Write a step's inputs into the host buffer (``send`` copies it to the device); ``measured``: the chosen
-        beams' ranges, NaN where not weighed (``upload_scan`` picks them from a whole scan)."""
-        self._ranges[:] = measured
-        self._set(odom_step, draw, motion_seed, resample_seed)
-
     def upload_scan(self, odom_step, draw, scan, beam_index, near_m, far_m, motion_seed, resample_seed) -> None:
-        """``upload`` with ``measured`` = ``ParticleFilter.chosen_ranges(scan)`` written into the buffer in place (the
-        beams picked by ``beam_index``, NaN at or below ``near_m`` and at or beyond ``far_m``; NaN stays NaN): the
-        same values with four small numpy calls and no array made, a step's host time on a GPU's fast path."""
+        """Write a step's inputs into the host buffer (``send`` copies it to the device), the measured ranges being
+        ``ParticleFilter.chosen_ranges(scan)`` written in place: the beams picked by ``beam_index``, NaN at or below
+        ``near_m`` and at or beyond ``far_m`` (NaN stays NaN), by five small numpy calls that make no array (a
+        step's host time counts on a GPU)."""
         r, bad, beyond = self._ranges, self._bad, self._beyond
         np.take(scan, beam_index, out=r)
         np.less_equal(r, near_m, out=bad)
