@@ -32,3 +32,21 @@ def test_the_table_check_measures_the_ranges_and_says_when_no_ray_sees_a_wall(tm
     assert near["rays"] > 1000 and 0.0 < near["median"] < 0.15 and near["p90"] >= near["median"]  # (36 headings)
     pf.particles.assign(wp.array((centre + [500.0, 500.0, 0.0]).astype(np.float32), dtype=wp.vec3, device=DEVICE))
     assert table_error(pf, nog, cfg, 10.0, DEVICE) == {"median": None, "p90": None, "max": None, "rays": 0}
+
+
+def test_the_host_split_times_each_part_of_a_captured_step():
+    """``--host-split``: a captured step's parts timed apart (the step, its graph replayed and waited for, back to back,
+    the upload, the read-back, a bare wait), each a positive median within its repeats' range; a filter launched one by
+    one has no graph to replay and gets no split."""
+    from eval.bench.mcl import bench_filter, measured_scan, simulator_nog
+
+    nog = simulator_nog(0.1, DEVICE)
+    angles, measured = measured_scan(nog, 20.0, DEVICE)
+    row = bench_filter(nog, "likelihood_field", 200, DEVICE, 3, 20.0, angles, measured, repeats=2, split=True)
+    split = row["host_split_ms"]
+    assert list(split) == ["step", "replay and wait", "replay back to back", "upload", "read back", "wait alone"]
+    assert all(0 < v["min"] <= v["ms"] <= v["max"] for v in split.values()), split
+    eager = bench_filter(
+        nog, "likelihood_field", 200, DEVICE, 2, 20.0, angles, measured, repeats=1, graph="off", split=True
+    )
+    assert "host_split_ms" not in eager

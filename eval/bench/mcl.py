@@ -16,7 +16,9 @@ chunks of 500 particles; irmcl_warp/reference/weighting.py) on the same device, 
   time and how far its ranges lie from the march's on the benchmark's particles after the steps);
 
 each with the step's launches replayed as one captured graph (``graph``, mcl.step_graph=on) and launched
-one by one (``eager``), side by side (``--step-graph`` picks one). ``DEFAULT_VARIANT`` names the one
+one by one (``eager``), side by side (``--step-graph`` picks one). ``--host-split`` also times a captured step's
+parts apart (``host_split``: the graph replayed and waited for, back to back, the upload, the read-back), so that the
+host's part of a step is measured, not guessed. ``DEFAULT_VARIANT`` names the one
 ``mcl``'s defaults run.
 
 The NOG is ``--nog`` (a baked outputs/<exp>/nog/nog-*.npz), else the simulator's walls rasterised at
@@ -142,6 +144,34 @@ def device_profile(fn, steps: int, what: str) -> dict:
     }
 
 
+def host_split(pf, u, measured, sync, steps: int, repeats: int) -> dict:
+    """Where a full step's wall time goes (ms per call, median of ``repeats`` timings of ``steps`` calls): the step;
+    its captured graph replayed and waited for; replayed back to back with one wait at the end (the device's own
+    time per step); the step's upload and its read-back alone (host); a wait with nothing in flight. The step less the
+    graph's replay and wait is the host's part. Needs a captured step (``pf.use_graph``, after a step); the filter's
+    draws and step count move on (a benchmark's filter, not a run's)."""
+    graph = pf.graphs.get(pf.particles.ptr)
+    if graph is None:
+        return {}
+    limit = pf.cfg.resample_threshold * pf.num_particles
+    calls = {
+        "step": lambda: pf.step(u, measured),
+        "replay and wait": lambda: (wp.capture_launch(graph), sync()),
+        "replay back to back": lambda: wp.capture_launch(graph),
+        "upload": lambda: pf._upload(u, measured),
+        "read back": lambda: pf._read_estimate(limit, 0.0),
+        "wait alone": sync,
+    }
+    out = {}
+    for name, fn in calls.items():
+        if name == "step":  # (the next step's graph is the other ping-pong buffer's: both are captured after two)
+            fn()
+            graph = pf.graphs.get(pf.particles.ptr, graph)
+        t = repeated(fn, sync, steps, repeats)
+        out[name] = {"ms": 1e3 * t["median"], "min": 1e3 * t["min"], "max": 1e3 * t["max"]}
+    return out
+
+
 def bench_filter(
     nog,
     variant,
@@ -157,6 +187,7 @@ def bench_filter(
     profile=False,
     around=None,
     cuda_trace=False,
+    split=False,
 ) -> dict:
     cfg = MCLConfig(num_particles=n, resample_threshold=1.0, seed=seed, step_graph=graph, **VARIANTS[variant])
     free = NOG(np.where(nog.occupancy < 0.1, 0.0, 1.0).astype(np.float32), nog.origin_xy, nog.resolution_m)
@@ -184,6 +215,7 @@ def bench_filter(
     step = repeated(lambda: pf.step(u, measured), sync, steps, repeats)  # median and spread of ``repeats``
     if profile:
         host_profile(lambda: pf.step(u, measured), sync, steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
+    host = host_split(pf, u, measured, sync, steps, repeats) if split and pf.use_graph else None
     trace = None
     if cuda_trace and device.startswith("cuda"):
         trace = device_profile(lambda: pf.step(u, measured), steps, f"{variant}, {n:,} particles, graph {pf.use_graph}")
@@ -212,6 +244,8 @@ def bench_filter(
     }
     if trace is not None:
         row["device_profile"] = trace
+    if host:
+        row["host_split_ms"] = host
     if cfg.weighting == "nog_table":
         row["table_vs_march_m"] = table_error(pf, nog, cfg, far_m, device)
     return row
@@ -310,6 +344,7 @@ def run_mcl_bench(a) -> list[dict]:
                         profile=a.profile,
                         around=around,
                         cuda_trace=a.cuda_trace,
+                        split=a.host_split,
                     )
                 )
                 print(rows[-1], flush=True)
@@ -345,6 +380,10 @@ def run_mcl_bench(a) -> list[dict]:
                 f"{r['method']} {r['particles']:,}: table {how} in {r['build_s']:.2f} s; |table - march| median "
                 f"{e['median']:.4f} m, 90th percentile {e['p90']:.4f} m, max {e['max']:.2f} m over {e['rays']:,} rays"
             )
+    for r in rows:
+        if "host_split_ms" in r:
+            parts = ", ".join(f"{k} {v['ms']:.4f}" for k, v in r["host_split_ms"].items())
+            print(f"{r['method']} {r['particles']:,}, where a step's time goes (ms, median): {parts}")
     print(
         "\nparts of a step alone (ms): "
         + ", ".join(
@@ -391,6 +430,12 @@ def add_parser(sub) -> None:
         "--cuda-trace",
         action="store_true",
         help="also list the CUDA kernels of a step with their device times (torch.profiler / CUPTI)",
+    )
+    p.add_argument(
+        "--host-split",
+        action="store_true",
+        help="also time the step's parts apart (graph replayed and waited for, back to back, upload, read-back, a bare "
+        "wait): how much of a step is the host's",
     )
     p.add_argument("--nog", default=None, help="a baked NOG (.npz); default: the simulator's walls")
     p.add_argument("--far", dest="far_m", type=float, default=40.0, help="the far bound (m)")

@@ -4,7 +4,8 @@
 # commit before (git archive <commit> | tar x -C <dir>). PHASES (default all, in this order):
 #   tests  the kernel and filter tests on cuda:0 and the -m gpu checks on this tree;
 #   bench  the step benchmark of both trees alternately (ROUNDS rounds, PARTICLES, VARIANTS);
-#   trace  one more benchmark of each tree with the device trace and the host profile (TRACE_VARIANTS, 100k);
+#   trace  one more benchmark of each tree with the device trace, the host profile and, where its bench has it
+#          (--host-split), the host split (TRACE_VARIANTS, 100k);
 #   g100k  a 100k global run on fr079 hashed, once before and twice after (does each repeat the other?);
 #   bits   eval.same_bits of both trees (BITS_ONLY: its groups, default all) and their comparison.
 # Everything lands in $OUT/step.tgz (the machine returns only a few files).
@@ -36,11 +37,12 @@ if has bench; then
 fi
 if has trace; then
   for side in before after; do
-    dir=$(tree $side)
+    dir=$(tree $side); split=""
+    grep -q -- "--host-split" "$dir/eval/bench/mcl.py" && split=--host-split
     # shellcheck disable=SC2086
     (cd "$dir" && PYTHONPATH=/root/site:$dir timeout 150 python -m eval.bench mcl --device cuda:0 --particles 100000 \
-      --variants $TRACE_VARIANTS --step-graph on --repeats 3 --torch-max 0 --cuda-trace --profile \
-      --out "$W/trace-$side" > "$W/trace-$side.log" 2>&1; grep -E "device profile|graph \|" "$W/trace-$side.log" | sed "s/^/$side /")
+      --variants $TRACE_VARIANTS --step-graph on --repeats 3 --torch-max 0 --cuda-trace --profile $split \
+      --out "$W/trace-$side" > "$W/trace-$side.log" 2>&1; grep -E "device profile|graph \||time goes" "$W/trace-$side.log" | sed "s/^/$side /")
   done
 fi
 if has g100k; then
