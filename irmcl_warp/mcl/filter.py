@@ -224,12 +224,13 @@ class ParticleFilter:
         moving = getattr(self.weighting, "moving", None) if fuse else None
         self._moving = moving(self.motion) if moving is not None else None
         self.graphs = {}  # captured on the old arrays: capture again
-        self._split = None  # whether the motion or the weighting splits this count over the CPU's cores (_replay)
         self.particles = wp.zeros(n, dtype=wp.vec3, device=d)
         self.scratch = wp.zeros(n, dtype=wp.vec3, device=d)
         self.log_w = wp.zeros(n, dtype=wp.float32, device=d)  # accumulated since the last resampling
         self.log_lik = wp.zeros(n, dtype=wp.float32, device=d)  # this scan's
         self.injected = wp.zeros(n, dtype=wp.int32, device=d)  # recovery: drawn at random at the last resampling
+        # whether the motion or the weighting splits this count over the CPU's cores (_replay; found once, not per step)
+        self._split = self._moving is None and self._splits_on_cpu()
 
     @property
     def num_particles(self) -> int:
@@ -555,10 +556,6 @@ class ParticleFilter:
         weighting splits its particles over the cores (``ParticleBlocks``; a graph would record one core's
         launch), those two run split before the graph, which then holds the rest of the step."""
         key = self.particles.ptr
-        if self._moving is not None:
-            self._split = False
-        if self._split is None:  # (found once per particle count: its Python cost a GPU step's host time)
-            self._split = self._splits_on_cpu()
         split = self._split
         if split:
             self._move_and_observe()

@@ -121,13 +121,3 @@ class GridModel:
         T = wp.vec3(*map(float, T_base_laser))
         inputs = [self.grid, self.origin, self.res, particles, T, self.beams(angles), measured, log_lik]
         return self.blocks.block(self.kernel, particles.shape[0], inputs, per_particle=(3, 7))
-
-
-def moving_kernel(kept: dict, motion, make):
-    """A weighting's move-and-weigh kernel for ``motion`` (kernels/motion.py): ``make(motion.move)``, made once per
-    motion function and kept in ``kept`` (id -> (the function, its kernel); the function is kept too, so that a new
-    one at a freed id is not taken for it)."""
-    entry = kept.get(id(motion.move))
-    if entry is None or entry[0] is not motion.move:
-        entry = kept[id(motion.move)] = (motion.move, make(motion.move))
-    return entry[1]

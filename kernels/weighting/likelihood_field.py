@@ -11,7 +11,7 @@ import warp as wp
 
 from irmcl_warp.kernels.raycast import distance_to_occupied
 from irmcl_warp.kernels.registry import WEIGHTING
-from irmcl_warp.kernels.weighting.common import GridModel, beam_origin, moving_kernel
+from irmcl_warp.kernels.weighting.common import GridModel, beam_origin
 
 
 def make_log_q_kernel(z_hit: float, z_rand: float, sigma_hit: float, far_m: float, max_dist: float):
@@ -143,14 +143,13 @@ class LikelihoodField(GridModel):
             device=self.device,
         )
         self.kernel = likelihood_field_kernel
-        self._moving = {}  # id(motion.move) -> (the move, its move-and-weigh kernel) (``moving``)
 
     def moving(self, motion):
         """A launch that moves each particle by ``motion`` (kernels/motion.py) and weighs it in one kernel: a function
         (particles, step, seed, T_base_laser, angles, measured, log_lik) -> None, the same particles and weights as
         ``motion.launch`` then this call, one launch fewer (a GPU filter's step: ParticleFilter._move_and_observe).
         One block of all the particles: the motion's random numbers are those of its own launch (index = particle)."""
-        kernel = moving_kernel(self._moving, motion, make_move_field_kernel)
+        kernel = make_move_field_kernel(motion.move)
 
         def launch(particles, step, seed, T_base_laser, angles, measured, log_lik) -> None:
             T = wp.vec3(*map(float, T_base_laser))

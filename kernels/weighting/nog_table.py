@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from irmcl_warp.kernels.registry import CPU_MIN_BLOCK, WEIGHTING, ParticleBlocks, pick_device
-from irmcl_warp.kernels.weighting.common import laser_pose, mean_l1_log_weight, moving_kernel
+from irmcl_warp.kernels.weighting.common import laser_pose, mean_l1_log_weight
 from irmcl_warp.kernels.weighting.nog_raymarch import NogRaymarch
 
 
@@ -206,7 +206,6 @@ class NogTable:
         self._rendered = None  # [P, B] for render() only: a filter step never fills it
         self.sigma_m = float(sigma_m)
         self.likelihood_kernel = make_table_likelihood_kernel(sigma_m)
-        self._moving = {}  # id(motion.move) -> (the move, its move-and-weigh kernel) (``moving``)
 
     @staticmethod
     def build(nog, num_angles, num_samples, near_m, far_m, t_min, empty_below, device) -> wp.array:
@@ -300,7 +299,7 @@ class NogTable:
         (particles, step, seed, T_base_laser, angles, measured, log_weights) -> None, the same particles and weights
         as ``motion.launch`` then this call, one launch fewer (a GPU filter's step: ParticleFilter._move_and_observe).
         One block of all the particles: the motion's random numbers are those of its own launch (index = particle)."""
-        kernel = moving_kernel(self._moving, motion, lambda move: make_table_likelihood_kernel(self.sigma_m, move))
+        kernel = make_table_likelihood_kernel(self.sigma_m, motion.move)
 
         def launch(particles, step, seed, T_base_laser, angles, measured, log_weights) -> None:
             self._check(angles, measured)
