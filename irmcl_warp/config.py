@@ -388,6 +388,8 @@ class WorldsConfig:
     # floor's walls are not forgotten; 4.0: the maps before the twenty-seventh session, where the beams that graze a
     # wall on a long drive cleared it: mcl/worlds.py logodds_bounds)
     kidnap_at_s: float = 0.0  # > 0: that far into each run, the robot is carried to another drive's place
+    unmapped_per_m: float = 0.0  # > 0: the drives see about this many objects per metre of drive that the map does
+    # not hold (people, moved furniture: sim/floors.py with_unmapped), as real logs do; 0: only what was mapped
     calibration: Optional[str] = None  # the confidence's calibration (JSON of eval.confidence fit); None: the one
     # shipped for mcl.weighting (irmcl_warp/mcl/calibration/<weighting>.json), else features only; "off": features
     # only (the tuning runs a calibration of new features is fitted on)
@@ -625,6 +627,7 @@ RANGES = {
     "worlds.run_s": ("> 0", None),
     "worlds.map_drive_m": ("> 0", None),
     "worlds.kidnap_at_s": (0, None),
+    "worlds.unmapped_per_m": (0, None),
     "worlds.confident_above": (0, 1),
     "worlds.lost_below": (0, 1),
     "worlds.lost_after_s": ("> 0", None),

@@ -508,6 +508,45 @@ def test_a_drive_log_follows_its_waypoints():
     assert np.allclose(log.ground_truth[0, :2], pts[0]) and np.isfinite(log.ranges_m).any(1).all()
 
 
+@pytest.mark.parametrize("kind", floors.KINDS)
+def test_unmapped_objects_stand_off_the_path_and_off_the_walls(kind):
+    world = floors.build(f"{kind}-{np.random.randint(3, 900)}")
+    path = floors.drive(world, np.random.default_rng(3), 30.0)
+    assert floors.with_unmapped(world, path, np.random.default_rng(0), 0.0) is world  # off: the map's own world
+    seen = floors.with_unmapped(world, path, np.random.default_rng(0), 0.3)
+    extra = seen.segments[len(world.segments) :]
+    assert np.array_equal(seen.segments[: len(world.segments)], world.segments) and seen.n_walls >= 0
+    length = np.sum(np.hypot(*np.diff(path, axis=0).T))
+    assert 0.5 * 0.3 * length <= len(extra) / 4 <= 0.3 * length + 1  # about 0.3 a metre (some draws are refused)
+    legs = np.column_stack([path[:-1], path[1:]])
+    points = np.concatenate([a + np.linspace(0, 1, 20)[:, None] * (b - a) for a, b in zip(extra[:, :2], extra[:, 2:])])
+    assert floors.distance_to_segments(points, legs).min() >= 0.3 - 1e-9  # never on the way
+    centres = extra.reshape(-1, 4, 4)[:, :, :2].mean(1)
+    assert floors.distance_to_segments(centres, world.segments).min() >= 0.3 - 1e-9  # in free space
+    assert getattr(seen, "solid", None) == getattr(world, "solid", None)
+
+
+def test_a_drive_among_unmapped_objects_is_the_same_drive_with_scans_the_map_explains_less():
+    from irmcl_warp.mcl.worlds import query_log, world_map
+
+    cfg = compose_config(["+exp=worlds", "worlds.run_s=12", "device=cpu"])
+    world = floors.build("office-5")
+    grid = world_map(world, cfg, "cpu")
+    agree = ScanAgreement(
+        np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m, cfg.mcl.field_occ_threshold
+    )
+    plain, _ = query_log(world, cfg, 1, "cpu")
+    cfg.worlds.unmapped_per_m = 1.0
+    among, _ = query_log(world, cfg, 1, "cpu")
+    assert np.array_equal(plain.ground_truth, among.ground_truth) and np.array_equal(plain.odom, among.odom)
+    assert not np.array_equal(np.nan_to_num(plain.ranges_m), np.nan_to_num(among.ranges_m))
+    fit = [
+        [agree(log.ground_truth[i], log.ranges_m[i], log.info.angles_rad, log.T_base_laser) for i in range(0, 60, 3)]
+        for log in (plain, among)
+    ]
+    assert np.mean(fit[1]) < np.mean(fit[0]) - 0.03 and min(fit[0]) > 0.9
+
+
 def test_between_updates_the_pose_follows_the_odometry():
     from irmcl_warp.geometry import compose, relative
     from irmcl_warp.mcl.track import between_updates

@@ -488,6 +488,11 @@ def worlds_table(runs: list) -> str:
             )
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
             + (
+                [f"drives among {r.setting('worlds.unmapped_per_m'):g} unmapped objects a metre"]
+                if r.setting("worlds.unmapped_per_m")  # (runs before it: none)
+                else []
+            )
+            + (
                 [
                     f"KLD-sampling from {r.setting('mcl.kld_min_particles'):,}, "
                     f"{s['particles_per_update'] / 1000:.1f}k per update on average"

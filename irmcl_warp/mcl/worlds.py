@@ -147,14 +147,16 @@ def query_log(world, cfg, k: int, device) -> tuple[LaserLog, int | None]:
     ``k + 1000``'s, its odometry continuing the first's (the jump unseen). Returns (log, first scan after the jump)."""
     w, s = cfg.worlds, cfg.sim
     length = DRIVE_SLACK * s.speed_mps * w.run_s
-    first = drive_log(world, s, floors.drive(world, np.random.default_rng(k), length), k, w.run_s, device)
+    path = floors.drive(world, np.random.default_rng(k), length)
+    first = drive_log(unmapped_for(world, path, w, k), s, path, k, w.run_s, device)
     if w.kidnap_at_s <= 0:
         return first, None
     cut = int(np.searchsorted(first.stamps - first.stamps[0], w.kidnap_at_s))
+    path = floors.drive(world, np.random.default_rng(k + 1000), length)
     other = drive_log(
-        world,
+        unmapped_for(world, path, w, k + 1000),
         s,
-        floors.drive(world, np.random.default_rng(k + 1000), length),
+        path,
         k + 1000,
         w.run_s - w.kidnap_at_s,
         device,
@@ -173,6 +175,17 @@ def query_log(world, cfg, k: int, device) -> tuple[LaserLog, int | None]:
         f"{first.source} kidnapped",
     )
     return log, cut
+
+
+UNMAPPED_SEEDS_FROM = 10_000  # drive k's unmapped objects come from the generator of this + k (its path and noise
+# from k's own: a drive with them is the drive without them, plus the objects)
+
+
+def unmapped_for(world, path, w, k: int):
+    """The world drive ``k`` sees: with ``worlds.unmapped_per_m`` > 0, ``world`` plus objects its map does not hold
+    near the drive's ``path`` (floors.with_unmapped); else ``world``, the map's own."""
+    per_m = float(getattr(w, "unmapped_per_m", 0.0) or 0.0)  # (runs before it: none)
+    return floors.with_unmapped(world, path, np.random.default_rng(UNMAPPED_SEEDS_FROM + k), per_m)
 
 
 def localize_worlds(run: runs.Run) -> Path:

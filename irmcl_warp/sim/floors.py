@@ -234,3 +234,57 @@ def coverage_drive(world: World, rng, clearance_m: float = 0.3, num_nodes: int =
             passed[i] = True
         at = goal
     return np.array(points)
+
+
+# --- what the map does not hold ----------------------------------------------------------------------------
+
+UNMAPPED_SIZE_M = (0.3, 0.8)  # an unmapped object's sides (a person, a bin, a chair, a moved box), drawn uniformly
+UNMAPPED_FROM_PATH_M = (0.6, 3.0)  # how far from the drive's path it stands, drawn uniformly
+
+
+def outline(centre, w: float, h: float, step_m: float = 0.05) -> np.ndarray:
+    """Points [n, 2] along the sides of the box ``w`` x ``h`` about ``centre``, ``step_m`` apart or closer."""
+    t = np.linspace(0.0, 1.0, max(2, int(np.ceil(max(w, h) / step_m)) + 1))[:, None]
+    corners = np.asarray(centre, float) + 0.5 * np.array([[-w, -h], [w, -h], [w, h], [-w, h], [-w, -h]])
+    return np.vstack([a + t * (b - a) for a, b in zip(corners[:-1], corners[1:])])
+
+
+def with_unmapped(world: World, path_xy: np.ndarray, rng, per_m: float) -> World:
+    """``world`` with objects its map does not hold, for a drive along the waypoints ``path_xy`` [k, 2]: about
+    ``per_m`` objects per metre of the drive, each a box of UNMAPPED_SIZE_M sides standing UNMAPPED_FROM_PATH_M
+    from a random point of the path, in free space (its centre 0.3 m from every segment) and never on the path
+    (its sides at least the roadmap's clearance, 0.3 m, from the path's lines). Real logs
+    have them (people, moved furniture, clutter: MIT Killian's scans fit their own SLAM map below 0.8 at 12 % of the
+    scans) where the simulated floors' drives see only what was mapped. ``per_m`` 0 returns ``world`` itself."""
+    if per_m <= 0 or len(path_xy) < 2:
+        return world
+    path = np.asarray(path_xy, float)
+    legs = np.column_stack([path[:-1], path[1:]])
+    lengths = np.hypot(*(path[1:] - path[:-1]).T)
+    want = int(round(per_m * lengths.sum()))
+    boxes = []
+    for _ in range(20 * want):
+        if len(boxes) >= want:
+            break
+        leg = int(rng.choice(len(legs), p=lengths / lengths.sum()))
+        at = path[leg] + rng.uniform() * (path[leg + 1] - path[leg])
+        heading, dist = rng.uniform(-np.pi, np.pi), rng.uniform(*UNMAPPED_FROM_PATH_M)
+        w, h = (float(v) for v in rng.uniform(*UNMAPPED_SIZE_M, 2))
+        c = at + dist * np.array([np.cos(heading), np.sin(heading)])
+        if distance_to_segments(c[None], world.segments)[0] < 0.3:
+            continue  # in or against a wall
+        if distance_to_segments(outline(c, w, h), legs).min() < 0.3:
+            continue  # on the way
+        boxes.append((float(c[0]), float(c[1]), w, h))
+    extra = [s for b in boxes for s in _box(*b)]
+    out = World(
+        np.vstack([world.segments, np.array(extra, float).reshape(-1, 4)]),
+        world.rooms,
+        world.corridor_y,
+        world.width_m,
+        world.height_m,
+        world.n_walls if world.n_walls >= 0 else len(world.segments),
+    )
+    if hasattr(world, "solid"):
+        out.solid = world.solid
+    return out
