@@ -66,8 +66,9 @@ def drive(trace, row: dict, confident_above: float) -> dict:
         between = not updated[later].any()
         out["class"] = "back, off between updates only" if between else "back, then wrong again at updates"
         out["excursion_at_s"] = float(t[np.flatnonzero(later)[-1]])
-        out["excursion_max_heading_deg"] = float(np.nanmax(yaw[later]))
-        out["excursion_max_position_m"] = float(np.nanmax(err[later]))
+        seen = later & np.isfinite(err)  # (a later re-seed leaves scans without an estimate: wrong, no error)
+        out["excursion_max_heading_deg"] = float(np.max(yaw[seen])) if seen.any() else None
+        out["excursion_max_position_m"] = float(np.max(err[seen])) if seen.any() else None
         out["excursion_between_updates_only"] = bool(between)
         return out
     out["class"] = "look-alike"
@@ -110,13 +111,13 @@ def main(argv=None) -> dict:
     for d in res["drives"]:
         if d["class"] == "met":
             continue
+        f = lambda v, spec=".1f": "-" if v is None else f"{v:{spec}}"  # noqa: E731
         exc = (
-            f"{d['excursion_max_heading_deg']:.1f} deg / {d['excursion_max_position_m']:.2f} m at {d['excursion_at_s']:.1f} s"
-            + (" (between updates)" if d["excursion_between_updates_only"] else "")
+            f"{f(d['excursion_max_heading_deg'])} deg / {f(d['excursion_max_position_m'], '.2f')} m at "
+            f"{d['excursion_at_s']:.1f} s" + (" (between updates)" if d["excursion_between_updates_only"] else "")
             if "excursion_at_s" in d
             else "-"
         )
-        f = lambda v: "-" if v is None else f"{v:.1f}"  # noqa: E731
         print(
             f"| {d['drive']} | {d['class']} | {f(d['detected_after_s'])} | {f(d.get('first_right_after_s'))} "
             f"| {f(d['reconverged_after_s'])} | {exc} | {d['confidently_wrong_s']:.1f} |"

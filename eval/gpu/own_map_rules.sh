@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Issue 33 on the lent GPU: one real log localized in its own SLAM map under several lost-robot thresholds side by
-# side (worlds.lost_agreement_below, which an own-map run reads from conf/exp/worlds.yaml), every run at once.
+# side (worlds.lost_agreement_below, and with "BxU" lost_agreement_updates U, which an own-map run reads from
+# conf/exp/worlds.yaml), every run at once.
 # Each threshold gets a copy of the tree whose conf/exp/worlds.yaml says it: a run's identity includes that file, so
 # the runs of two thresholds never share a folder. Scored as eval/gpu/own_slam_map.sh scores (eval.analyses.own_slam_map).
 # Usage (after the packages and the log are unpacked: ../shared/tools/gpu/README.md):
@@ -24,8 +25,10 @@ trees=()
 for v in $RULES; do
   tree=$(mktemp -d); trees+=("$tree")
   cp -a irmcl_warp conf eval kernels hydra_plugins pyproject.toml "$tree"/
-  sed -i "s/^  lost_agreement_below: .*/  lost_agreement_below: $v/" "$tree/conf/exp/worlds.yaml"
-  grep -q "^  lost_agreement_below: $v$" "$tree/conf/exp/worlds.yaml" || { echo "could not set the rule $v"; exit 1; }
+  below=${v%x*}; updates=${v#*x}  # "0.4" or "0.4x3" (below 0.4 for 3 updates in a row)
+  sed -i "s/^  lost_agreement_below: .*/  lost_agreement_below: $below/" "$tree/conf/exp/worlds.yaml"
+  [ "$updates" = "$v" ] || sed -i "s/^  lost_agreement_updates: .*/  lost_agreement_updates: $updates/" "$tree/conf/exp/worlds.yaml"
+  grep -q "^  lost_agreement_below: $below$" "$tree/conf/exp/worlds.yaml" || { echo "could not set the rule $v"; exit 1; }
   for s in ${SEEDS//,/ }; do  # run inside the copy: python -m imports the package from the working directory
     # shellcheck disable=SC2086
     (cd "$tree" && python -m irmcl_warp.localize +exp="$LOG" mcl=amcl mcl.num_particles="$N" \
