@@ -13,6 +13,8 @@
 set -uo pipefail
 [ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
+# one thread a run unless told otherwise: ten runs of 16 threads each swamped a 16-core host (load 78)
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} MKL_NUM_THREADS=${MKL_NUM_THREADS:-1} OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
 OUT=${OUT:-gpu-out}; mkdir -p "$OUT"
 LOG=${LOG:-mit_killian}; N=${N:-20000}; SEEDS=${SEEDS:-0,1,2,3,4}; RULES=${RULES:-0.4 0.7}; RUN_S=${RUN_S:-null}
 SLAM_ARGS=${SLAM_ARGS:-slam.num_particles=60 slam.proposal=gmapping_code slam.seed=6}
