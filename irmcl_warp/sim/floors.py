@@ -253,9 +253,9 @@ def with_unmapped(world: World, path_xy: np.ndarray, rng, per_m: float) -> World
     """``world`` with objects its map does not hold, for a drive along the waypoints ``path_xy`` [k, 2]: about
     ``per_m`` objects per metre of the drive, each a box of UNMAPPED_SIZE_M sides standing UNMAPPED_FROM_PATH_M
     from a random point of the path, in free space (its centre 0.3 m from every segment) and never on the path
-    (its sides at least the roadmap's clearance, 0.3 m, from the path's lines). Real logs
-    have them (people, moved furniture, clutter: MIT Killian's scans fit their own SLAM map below 0.8 at 12 % of the
-    scans) where the simulated floors' drives see only what was mapped. ``per_m`` 0 returns ``world`` itself."""
+    (its sides at least the roadmap's clearance, 0.3 m, from the path's lines). Real logs have them (people, moved
+    furniture, clutter: MIT Killian's scans fit its own SLAM map at the SLAM pose below 0.8 at 12 % of the scans),
+    where the simulated floors' drives see only what was mapped. ``per_m`` 0 returns ``world`` itself."""
     if per_m <= 0 or len(path_xy) < 2:
         return world
     path = np.asarray(path_xy, float)
