@@ -19,6 +19,8 @@ straight lines that keep that clearance), so every kind gets a path without a ha
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
@@ -277,14 +279,7 @@ def with_unmapped(world: World, path_xy: np.ndarray, rng, per_m: float) -> World
             continue  # on the way
         boxes.append((float(c[0]), float(c[1]), w, h))
     extra = [s for b in boxes for s in _box(*b)]
-    out = World(
-        np.vstack([world.segments, np.array(extra, float).reshape(-1, 4)]),
-        world.rooms,
-        world.corridor_y,
-        world.width_m,
-        world.height_m,
-        world.n_walls if world.n_walls >= 0 else len(world.segments),
-    )
-    if hasattr(world, "solid"):
-        out.solid = world.solid
+    out = copy.copy(world)  # (every attribute, the loop's closed core ``solid`` too)
+    out.segments = np.vstack([world.segments, np.array(extra, float).reshape(-1, 4)])
+    out.n_walls = world.n_walls if world.n_walls >= 0 else len(world.segments)  # the objects count as furniture
     return out
