@@ -151,7 +151,7 @@ def nog_log_weights_torch(
     import torch
 
     dev = grid.device
-    z = torch.linspace(near, far_m, num_samples, device=dev)
+    z = torch.linspace(near, far_m, num_samples, device=dev, dtype=particles.dtype)  # not torch's float32 default
     valid = torch.isfinite(measured)
     H, W = grid.shape
     c, s = torch.cos(particles[:, 2]), torch.sin(particles[:, 2])
