@@ -1170,6 +1170,43 @@ def test_the_kidnaps_analysis_tells_the_misses_apart(tmp_path):
     assert by["w-1-run1"]["confidently_wrong_s"] == 0.0
 
 
+def test_the_kidnaps_evidence_tells_a_look_alike_window_from_one_whose_scans_told(rng):
+    """eval.analyses.kidnaps --evidence on a corridor with a wall 5 m ahead of the true pose: where the wrong place
+    the filter held (10 m further) has a wall 5 m ahead as well, the window's scans fit both and the miss counts as
+    one no localizer could have resolved; without that wall the true pose fits better and the scans told. A drive
+    made again that is not the recorded one is refused."""
+    from types import SimpleNamespace
+
+    from eval.analyses.kidnaps import window_evidence
+
+    res, t = 0.1, np.arange(0.0, 8.0, 0.2)
+    angles = np.linspace(-0.4, 0.4, 60)
+    shift = rng.uniform(0.0, 0.3)  # the robot creeps towards the wall
+    truth = np.column_stack([shift * t / t[-1], np.full_like(t, 2.0), np.zeros_like(t)])
+    ranges = (5.0 - truth[:, :1]) / np.cos(angles)[None, :]
+    log = SimpleNamespace(
+        ground_truth=truth, odom=truth.copy(), ranges_m=ranges, info=SimpleNamespace(angles_rad=angles),
+        T_base_laser=(0.0, 0.0, 0.0),
+    )  # fmt: skip
+    est = truth.copy()
+    est[t >= 3.0, 0] += 10.0  # kidnapped at 3 s, never detected: the filter holds a place 10 m along
+    trace = dict(stamps=t, estimate=est, truth=truth)
+    row = dict(world="w-1", run=1, kidnap_at_s=3.0, detected_after_s=None)
+    verdicts = {}
+    for walls in ((50,), (50, 150)):  # cells of x = 5 m, and x = 15 m
+        occ = np.zeros((40, 200))
+        occ[:, list(walls)] = 1.0
+        ev = window_evidence(trace, row, log, ScanAgreement(occ, (0.0, 0.0), res))
+        assert ev["window_s"] == [3.0, 10.0] and ev["wrong_place"][0] == pytest.approx(10.0 + shift)
+        verdicts[walls] = ev
+    alike, told = verdicts[(50, 150)], verdicts[(50,)]
+    assert alike["scans_tell"] is False and abs(alike["margin"]) < 0.02, alike
+    assert told["scans_tell"] is True and told["margin"] > 0.9 and told["agreement_at_wrong_place"] < 0.05, told
+    other = SimpleNamespace(**{**vars(log), "ground_truth": truth + [0.5, 0.0, 0.0]})
+    with pytest.raises(SystemExit, match="not the one the run recorded"):
+        window_evidence(trace, row, other, ScanAgreement(occ, (0.0, 0.0), res))
+
+
 def test_a_search_grid_over_the_budget_is_covered_in_turns(monkeypatch):
     """confidence.SEARCH_BUDGET: a grid of at most the budget is searched whole every time; a larger one in slices of
     the budget that together hold every pose once per turn, and the turns go on."""
