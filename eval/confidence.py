@@ -1,7 +1,8 @@
 """The localizer's confidence: fitted on the tuning worlds, judged on the test worlds (issue 33).
 
     python -m eval.confidence fit outputs/worlds/worlds/tuning-<...> [...] [--out irmcl_warp/mcl/calibration/<w>.json]
-    python -m eval.confidence judge outputs/worlds/worlds/test-<...> [...] [--calibration FILE] [--out results/worlds]
+    python -m eval.confidence judge outputs/worlds/worlds/test-<...> [...] [--calibration FILE] [--against FILE]
+        [--out results/worlds]
 
 ``fit`` reads the features recorded at every filter update of worlds runs (``<world>-run<k>.npz``), labels each
 update right or wrong (the heaviest mode within 0.5 m / 10 deg of the truth) and fits the logistic model of
@@ -10,8 +11,10 @@ irmcl_warp/mcl/confidence.py. It refuses runs on test worlds: the calibration is
 ``judge`` applies a calibration to runs of the test worlds (it refuses tuning worlds): the AUROC of the confidence
 (right against wrong updates), its reliability curve (predicted against observed, per tenth), the same for the
 features alone (the top mode's weight, the spread: the signals the filter used to report), and writes a record
-``confidence-<weighting>-<particles>.json`` with a plot (``.png``) beside it. One calibration is for one observation
-model and one particle count (the features depend on both).
+``confidence-<weighting>-<particles>.json`` with a plot (``.png``) beside it. With ``--against`` a second calibration
+is judged on the same updates, and the record holds both AUROCs with a 95 % interval of their difference from
+resampling the drives (``eval.analyses.paired_worlds``: a drive's updates are not independent, the drives are). One
+calibration is for one observation model and one particle count (the features depend on both).
 """
 
 from __future__ import annotations
@@ -28,16 +31,18 @@ from irmcl_warp.services.outputs import save_figure, write_json
 from irmcl_warp.sim import floors
 
 
-def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict]:
-    """(features [n, F], right [n], provenance) of every filter update of the runs, which must all be on
-    worlds of ``side`` (tuning | test)."""
-    X, y = [], []
+def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, dict, np.ndarray]:
+    """(features [n, F], right [n], provenance, the drive of each update [n]) of every filter update of the runs,
+    which must all be on worlds of ``side`` (tuning | test)."""
+    X, y, drive = [], [], []
     prov = {"runs": [], "worlds": set(), "weighting": set(), "particles": set(), "tracker": set(), "maps": set()}
+    prov["unmapped_per_m"] = set()
     for d in run_dirs:
         doc = json.loads((Path(d) / "metrics.json").read_text())
         w = doc.get("settings", {}).get("worlds", {})
         prov["tracker"].add(tuple(tracker_of(w).items()))
         prov["maps"].add((w.get("map_drive", "random"), w.get("map_logodds_limit", 4.0)))  # (runs before: as named)
+        prov["unmapped_per_m"].add(float(w.get("unmapped_per_m", 0.0) or 0.0))
         for r in doc["runs"]:
             if floors.split_of(r["world"]) != side:
                 raise ValueError(
@@ -53,6 +58,7 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
                 )
             X.append(z["features"][upd])
             y.append(right(z["estimate"][upd], z["truth"][upd]))
+            drive.append(np.full(int(upd.sum()), f"{Path(d).name}/{r['world']}-run{r['run']}"))
             prov["worlds"].add(r["world"])
         prov["runs"].append(Path(d).name)
         prov["weighting"].add(doc["summary"]["weighting"])
@@ -73,17 +79,18 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
     maps = [{"map_drive": d, "map_logodds_limit": limit} for d, limit in sorted(prov["maps"], key=str)]
     prov = {
         "maps": maps[0] if len(maps) == 1 else maps,
+        "unmapped_per_m": sorted(prov["unmapped_per_m"]),
         "tracker": tracker,
         "runs": prov["runs"],
         "worlds": sorted(prov["worlds"]),
         "weighting": prov["weighting"].pop(),
         "particles": prov["particles"].pop(),
     }
-    return np.concatenate(X), np.concatenate(y), prov
+    return np.concatenate(X), np.concatenate(y), prov, np.concatenate(drive)
 
 
 def fit(args) -> Path:
-    X, y, prov = samples(args.runs, "tuning")
+    X, y, prov, _ = samples(args.runs, "tuning")
     model = fit_logistic(X, y)
     out = Path(args.out) if args.out else CALIBRATION_DIR / f"{prov['weighting']}.json"
     model.meta = {
@@ -93,6 +100,7 @@ def fit(args) -> Path:
         "num_particles": prov["particles"],
         "tracker": prov["tracker"],
         "maps": prov["maps"],
+        "unmapped_per_m": prov["unmapped_per_m"],
         "updates": int(len(y)),
         "right_share": float(y.mean()),
         "tuning_auroc": auroc(model(X), y),
@@ -107,13 +115,9 @@ def fit(args) -> Path:
 
 
 def judge(args) -> dict:
-    X, y, prov = samples(args.runs, "test")
+    X, y, prov, drive = samples(args.runs, "test")
     cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
-    model = Confidence.load(cal)
-    if model.tracker != prov["tracker"]:
-        raise ValueError(
-            f"{cal} was fitted on runs that tracked rivals as {model.tracker}, these runs did as {prov['tracker']}"
-        )
+    model = judging(cal, prov)
     p = model(X)
     doc = {
         "weighting": prov["weighting"],
@@ -132,6 +136,8 @@ def judge(args) -> dict:
     doc["max_calibration_gap"] = max(
         abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20
     )
+    if args.against:
+        doc["against"] = against(Path(args.against), prov, X, y, drive, p)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = f"confidence-{prov['weighting']}-{prov['particles'] // 1000}k"
@@ -142,7 +148,44 @@ def judge(args) -> dict:
         f"AUROC {doc['auroc']:.3f} (top mode's weight alone {doc['auroc_top_weight']:.3f}, spread alone "
         f"{doc['auroc_spread']:.3f}); largest calibration gap {doc['max_calibration_gap']:.2f}"
     )
+    if "against" in doc:
+        o = doc["against"]
+        print(
+            f"against {o['calibration']}: AUROC {o['auroc']:.3f}; difference {o['difference']:+.3f} (95 % over "
+            f"{o['drives']} drive resamples {o['ci95'][0]:+.3f} to {o['ci95'][1]:+.3f})"
+        )
     return doc
+
+
+def judging(cal: Path, prov: dict) -> Confidence:
+    """The calibration ``cal``, refused where it was fitted on runs that tracked rivals otherwise than these."""
+    model = Confidence.load(cal)
+    if model.tracker != prov["tracker"]:
+        raise ValueError(
+            f"{cal} was fitted on runs that tracked rivals as {model.tracker}, these runs did as {prov['tracker']}"
+        )
+    return model
+
+
+def against(cal: Path, prov: dict, X, y, drive, p) -> dict:
+    """A second calibration on the same updates: its AUROC beside the first's (``p``), with the 95 % interval of
+    (first - second) over drive resamples."""
+    from eval.analyses.paired_worlds import auroc_difference
+
+    q = judging(cal, prov)(X)  # (the same checks as the first's)
+    keys = np.unique(drive)
+    first = {k: (p[drive == k], y[drive == k]) for k in keys}
+    second = {k: (q[drive == k], y[drive == k]) for k in keys}
+    diff, meta = auroc_difference(first, second), Confidence.load(cal).meta
+    return {
+        "calibration": str(cal),
+        "tuning_worlds": meta.get("tuning_worlds"),
+        "source": meta.get("source"),
+        "auroc": diff["b"],
+        "difference": diff["difference"],
+        "ci95": diff["ci95"],
+        "drives": int(len(keys)),
+    }
 
 
 def plot(path: Path, doc: dict) -> None:
@@ -172,6 +215,7 @@ def main(argv=None) -> None:
     j = sub.add_parser("judge", help="AUROC and reliability on test-world runs")
     j.add_argument("runs", nargs="+", type=Path)
     j.add_argument("--calibration")
+    j.add_argument("--against", help="a second calibration, judged on the same updates")
     j.add_argument("--out", default="outputs/worlds/judged")
     args = ap.parse_args(argv)
     try:

@@ -491,6 +491,41 @@ def test_calibration_is_fitted_on_tuning_worlds_and_judged_on_test_worlds_only(t
         samples([run], side)
 
 
+def test_judging_against_a_second_calibration_compares_them_on_the_same_updates(tmp_path, rng, capsys):
+    """eval.confidence judge --against: on test drives whose right updates agree with the map better than their wrong
+    ones, a calibration that reads the agreement beats one that reads it backwards, the interval of the difference
+    over drive resamples lies above 0, and the record names both calibrations."""
+    from eval.confidence import main
+
+    run = tmp_path / "test-run"
+    run.mkdir()
+    rows = []
+    for k in range(1, 9):
+        n = 40
+        truth = np.zeros((n, 3))
+        wrong = rng.random(n) < 0.4
+        est = truth + np.where(wrong[:, None], [3.0, 0.0, 0.0], 0.0)
+        feats = np.full((n, len(FEATURES)), 0.5)
+        feats[:, FEATURES.index("agreement")] = np.where(wrong, 0.6, 0.9) + rng.normal(0.0, 0.1, n)
+        np.savez(run / f"office-1001-run{k}.npz", features=feats, estimate=est, truth=truth, updated=np.ones(n, bool))
+        rows.append({"world": "office-1001", "run": k})
+    w = {"refine_rivals": True, "search_rivals_every": 5, "mode_pose": "densest", "map_drive": "cover"}
+    doc = {"summary": {"weighting": "likelihood_field", "num_particles": 20000}, "settings": {"worlds": w}}
+    (run / "metrics.json").write_text(json.dumps({**doc, "runs": rows}))
+    good = _fake_calibration(tmp_path / "good.json")
+    bad = json.loads(good.read_text())
+    bad["coef"] = [-c for c in bad["coef"]]
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    main(
+        ["judge", str(run), "--calibration", str(good), "--against", str(tmp_path / "bad.json"), "--out", str(tmp_path)]
+    )
+    rec = json.loads((tmp_path / "confidence-likelihood_field-20k.json").read_text())
+    a = rec["against"]
+    assert rec["auroc"] > 0.8 and a["auroc"] == pytest.approx(1.0 - rec["auroc"], abs=1e-9)
+    assert a["difference"] == pytest.approx(rec["auroc"] - a["auroc"]) and a["ci95"][0] > 0.0 and a["drives"] == 8
+    assert a["calibration"].endswith("bad.json") and "against" in capsys.readouterr().out
+
+
 def test_a_pose_without_estimate_has_no_tum_line(tmp_path):
     from irmcl_warp.io import read_tum, write_tum
 
