@@ -384,6 +384,29 @@ def test_the_step_graph_runs_are_summarised_per_card_never_pooled():
     assert _graph_spans(nof, "intel") == {}
 
 
+def test_the_kidnap_evidence_facts_bound_what_the_scans_allow(tmp_path):
+    """README's bound on re-convergence comes from results/checks/kidnaps_evidence_<name>.json (eval.analyses.kidnaps
+    --evidence): of 10 kidnappings 6 met the windows and of the 4 misses read, 1 had scans that fit both places, so a
+    localizer reading only the scans can be sure of at most 9/10."""
+    import json
+
+    from eval.report.facts import _kidnap_evidence
+
+    (tmp_path / "checks").mkdir()
+    doc = {"kidnaps": 10, "classes": {"met": 6, "look-alike": 3, "not detected": 1}}
+    doc["evidence"] = {"tie": 0.02, "misses_read": 4, "scans_could_tell": 3}
+    doc["drives"] = [{"drive": "twin-1-run2", "scans_tell": False}, {"drive": "loop-1-run1", "scans_tell": True}]
+    doc["drives"] += [{"drive": "hall-1-run1", "class": "met"}]
+    (tmp_path / "checks" / "kidnaps_evidence_test_x.json").write_text(json.dumps(doc))
+    assert _kidnap_evidence(tmp_path) == {
+        "kidnaps_evidence_test_x_met": "6/10",
+        "kidnaps_evidence_test_x_alike": "1 of the 4",
+        "kidnaps_evidence_test_x_alike_drives": "twin-1-run2",
+        "kidnaps_evidence_test_x_bound": "9/10 (90 %)",
+    }
+    assert _kidnap_evidence(tmp_path / "nothing") == {}
+
+
 def test_the_paired_worlds_facts_quote_both_counts_and_the_test(tmp_path):
     """README's KLD-sampling figures come from results/checks/paired_worlds_<name>.json (eval.analyses.paired_worlds):
     both counts over the drives with McNemar's p, the drives only one side got right, and each side's particles per

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -143,6 +144,23 @@ def _paired_worlds(results=RESULTS) -> dict[str, dict[str, str]]:
                 f"(exact test of two Poisson rates p = {fa['p_rates']:.2g})"
             )
         out[name] = facts
+    return out
+
+
+def _kidnap_evidence(results=RESULTS) -> dict[str, str]:
+    """The kept ``eval.analyses.kidnaps --evidence`` readings (results/checks/kidnaps_evidence_<name>.json): the
+    kidnappings that met the issue's windows, the misses whose window of scans fit the wrong place as well as the
+    truth, and the share a localizer reading only the scans could be sure of (every kidnapping but those)."""
+    out = {}
+    for path in sorted((Path(results) / "checks").glob("kidnaps_evidence_*.json")):
+        name, rec = path.stem[len("kidnaps_evidence_") :], json.loads(path.read_text())
+        n, ev = rec["kidnaps"], rec["evidence"]
+        alike = ev["misses_read"] - ev["scans_could_tell"]
+        out[f"kidnaps_evidence_{name}_met"] = f"{rec['classes'].get('met', 0)}/{n}"
+        out[f"kidnaps_evidence_{name}_alike"] = f"{alike} of the {ev['misses_read']}"
+        names = [d["drive"] for d in rec["drives"] if "scans_tell" in d and not d["scans_tell"]]
+        out[f"kidnaps_evidence_{name}_alike_drives"] = ", ".join(names) or "none"
+        out[f"kidnaps_evidence_{name}_bound"] = f"{n - alike}/{n} ({100 * (n - alike) / n:.0f} %)"
     return out
 
 
@@ -295,6 +313,7 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         )
         wrong = [r for r in rows if not r["right_at_end"]]
         out[f"worlds_twins_{name}_wrong_against"] = f"{sum(r['evidence'] <= 0 for r in wrong)} of the {len(wrong)}"
+    out.update(_kidnap_evidence())
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value
