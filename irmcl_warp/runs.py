@@ -595,6 +595,7 @@ def start(cfg, stage: str, root=OUTPUTS) -> Iterator[Run]:
         ok, why = intact(final, ident.id)
         if ok:
             print(f"{final}: up to date (a finished run of these settings and inputs)")
+            warn_if_other_code(final)
             yield Run(ident, restricted(ident.settings), final, final, True, upstream)
             return
         if final.exists():
@@ -605,6 +606,26 @@ def start(cfg, stage: str, root=OUTPUTS) -> Iterator[Run]:
         partial.mkdir(parents=True, exist_ok=True)
         run = Run(ident, restricted(ident.settings), final, partial, False, upstream)
         yield run
+
+
+def warn_if_other_code(folder: Path) -> str | None:
+    """A finished run reused by code other than the code that made it (another commit, or either checkout with
+    uncommitted changes) is a loud warning: a run's identity is what it reads, not its code, so a changed program
+    finds the old result "up to date" (the thirty-sixth session kept four runs made by uncommitted code under ids
+    the committed code reuses, with other drives). Returns the warning, or None."""
+    import warnings
+
+    made = json.loads((Path(folder) / "manifest.json").read_text()).get("git_sha", "unknown")
+    now = _git_sha()
+    if (made == now and not now.endswith("-dirty")) or "unknown" in (made, now):
+        return None
+    why = "with uncommitted changes" if made == now else f"by {made}; this code is {now}"
+    msg = (
+        f"{folder}: reused, but it was made {why}: a run's identity is its settings and inputs, not its code, so "
+        "its results may not be what this code makes. Remove the folder to make it again"
+    )
+    warnings.warn(msg, stacklevel=4)  # (this, start, contextlib: the caller of runs.start)
+    return msg
 
 
 def cache_dir(cfg, name: str, root=OUTPUTS) -> Path:

@@ -391,6 +391,32 @@ def test_a_full_disk_is_one_line_naming_the_file_and_nothing_half_written(tmp_pa
     assert not list(stage.rglob(".summary.json.*"))  # no temporary file left
 
 
+def test_a_finished_run_reused_by_other_code_is_a_loud_warning(tmp_path, monkeypatch):
+    """A run's id is its settings and inputs, not its code: a finished run found by a later commit, or made or
+    found with uncommitted changes, is reused with a warning naming both; the same clean commit reuses it quietly.
+    A check study's record keeps the commit that made each run."""
+    from eval.results.records import keep_check
+
+    cfg = _cfg(*SMALL)
+    monkeypatch.setenv("IRMCL_GIT_SHA", "1111111")
+    folder = _finish(cfg, "inspect", tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning at all
+        with runs.start(cfg, "inspect", tmp_path) as run:
+            assert run.done
+    monkeypatch.setenv("IRMCL_GIT_SHA", "2222222")
+    with pytest.warns(UserWarning, match="made by 1111111; this code is 2222222"):
+        with runs.start(cfg, "inspect", tmp_path) as run:
+            assert run.done and run.path == folder
+    monkeypatch.setenv("IRMCL_GIT_SHA", "1111111-dirty")
+    other = _finish(_cfg(*SMALL, "sim.path_seed=2"), "inspect", tmp_path)
+    with pytest.warns(UserWarning, match="made with uncommitted changes"):
+        assert runs.warn_if_other_code(other)
+    doc = json.loads(keep_check("study", "sim_office", [(other, "inspect", [], None)], tmp_path).read_text())
+    (entry,) = doc["records"].values()
+    assert entry["manifest"]["git_sha"] == "1111111-dirty" and entry["manifest"]["device"] == "cpu"
+
+
 def test_a_copy_without_its_history_records_the_commit_it_was_made_from(tmp_path, monkeypatch):
     """A lent GPU machine runs a copy of the working tree with a stale history: IRMCL_GIT_SHA (written here by
     eval/gpu/stamp_source.sh) is what a run records; without it, this checkout's own HEAD (and -dirty when tracked

@@ -297,6 +297,7 @@ def keep_check(study: str, exp: str, entries, results: Path = RESULTS) -> Path:
         config = OmegaConf.to_container(OmegaConf.load(folder / "config.yaml"), resolve=True)
         config["exp"] = exp
         metrics = json.loads((folder / "metrics.json").read_text())
+        manifest = json.loads((folder / "manifest.json").read_text()) if (folder / "manifest.json").is_file() else {}
         entry = {
             "stage": stage,
             "exp": exp,
@@ -305,6 +306,8 @@ def keep_check(study: str, exp: str, entries, results: Path = RESULTS) -> Path:
             "kept_from": folder.name,
             "artifacts": {name: json.loads((folder / name).read_text()) for name in artifacts},
         }
+        if manifest:  # the code that made it (the id is the settings', not the code's)
+            entry["manifest"] = {k: manifest.get(k) for k in ("git_sha", "device", "package", "wall_time_s")}
         if draw:
             entry["draw"] = draw
         entry["id"] = runs.digest({k: entry[k] for k in ("stage", "config", "kept_from")} | {"draw": draw})
