@@ -442,6 +442,9 @@ def test_the_worlds_table_reads_the_stages_record(tmp_path, monkeypatch):
         f"KLD-sampling from 500, {s['particles_per_update'] / 1000:.1f}k per update on average"
         in (worlds_table([rec]).splitlines()[-1])
     )
+    assert "confidence fitted on" not in worlds_table([rec]).splitlines()[-1]  # a calibration of one tuning run
+    doc["summary"]["calibration"] = "eval.confidence fit on tuning-a, tuning-b, tuning-c"
+    assert "confidence fitted on 3 tuning runs" in worlds_table([rec]).splitlines()[-1]
     rec.config["worlds"]["split"] = "tuning"
     assert len(worlds_table([rec]).splitlines()) == 2  # tuning runs are never reported
 

@@ -7,6 +7,9 @@
 # Usage (after the packages and the log are unpacked: ../shared/tools/gpu/README.md):
 #   RULES="0.4 0.7" LOG=mit_killian SEEDS=0,1,2,3,4 N=20000 OUT=$PWD/gpu-out bash eval/gpu/own_map_rules.sh
 # RUN_S: seconds of the log (default null: the whole log).
+# CALIBRATION: a confidence calibration (eval.confidence fit) the copies judge with instead of the shipped one for N
+# (irmcl_warp/mcl/calibration/likelihood_field.json at 20k): two calibrations side by side are two calls, each
+# with its own OUT; the runs' identity includes the file, so they never share a folder.
 # SLAM_ARGS as in eval/gpu/own_slam_map.sh (MIT Killian's converged map: seed 6, 60 particles, gmapping_code).
 # Results: $OUT/own_slam_map-<log>-rule<v>.json and $OUT/own_map_rule<v>.tgz (the runs' trajectories, metrics and
 # settings) per threshold. OUT must be an absolute path (the runs start inside the copies).
@@ -31,6 +34,10 @@ for v in $RULES; do
   sed -i "s/^  lost_agreement_below: .*/  lost_agreement_below: $below/" "$tree/conf/exp/worlds.yaml"
   [ "$updates" = "$v" ] || sed -i "s/^  lost_agreement_updates: .*/  lost_agreement_updates: $updates/" "$tree/conf/exp/worlds.yaml"
   grep -q "^  lost_agreement_below: $below$" "$tree/conf/exp/worlds.yaml" || { echo "could not set the rule $v"; exit 1; }
+  if [ -n "${CALIBRATION:-}" ]; then
+    cal="$tree/irmcl_warp/mcl/calibration/likelihood_field$([ "$N" = 20000 ] || echo "-$((N / 1000))k").json"
+    cp "$CALIBRATION" "$cal" && echo "rule $v judged by $CALIBRATION ($cal)"
+  fi
   for s in ${SEEDS//,/ }; do  # run inside the copy: python -m imports the package from the working directory
     # shellcheck disable=SC2086
     (cd "$tree" && python -m irmcl_warp.localize +exp="$LOG" mcl=amcl mcl.num_particles="$N" \

@@ -462,6 +462,8 @@ def worlds_table(runs: list) -> str:
         gate = r.setting("worlds.lost_timeout_agreement_below")  # (runs before it: none)
         upd = r.setting("worlds.lost_agreement_updates") or 1
         places = r.setting("worlds.relocalize_places") or 0  # (runs before it: none)
+        fitted = s.get("calibration") or ""  # "eval.confidence fit on <run>, <run>, ...": calibrations before the
+        fitted_on = len(fitted.split(" on ", 1)[1].split(", ")) if " on " in fitted else 1  # 37th were one run's
         how = (
             ([f"map of a random {r.setting('worlds.map_drive_m') or 400:g} m drive"] if random_map else [])
             + ([f"map's log-odds within +-{limit:g}"] if limit is not None and not random_map else [])
@@ -487,6 +489,7 @@ def worlds_table(runs: list) -> str:
                 else []
             )
             + (["not relocalizing"] if r.setting("worlds.relocalize") is False else [])
+            + ([f"confidence fitted on {fitted_on} tuning runs"] if fitted_on > 1 else [])
             + (
                 [f"drives among {r.setting('worlds.unmapped_per_m'):g} unmapped objects a metre"]
                 if r.setting("worlds.unmapped_per_m")  # (runs before it: none)
