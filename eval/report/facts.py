@@ -109,6 +109,10 @@ PAIRED_WORLDS = (
     "candidates_vs_before_cpu",
     "candidates_vs_before_cpu_kidnap",
     "candidates_vs_off_tuning_kidnap",
+    "calibration_mixed_vs_shipped_test_clean",  # the confidence fitted on clean and cluttered tuning floors, kidnapped
+    "calibration_mixed_vs_shipped_test_unmapped03",  # and not, against the one fitted on the clean drives alone
+    "calibration_mixed_vs_shipped_test_clean_kidnap",
+    "calibration_mixed_vs_shipped_test_unmapped03_kidnap",
 )  # results/checks/paired_worlds_<name>.json
 
 
@@ -314,6 +318,11 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         wrong = [r for r in rows if not r["right_at_end"]]
         out[f"worlds_twins_{name}_wrong_against"] = f"{sum(r['evidence'] <= 0 for r in wrong)} of the {len(wrong)}"
     out.update(_kidnap_evidence())
+    real = RESULTS / "checks" / "calibration_mixed_real_logs.json"  # the new calibration on real logs, poses unchanged
+    if real.is_file():
+        for log, sides in json.loads(real.read_text())["logs"].items():
+            new, old = sides["mixed"]["confidence"]["auroc"], sides["shipped"]["confidence"]["auroc"]
+            out[f"calibration_mixed_{log}_auroc"] = f"{new:.3f} against {old:.3f}"
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value
