@@ -1240,6 +1240,8 @@ def test_the_kidnaps_evidence_tells_a_look_alike_window_from_one_whose_scans_tol
     alike, told = verdicts[(50, 150)], verdicts[(50,)]
     assert alike["scans_tell"] is False and abs(alike["margin"]) < 0.02, alike
     assert told["scans_tell"] is True and told["margin"] > 0.9 and told["agreement_at_wrong_place"] < 0.05, told
+    lost = dict(trace, estimate=np.where((t >= 3.0)[:, None], np.nan, est))  # a re-seed: no estimate to judge
+    assert "scans_tell" not in window_evidence(lost, row, log, ScanAgreement(occ, (0.0, 0.0), res))
     other = SimpleNamespace(**{**vars(log), "ground_truth": truth + [0.5, 0.0, 0.0]})
     with pytest.raises(SystemExit, match="not the one the run recorded"):
         window_evidence(trace, row, other, ScanAgreement(occ, (0.0, 0.0), res))

@@ -122,7 +122,7 @@ class Drives:
     def __init__(self, run: Path):
         from omegaconf import OmegaConf
 
-        self.cfg, self.run, self.maps = OmegaConf.load(run / "config.yaml"), run, {}
+        self.cfg, self.maps = OmegaConf.load(run / "config.yaml"), {}
 
     def __call__(self, row: dict):
         """(the drive's log, the agreement with its world's map) for a row of the run's metrics."""
@@ -153,8 +153,8 @@ def window_evidence(trace, row: dict, log, agreement) -> dict:
     est, truth = trace["estimate"], trace["truth"]
     window = np.flatnonzero((t >= start) & (t <= end))
     held = window[np.all(np.isfinite(est[window]), 1) & ~right(np.nan_to_num(est[window]), truth[window])]
-    if not len(held):
-        return {"window_s": [float(start), float(end)], "scans_tell": False, "note": "no wrong estimate in the window"}
+    if not len(held):  # (no estimate at all, a re-seed's: nothing to judge, so not counted either way)
+        return {"window_s": [float(start), float(end)], "note": "no wrong estimate in the window"}
     last = held[-1]
     place = compose(est[last], relative(log.odom[last], log.odom[window]))  # the wrong place over the window
     angles, T = log.info.angles_rad, log.T_base_laser
