@@ -172,11 +172,11 @@ def against(cal: Path, prov: dict, X, y, drive, p) -> dict:
     (first - second) over drive resamples."""
     from eval.analyses.paired_worlds import auroc_difference
 
-    q = judging(cal, prov)(X)  # (the same checks as the first's)
-    keys = np.unique(drive)
+    model = judging(cal, prov)  # (the same checks as the first's)
+    q, keys = model(X), np.unique(drive)
     first = {k: (p[drive == k], y[drive == k]) for k in keys}
     second = {k: (q[drive == k], y[drive == k]) for k in keys}
-    diff, meta = auroc_difference(first, second), Confidence.load(cal).meta
+    diff, meta = auroc_difference(first, second), model.meta
     return {
         "calibration": str(cal),
         "tuning_worlds": meta.get("tuning_worlds"),

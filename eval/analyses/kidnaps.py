@@ -126,13 +126,15 @@ class Drives:
 
     def __call__(self, row: dict):
         """(the drive's log, the agreement with its world's map) for a row of the run's metrics."""
-        from irmcl_warp.mcl.worlds import map_agreement, query_log, world_map
+        from irmcl_warp.mcl.confidence import ScanAgreement
+        from irmcl_warp.mcl.worlds import query_log, world_map
         from irmcl_warp.sim import floors
 
         name = row["world"]
         if name not in self.maps:
             world = floors.build(name)
-            self.maps[name] = (world, map_agreement(world_map(world, self.cfg, "cpu"), self.cfg.mcl))
+            grid = world_map(world, self.cfg, "cpu")
+            self.maps[name] = (world, ScanAgreement.of_grid(grid, self.cfg.mcl.field_occ_threshold))
         world, agreement = self.maps[name]
         log, _ = query_log(world, self.cfg, int(row["run"]), "cpu")
         return log, agreement

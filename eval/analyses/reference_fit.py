@@ -80,7 +80,7 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
     cfg = OmegaConf.load(runs[0] / "config.yaml")  # the log the runs read (and the SLAM run made its map of)
     log = load_stream(cfg)
     grid = load_map(slam / "map.yaml")
-    agreement = ScanAgreement(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m)
+    agreement = ScanAgreement.of_grid(grid)
     ref_stamps, ref = read_tum(slam / "trajectory.tum")
     k = match_stamps(log.stamps, ref_stamps)  # (the log's scans in their own order: intel's stamps go back)
     has_scan = k >= 0

@@ -166,6 +166,11 @@ class ScanAgreement:
         self.near_coarse = dist <= COARSE_TOLERANCE_M  # for a search over poses 0.5 m and 22.5 deg apart
         self.origin, self.res, self.step = np.asarray(origin_xy, float), float(resolution_m), int(beam_step)
 
+    @classmethod
+    def of_grid(cls, grid, occ_threshold: float = 0.65) -> "ScanAgreement":
+        """The agreement with an occupancy grid's known cells (``grid.known``; unknown cells hold no wall)."""
+        return cls(np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m, occ_threshold)
+
     def __call__(self, pose, ranges_m, angles_rad, T_base_laser) -> float:
         return float(self.many(np.asarray(pose, float)[None], ranges_m, angles_rad, T_base_laser)[0])
 

@@ -59,8 +59,7 @@ def calibrated_judge(cfg, grid, log) -> tuple[Judge | None, str]:
             else f"the filter differs from the calibrated one (mcl=amcl) in {', '.join(differ)}"
         )
         return None, f"no confidence: {why}"
-    occupancy = np.where(grid.known, grid.probability, 0.0)
-    agreement = ScanAgreement(occupancy, grid.origin_xy, grid.resolution_m, m.field_occ_threshold)
+    agreement = ScanAgreement.of_grid(grid, m.field_occ_threshold)
     conf = Confidence.load(path)
     tracker = FeatureTracker(  # tracking rivals as the runs it was fitted on did
         agreement,

@@ -132,13 +132,6 @@ def world_map(world, cfg, device):
     )
 
 
-def map_agreement(grid, m) -> ScanAgreement:
-    """The scan's agreement with a world's map (its known cells; unknown ones hold no wall)."""
-    return ScanAgreement(
-        np.where(grid.known, grid.probability, 0.0), grid.origin_xy, grid.resolution_m, m.field_occ_threshold
-    )
-
-
 def logodds_bounds(limit) -> dict:
     """integrate_scans' l_min / l_max for ``worlds.map_logodds_limit`` (None: unbounded). A bound makes the map
     forget: on a long drive, beams that graze a wall end a little beyond it (range noise) and mark its cells free,
@@ -207,7 +200,7 @@ def localize_worlds(run: runs.Run) -> Path:
         grid = world_map(world, cfg, device)
         view = free_space_view(grid.probability, grid.origin_xy, grid.resolution_m, grid.known)
         maps = grid_maps(grid, cfg.mcl.weighting)
-        agreement = map_agreement(grid, cfg.mcl)
+        agreement = ScanAgreement.of_grid(grid, cfg.mcl.field_occ_threshold)
         wants_grid = cfg.worlds.search_rivals_every > 0 or cfg.worlds.relocalize_places > 0
         search = search_grid(grid) if wants_grid else None
         results = []
