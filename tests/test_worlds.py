@@ -564,6 +564,7 @@ def test_unmapped_objects_stand_off_the_path_and_off_the_walls(kind):
     assert getattr(seen, "solid", None) == getattr(world, "solid", None)
 
 
+@pytest.mark.cpu_only  # it builds the map with device=cpu
 def test_a_drive_among_unmapped_objects_is_the_same_drive_with_scans_the_map_explains_less():
     from irmcl_warp.mcl.worlds import query_log, world_map
 
