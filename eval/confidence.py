@@ -14,7 +14,9 @@ features alone (the top mode's weight, the spread: the signals the filter used t
 ``confidence-<weighting>-<particles>.json`` with a plot (``.png``) beside it. With ``--against`` a second calibration
 is judged on the same updates, and the record holds both AUROCs with a 95 % interval of their difference from
 resampling the drives (``eval.analyses.paired_worlds``: a drive's updates are not independent, the drives are). One
-calibration is for one observation model and one particle count (the features depend on both).
+calibration is for one observation model and one particle count (the features depend on both): without ``--out``
+or ``--calibration`` the file is the one shipped for the runs' particle count (``<w>.json`` at 20k, ``<w>-<n>k.json``
+otherwise; until the 2026-12-02 session both took ``<w>.json`` whatever the count).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from irmcl_warp.config import CALIBRATION_DIR
+from irmcl_warp.config import calibration_file
 from irmcl_warp.mcl.confidence import FEATURES, Confidence, auroc, fit_logistic, reliability, right, tracker_of
 from irmcl_warp.services.outputs import save_figure, write_json
 from irmcl_warp.sim import floors
@@ -92,7 +94,7 @@ def samples(run_dirs: list[Path], side: str) -> tuple[np.ndarray, np.ndarray, di
 def fit(args) -> Path:
     X, y, prov, _ = samples(args.runs, "tuning")
     model = fit_logistic(X, y)
-    out = Path(args.out) if args.out else CALIBRATION_DIR / f"{prov['weighting']}.json"
+    out = Path(args.out) if args.out else calibration_file(prov["weighting"], prov["particles"])
     model.meta = {
         "source": f"eval.confidence fit on {', '.join(prov['runs'])}",
         "tuning_worlds": prov["worlds"],
@@ -116,7 +118,7 @@ def fit(args) -> Path:
 
 def judge(args) -> dict:
     X, y, prov, drive = samples(args.runs, "test")
-    cal = Path(args.calibration) if args.calibration else CALIBRATION_DIR / f"{prov['weighting']}.json"
+    cal = Path(args.calibration) if args.calibration else calibration_file(prov["weighting"], prov["particles"])
     model = judging(cal, prov)
     p = model(X)
     doc = {
@@ -211,10 +213,10 @@ def main(argv=None) -> None:
     sub = ap.add_subparsers(dest="command", required=True)
     f = sub.add_parser("fit", help="fit the confidence on tuning-world runs")
     f.add_argument("runs", nargs="+", type=Path)
-    f.add_argument("--out", help="calibration file (default: the one shipped for the weighting)")
+    f.add_argument("--out", help="calibration file (default: the one shipped for the weighting and particle count)")
     j = sub.add_parser("judge", help="AUROC and reliability on test-world runs")
     j.add_argument("runs", nargs="+", type=Path)
-    j.add_argument("--calibration")
+    j.add_argument("--calibration", help="default: the one shipped for the runs' weighting and particle count")
     j.add_argument("--against", help="a second calibration, judged on the same updates")
     j.add_argument("--out", default="outputs/worlds/judged")
     args = ap.parse_args(argv)

@@ -479,11 +479,23 @@ def shipped_calibration(weighting: str) -> Path | None:
     return path if path.is_file() else None
 
 
-def own_map_calibration(weighting: str, num_particles: int) -> Path | None:
-    """The calibration a run in your own map judges itself with: the one fitted on the worlds stage's filter at this
-    particle count (``<weighting>.json`` for 20k, ``<weighting>-<n>k.json`` otherwise), or None."""
+def calibration_file(weighting: str, num_particles: int) -> Path:
+    """Where the calibration fitted on the worlds stage's filter at this particle count lives (``<weighting>.json``
+    for 20k, ``<weighting>-<n>k.json`` otherwise), whether or not one was fitted."""
     n = int(num_particles)
-    return shipped_calibration(weighting if n == 20000 else f"{weighting}-{n // 1000}k")
+    return CALIBRATION_DIR / f"{weighting if n == 20000 else f'{weighting}-{n // 1000}k'}.json"
+
+
+def own_map_calibration(weighting: str, num_particles: int) -> Path | None:
+    """The calibration a run in your own map judges itself with: the one fitted at its particle count, or None."""
+    path = calibration_file(weighting, num_particles)
+    return path if path.is_file() else None
+
+
+def worlds_calibration(weighting: str, num_particles: int) -> Path | None:
+    """The calibration a worlds run that names none judges itself with: the one fitted at its particle count, else
+    the weighting's 20k one (mcl/worlds.py calibration_of warns that it was fitted on another filter), else None."""
+    return own_map_calibration(weighting, num_particles) or shipped_calibration(weighting)
 
 
 def own_map_lost_rule_file() -> Path:

@@ -45,7 +45,7 @@ from typing import Callable, Iterator
 
 from irmcl_warp.io.atomic import atomic_write_bytes
 from irmcl_warp.io.atomic import atomic_write_json as write_json
-from irmcl_warp.config import own_map_calibration, own_map_lost_rule_file, shipped_calibration
+from irmcl_warp.config import own_map_calibration, own_map_lost_rule_file, worlds_calibration
 
 REPO = Path(__file__).resolve().parents[1]
 OUTPUTS = Path("outputs")  # relative to the working directory, as Hydra's run dir
@@ -253,8 +253,8 @@ def input_files(settings: dict) -> dict[str, list[Path]]:
             continue
         if key == "worlds.calibration" and value == "off":  # features only: no file read
             continue
-        if not value and key == "worlds.calibration":  # none given: the one shipped for the weighting, if any
-            value = shipped_calibration(_get(settings, "mcl.weighting"))
+        if not value and key == "worlds.calibration":  # none given: the one shipped for the filter, if any
+            value = worlds_calibration(_get(settings, "mcl.weighting"), _get(settings, "mcl.num_particles"))
         if value:
             path = resolve(value)  # as given (absolute, or from the working directory), else under IRMCL_DATA
             out[key] = map_files(path) if key == "localize.map_path" else [path]

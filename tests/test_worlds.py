@@ -1416,3 +1416,30 @@ def test_the_lost_rule_is_chosen_again_from_a_record_without_replaying(tmp_path)
     assert chosen.read_text().startswith("lost_agreement_below=0.4 lost_agreement_updates=2: detected within 2 s 22/23")
     with pytest.raises(ValueError, match="not both"):
         main([str(tmp_path), "--from-record", str(record)])
+
+
+def test_a_worlds_run_naming_no_calibration_reads_the_one_for_its_particle_count(tmp_path, monkeypatch):
+    """A 100k run that names no calibration judges itself with the 100k file (it took the 20k one until the
+    2026-12-02 session, silently); with no file for its count it takes the 20k one with a warning naming both counts,
+    and the file it reads is the one its identity holds."""
+    import irmcl_warp.config as config
+    from irmcl_warp import runs
+    from irmcl_warp.mcl.worlds import calibration_of
+
+    monkeypatch.setattr(config, "CALIBRATION_DIR", tmp_path)
+    for name, n in (("likelihood_field.json", 20000), ("likelihood_field-100k.json", 100000)):
+        doc = json.loads(_fake_calibration(tmp_path / name).read_text())
+        (tmp_path / name).write_text(json.dumps({**doc, "num_particles": n}))
+    cfg = _worlds_cfg("mcl.num_particles=100000")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        assert calibration_of(cfg).meta["num_particles"] == 100000
+    assert [f["path"] for f in runs.identify(cfg, "worlds").inputs["worlds.calibration"]] == [
+        str(tmp_path / "likelihood_field-100k.json")
+    ]
+    (tmp_path / "likelihood_field-100k.json").unlink()
+    with pytest.warns(UserWarning, match="fitted on a filter of 20,000 particles, this run has 100,000"):
+        assert calibration_of(cfg).meta["num_particles"] == 20000
+    assert [f["path"] for f in runs.identify(cfg, "worlds").inputs["worlds.calibration"]] == [
+        str(tmp_path / "likelihood_field.json")
+    ]

@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from irmcl_warp.config import shipped_calibration
 
 MAX_PARTICLES = 20_000  # the features read every k-th particle of a larger set (k = ceil(n / this)): 40 ms of
 # host work per update at 100k, 9 ms at 20k (2-core CPU); resampling keeps a set's copies together, so a stride
@@ -493,9 +492,6 @@ class Confidence:
             "scale": self.scale.tolist(),
             **({} if self.lo is None else {"lo": self.lo.tolist(), "hi": self.hi.tolist()}),
         }
-
-
-shipped = shipped_calibration
 
 
 def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = 1e-3, iterations: int = 50) -> Confidence:

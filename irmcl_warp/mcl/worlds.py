@@ -36,6 +36,7 @@ from omegaconf import OmegaConf
 from tqdm import tqdm
 
 from irmcl_warp import runs
+from irmcl_warp.config import worlds_calibration
 from irmcl_warp.geometry import compose, relative, wrap_angle
 from irmcl_warp.io import write_tum
 from irmcl_warp.mapping import integrate_scans
@@ -50,7 +51,6 @@ from irmcl_warp.mcl.confidence import (
     reliability,
     search_grid,
     right,
-    shipped,
     tracker_of,
 )
 from irmcl_warp.mcl.track import between_updates, moved
@@ -88,10 +88,20 @@ def run_worlds(cfg) -> Path:
 def calibration_of(cfg) -> Confidence | None:
     if cfg.worlds.calibration == "off":  # features only (tuning runs for a calibration of new features)
         return None
-    path = cfg.worlds.calibration or shipped(cfg.mcl.weighting)
+    path = cfg.worlds.calibration or worlds_calibration(cfg.mcl.weighting, cfg.mcl.num_particles)
     if not path:
         return None
     conf = Confidence.load(path)
+    fitted_n = conf.meta.get("num_particles")
+    if fitted_n is not None and int(fitted_n) != int(cfg.mcl.num_particles):
+        # a larger cloud keeps a wider spread and weightier modes: the features read otherwise (until the 2026-12-02
+        # session a 100k run that named none took the 20k file without a word)
+        warnings.warn(
+            f"worlds: {path} was fitted on a filter of {int(fitted_n):,} particles, this run has "
+            f"{int(cfg.mcl.num_particles):,}: its confidence may not be calibrated (fit one at this count: "
+            "python -m eval.confidence fit)",
+            stacklevel=1,
+        )
     mine = tracker_of(cfg.worlds)
     if conf.tracker != mine:
         raise ValueError(
