@@ -135,9 +135,7 @@ def judge(args) -> dict:
         "auroc_top_weight": auroc(X[:, FEATURES.index("top_weight")], y),
         "auroc_spread": auroc(-X[:, FEATURES.index("log_spread")], y),
     }
-    doc["max_calibration_gap"] = max(
-        abs(b["predicted"] - b["observed"]) for b in doc["reliability"] if b["count"] >= 20
-    )
+    doc["max_calibration_gap"] = largest_gap(doc["reliability"])
     if args.against:
         doc["against"] = against(Path(args.against), prov, X, y, drive, p)
     out = Path(args.out)
@@ -153,10 +151,16 @@ def judge(args) -> dict:
     if "against" in doc:
         o = doc["against"]
         print(
-            f"against {o['calibration']}: AUROC {o['auroc']:.3f}; difference {o['difference']:+.3f} (95 % over "
-            f"{o['drives']} drive resamples {o['ci95'][0]:+.3f} to {o['ci95'][1]:+.3f})"
+            f"against {o['calibration']}: AUROC {o['auroc']:.3f}, largest calibration gap "
+            f"{o['max_calibration_gap']:.2f}; difference {o['difference']:+.3f} (95 % over {o['drives']} drive "
+            f"resamples {o['ci95'][0]:+.3f} to {o['ci95'][1]:+.3f})"
         )
     return doc
+
+
+def largest_gap(curve) -> float:
+    """The reliability curve's largest |predicted - observed| over its bins of at least 20 updates."""
+    return max(abs(b["predicted"] - b["observed"]) for b in curve if b["count"] >= 20)
 
 
 def judging(cal: Path, prov: dict) -> Confidence:
@@ -184,6 +188,7 @@ def against(cal: Path, prov: dict, X, y, drive, p) -> dict:
         "tuning_worlds": meta.get("tuning_worlds"),
         "source": meta.get("source"),
         "auroc": diff["b"],
+        "max_calibration_gap": largest_gap(reliability(q, y)),
         "difference": diff["difference"],
         "ci95": diff["ci95"],
         "drives": int(len(keys)),

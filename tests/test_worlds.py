@@ -527,6 +527,7 @@ def test_judging_against_a_second_calibration_compares_them_on_the_same_updates(
     assert rec["auroc"] > 0.8 and a["auroc"] == pytest.approx(1.0 - rec["auroc"], abs=1e-9)
     assert a["difference"] == pytest.approx(rec["auroc"] - a["auroc"]) and a["ci95"][0] > 0.0 and a["drives"] == 8
     assert a["calibration"].endswith("bad.json") and "against" in capsys.readouterr().out
+    assert a["max_calibration_gap"] > rec["max_calibration_gap"]  # the backward one is the further off its curve
 
 
 def test_a_pose_without_estimate_has_no_tum_line(tmp_path):
