@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eval.analyses.paired_worlds import rates_exact
 from eval.results.queries import converged, median_span, released_errors, slam_errors, slam_variant
 from eval.results.records import RESULTS, checks, find
 
@@ -323,6 +324,13 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         for log, sides in json.loads(real.read_text())["logs"].items():
             new, old = sides["mixed"]["confidence"]["auroc"], sides["shipped"]["confidence"]["auroc"]
             out[f"calibration_mixed_{log}_auroc"] = f"{new:.3f} against {old:.3f}"
+            a, b = sides["mixed"]["false_alarms"], sides["shipped"]["false_alarms"]
+            p = rates_exact(a["false"], a["hours_right"], b["false"], b["hours_right"])
+            out[f"calibration_mixed_{log}_false_alarms"] = (
+                f"{a['false']} against {b['false']} in {a['hours_right']:.2f} h of right tracking "
+                f"({a['per_hour_right']:.1f} against {b['per_hour_right']:.1f} an hour; exact test of two Poisson "
+                f"rates p = {p:.2g})"
+            )
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value
