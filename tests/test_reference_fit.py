@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from eval.analyses.reference_fit import auroc_where_reference_fits, who_fits_better
+from eval.analyses.reference_fit import alarm_fits, auroc_where_reference_fits, who_fits_better
 from irmcl_warp.mcl.confidence import auroc
 
 
@@ -50,3 +50,23 @@ def test_scans_are_found_by_stamp_in_a_log_whose_stamps_go_back(rng):
     assert (k >= 0).all() and np.array_equal(stamps[log_order][k], stamps[::3])
     k = match_stamps(stamps[log_order], stamps[::3] + 0.05)  # no scan stamped there
     assert not (k >= 0).any()
+
+
+def test_an_alarm_on_a_right_estimate_is_read_with_the_fit_of_the_scans_its_rule_read(rng):
+    """Only events whose last scan before was right are false alarms; each carries the lowest agreement of the scans
+    in the window before it, at the estimate and at the SLAM pose, and whether the SLAM pose too fell below the bar."""
+    t = np.arange(0.0, 30.0, 0.1)
+    ok = np.ones(len(t), bool)
+    ok[(t > 19.0) & (t < 21.0)] = False  # wrong before the event at 20 s: not a false alarm
+    fit_est = rng.uniform(0.8, 1.0, len(t))
+    fit_ref = rng.uniform(0.8, 1.0, len(t))
+    fit_est[np.isclose(t, 9.0)], fit_ref[np.isclose(t, 9.0)] = 0.1, 0.2  # at 10 s the map fits nowhere
+    fit_est[np.isclose(t, 28.0)] = 0.3  # at 28.5 s only the estimate fits badly
+    fit_ref[(t > 5.0) & (t < 6.0)] = 0.0  # outside every window: not read
+    events = alarm_fits([10.0, 20.0, 28.5], t, ok, fit_est, fit_ref, below=0.4, window_s=2.0)
+    assert [e["at_s"] for e in events] == [10.0, 28.5]
+    first, last = events
+    assert first["lowest_at_estimate"] == 0.1 and first["lowest_at_reference"] == 0.2 and first["reference_below_bar"]
+    assert last["lowest_at_estimate"] == 0.3 and last["lowest_at_reference"] >= 0.8 and not last["reference_below_bar"]
+    assert first["scans"] == 20  # the 2 s before, at 10 Hz
+    assert alarm_fits(None, t, ok, fit_est, fit_ref, below=0.4) == []

@@ -24,12 +24,15 @@ pose of it. It reports:
 from __future__ import annotations
 
 import argparse
+import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 from omegaconf import OmegaConf
 
-from eval.analyses.own_slam_map import confidence_per_scan, on_reference
+from eval.analyses.own_slam_map import confidence_per_scan, lost_rule_of_run, on_reference
+from irmcl_warp.config import own_map_lost_rule_settings
 from irmcl_warp.io import read_tum
 from irmcl_warp.mapping.mapio import load_map
 from irmcl_warp.mcl.confidence import ScanAgreement, auroc, right
@@ -38,6 +41,9 @@ from irmcl_warp.types import match_stamps
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
 
+ALARM_WINDOW_S = (
+    2.0  # the scans before a lost event that its rule read (2 updates below the bar, and the scans between)
+)
 THRESHOLDS = (0.0, 0.6, 0.7, 0.8, 0.9)  # the reference's agreement with its map at or above which a scan is judged
 MARGIN = 0.02  # one pose fits a scan better than another when its agreement is higher by more than this
 
@@ -76,6 +82,31 @@ def who_fits_better(at_estimate, at_reference, margin: float = MARGIN) -> dict:
     }
 
 
+def alarm_fits(lost_at_s, t, ok, fit_est, fit_ref, below: float, window_s: float = ALARM_WINDOW_S) -> list[dict]:
+    """The lost events on a right estimate (``own_slam_map.false_alarms``' reading: the last scan before the event was
+    right), each with the lowest agreement of the scans in the ``window_s`` before it at the estimate and at the SLAM
+    pose. ``t``: the scans' seconds since the first; ``fit_est`` / ``fit_ref``: each scan's agreement (NaN where
+    unread); ``below``: the rule's bar. Where the SLAM pose too fits below the bar, the map explains those scans at no
+    pose the label calls right: the alarm says the map is not the world there, not that the robot is lost."""
+    out = []
+    for at in lost_at_s or ():
+        before = np.flatnonzero(t < at - 1e-6)
+        if not len(before) or not ok[before[-1]]:
+            continue
+        w = before[t[before] >= at - window_s]
+        lo_est, lo_ref = np.nanmin(fit_est[w], initial=np.inf), np.nanmin(fit_ref[w], initial=np.inf)
+        out.append(
+            {
+                "at_s": float(at),
+                "scans": int(len(w)),
+                "lowest_at_estimate": float(lo_est),
+                "lowest_at_reference": float(lo_ref),
+                "reference_below_bar": bool(lo_ref < below),
+            }
+        )
+    return out
+
+
 def reference_fit(slam: Path, runs: list[Path]) -> dict:
     cfg = OmegaConf.load(runs[0] / "config.yaml")  # the log the runs read (and the SLAM run made its map of)
     log = load_stream(cfg)
@@ -90,7 +121,7 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
     ref_fit = np.full(len(ref), np.nan)
     for i in np.flatnonzero(has_scan):
         ref_fit[i] = agreement(ref[i], log.ranges_m[k[i]], *scan)
-    conf_all, hit_all, fit_all, at_est = [], [], [], []
+    conf_all, hit_all, fit_all, at_est, alarms = [], [], [], [], {}
     for run in runs:
         stamps, est = read_tum(run / "trajectory.tum")
         on_ref = on_reference(stamps, est, ref_stamps, ref)
@@ -102,9 +133,27 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         hit_all.append(hit[use])
         fit_all.append(ref_fit[j][use])
         at_est += [agreement(est[i], log.ranges_m[k[j[i]]], *scan) for i in np.flatnonzero(use)]
+        metrics = json.loads((run / "metrics.json").read_text())
+        if metrics.get("lost_at_s"):  # the agreement at the estimate, only at the scans an alarm's rule read
+            t, near = stamps - stamps[0], np.zeros(len(stamps), bool)
+            for at in metrics["lost_at_s"]:
+                near |= (t >= at - ALARM_WINDOW_S - 1e-6) & (t < at)
+            fit_est = np.full(len(stamps), np.nan)
+            for i in np.flatnonzero(near & np.isfinite(est).all(1) & (k[j] >= 0)):
+                fit_est[i] = agreement(est[i], log.ranges_m[k[j[i]]], *scan)
+            below = (lost_rule_of_run(json.loads((run / "manifest.json").read_text())) or {}).get(
+                "lost_agreement_below"
+            )
+            if below is None:
+                below = own_map_lost_rule_settings().lost_agreement_below
+                warnings.warn(f"{run}: its lost rule is not recorded; the bar read is today's ({below})", stacklevel=1)
+            alarms[str(run)] = alarm_fits(metrics["lost_at_s"], t, hit, fit_est, ref_fit[j], below)
     conf_all, hit_all, at_ref = (np.concatenate(x) for x in (conf_all, hit_all, fit_all))
     fit = ref_fit[np.isfinite(ref_fit)]
     at_est, wrong = np.array(at_est), ~hit_all  # each used scan's, in the order of the runs
+    for events in alarms.values():  # how rare a fit that poor is for the reference: its share of the log's scans
+        for e in events:
+            e["reference_share_below"] = float(np.mean(fit < e["lowest_at_reference"]))
     return {
         "log": cfg.data.name,
         "slam_run": str(slam),
@@ -116,9 +165,14 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         },
         "every_scan": who_fits_better(at_est, at_ref),
         "wrong_scans": who_fits_better(at_est[wrong], at_ref[wrong]),
-        "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, at_ref),
+        # (None where the runs kept no confidence per scan: spread.csv)
+        "auroc_where_reference_fits": auroc_where_reference_fits(conf_all, hit_all, at_ref) if len(hit_all) else None,
         # the scan's agreement at the reported pose, every scan's own (between updates too), taken as the score
         "auroc_of_agreement_alone": auroc(at_est, ~wrong) if wrong.any() and (~wrong).any() else None,
+        "false_alarms": alarms,
+        "alarm_window_s": ALARM_WINDOW_S,
+        "false_alarms_where_reference_below_bar": sum(a["reference_below_bar"] for r in alarms.values() for a in r),
+        "false_alarms_total": sum(len(r) for r in alarms.values()),
     }
 
 
@@ -147,15 +201,41 @@ def main(argv=None):
         print(
             f"the scan's agreement at the reported pose alone as the score: AUROC {rec['auroc_of_agreement_alone']:.3f}"
         )
-    print("| SLAM pose's agreement at least | share of scans | wrong scans | AUROC |")
-    print("|---|---|---|---|")
-    for r in rec["auroc_where_reference_fits"]:
-        auc = "-" if r["auroc"] is None else f"{r['auroc']:.3f}"
-        print(f"| {r['reference_agreement_at_least']:.1f} | {r['share_of_scans']:.3f} | {r['wrong']:,} | {auc} |")
+    if rec["auroc_where_reference_fits"] is None:
+        print(
+            "these runs kept no confidence per scan (spread.csv): no scan is scored, only the reference and the alarms"
+        )
+    else:
+        print_auroc_rows(rec["auroc_where_reference_fits"])
+    print_alarms(rec)
     if a.out:
         write_json(a.out, rec)
         print(f"-> {a.out}")
     return rec
+
+
+def print_auroc_rows(rows) -> None:
+    print("| SLAM pose's agreement at least | share of scans | wrong scans | AUROC |")
+    print("|---|---|---|---|")
+    for r in rows:
+        auc = "-" if r["auroc"] is None else f"{r['auroc']:.3f}"
+        print(f"| {r['reference_agreement_at_least']:.1f} | {r['share_of_scans']:.3f} | {r['wrong']:,} | {auc} |")
+
+
+def print_alarms(rec: dict) -> None:
+    if rec["false_alarms_total"]:
+        print(
+            f"lost events on a right estimate: {rec['false_alarms_total']}, of them "
+            f"{rec['false_alarms_where_reference_below_bar']} where the SLAM pose too fits a scan of the {ALARM_WINDOW_S:.0f} s before below the rule's bar"
+        )
+        print("| run | at (s) | lowest agreement at the estimate | at the SLAM pose | scans the SLAM pose fits worse |")
+        print("|---|---|---|---|---|")
+        for run, events in rec["false_alarms"].items():
+            for e in events:
+                print(
+                    f"| {Path(run).name} | {e['at_s']:.1f} | {e['lowest_at_estimate']:.2f} | "
+                    f"{e['lowest_at_reference']:.2f} | {e['reference_share_below']:.1%} |"
+                )
 
 
 if __name__ == "__main__":

@@ -169,6 +169,25 @@ def _kidnap_evidence(results=RESULTS) -> dict[str, str]:
     return out
 
 
+def _alarms_reference_fit(results=RESULTS) -> dict[str, str]:
+    """Where a real log's false alarms fall (eval.analyses.reference_fit's alarms): how many, and the largest share of
+    the log's scans that the SLAM pose fits worse than it fits the scans before any of them."""
+    out = {}
+    for path in sorted((Path(results) / "checks").glob("alarms_reference_fit_*.json")):
+        rec, name = json.loads(path.read_text()), path.stem[len("alarms_reference_fit_") :]
+        events = [e for run in rec["false_alarms"].values() for e in run]
+        if not events:
+            continue
+        out[f"alarms_{name}_count"] = str(len(events))
+        out[f"alarms_{name}_reference_worst_share"] = f"{100 * max(e['reference_share_below'] for e in events):.1f} %"
+        out[f"alarms_{name}_reference_fit"] = (
+            f"{min(e['lowest_at_reference'] for e in events):.2f}-{max(e['lowest_at_reference'] for e in events):.2f}"
+        )
+        out[f"alarms_{name}_reference_median"] = f"{rec['reference_agreement']['quantiles']['50']:.3f}"
+        out[f"alarms_{name}_window"] = f"{rec['alarm_window_s']:g} s"
+    return out
+
+
 def _yaw_of(log: str, weighting: str | None) -> float | None:
     """Heading RMSE of the authors' code (``weighting`` None) or of ours with their motion model on ``log``."""
     if weighting is None:
@@ -319,6 +338,7 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         wrong = [r for r in rows if not r["right_at_end"]]
         out[f"worlds_twins_{name}_wrong_against"] = f"{sum(r['evidence'] <= 0 for r in wrong)} of the {len(wrong)}"
     out.update(_kidnap_evidence())
+    out.update(_alarms_reference_fit())
     real = RESULTS / "checks" / "calibration_mixed_real_logs.json"  # the new calibration on real logs, poses unchanged
     if real.is_file():
         for log, sides in json.loads(real.read_text())["logs"].items():
