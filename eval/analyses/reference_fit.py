@@ -18,7 +18,10 @@ pose of it. It reports:
   updates too), beside the confidence's;
 * the confidence's AUROC over the scans whose SLAM pose agrees at least ``t`` with its map, for several ``t``: no
   threshold is chosen, the curve shows how much of the AUROC's shortfall lies where the reference fits its own map
-  badly.
+  badly;
+* each lost event on a right estimate (a false alarm, as ``own_slam_map`` counts them) with the lowest agreement of
+  the scans before it at the estimate and at the SLAM pose, and the share of the log's scans the SLAM pose fits worse:
+  is the alarm where the map explains the scan at no pose the label calls right?
 """
 
 from __future__ import annotations
@@ -41,9 +44,8 @@ from irmcl_warp.types import match_stamps
 from irmcl_warp.services.data import load_stream
 from irmcl_warp.services.outputs import write_json
 
-ALARM_WINDOW_S = (
-    2.0  # the scans before a lost event that its rule read (2 updates below the bar, and the scans between)
-)
+# the seconds of scans before a lost event that its rule read (2 updates below the bar, and the scans between)
+ALARM_WINDOW_S = 2.0
 THRESHOLDS = (0.0, 0.6, 0.7, 0.8, 0.9)  # the reference's agreement with its map at or above which a scan is judged
 MARGIN = 0.02  # one pose fits a scan better than another when its agreement is higher by more than this
 
