@@ -131,28 +131,29 @@ def reference_fit(slam: Path, runs: list[Path]) -> dict:
         conf = confidence_per_scan(run, stamps)
         use = np.isfinite(conf) & np.isfinite(on_ref).all(1) & np.isfinite(ref_fit[j])
         hit = right(est, on_ref)
+        lost_at_s = json.loads((run / "metrics.json").read_text()).get("lost_at_s")
+        t, near = stamps - stamps[0], np.zeros(len(stamps), bool)
+        for at in lost_at_s or ():  # the scans an alarm's rule read
+            near |= (t >= at - ALARM_WINDOW_S - 1e-6) & (t < at)
+        # the agreement at the estimate, once a scan: at the scored scans and at those before an alarm
+        fit_est = np.full(len(stamps), np.nan)
+        for i in np.flatnonzero(use | (near & np.isfinite(est).all(1) & (k[j] >= 0))):
+            fit_est[i] = agreement(est[i], log.ranges_m[k[j[i]]], *scan)
         conf_all.append(conf[use])
         hit_all.append(hit[use])
         fit_all.append(ref_fit[j][use])
-        at_est += [agreement(est[i], log.ranges_m[k[j[i]]], *scan) for i in np.flatnonzero(use)]
-        metrics = json.loads((run / "metrics.json").read_text())
-        if metrics.get("lost_at_s"):  # the agreement at the estimate, only at the scans an alarm's rule read
-            t, near = stamps - stamps[0], np.zeros(len(stamps), bool)
-            for at in metrics["lost_at_s"]:
-                near |= (t >= at - ALARM_WINDOW_S - 1e-6) & (t < at)
-            fit_est = np.full(len(stamps), np.nan)
-            for i in np.flatnonzero(near & np.isfinite(est).all(1) & (k[j] >= 0)):
-                fit_est[i] = agreement(est[i], log.ranges_m[k[j[i]]], *scan)
+        at_est.append(fit_est[use])
+        if lost_at_s:
             below = (lost_rule_of_run(json.loads((run / "manifest.json").read_text())) or {}).get(
                 "lost_agreement_below"
             )
             if below is None:
                 below = own_map_lost_rule_settings().lost_agreement_below
                 warnings.warn(f"{run}: its lost rule is not recorded; the bar read is today's ({below})", stacklevel=1)
-            alarms[str(run)] = alarm_fits(metrics["lost_at_s"], t, hit, fit_est, ref_fit[j], below)
-    conf_all, hit_all, at_ref = (np.concatenate(x) for x in (conf_all, hit_all, fit_all))
+            alarms[str(run)] = alarm_fits(lost_at_s, t, hit, fit_est, ref_fit[j], below)
+    conf_all, hit_all, at_ref, at_est = (np.concatenate(x) for x in (conf_all, hit_all, fit_all, at_est))
     fit = ref_fit[np.isfinite(ref_fit)]
-    at_est, wrong = np.array(at_est), ~hit_all  # each used scan's, in the order of the runs
+    wrong = ~hit_all  # at_est: each used scan's agreement at the estimate, in the order of the runs
     for events in alarms.values():  # how rare a fit that poor is for the reference: its share of the log's scans
         for e in events:
             e["reference_share_below"] = float(np.mean(fit < e["lowest_at_reference"]))
