@@ -258,11 +258,18 @@ def test_the_ordered_scan_is_the_cumulative_sum_and_repeats_itself_bit_for_bit(r
     """ordered_scan (the cdf a GPU resamples from): the numpy cumulative sum within float32 rounding, never
     decreasing for non-negative weights, and the same bits on every call (CUB's scan was not: its tiles' partial sums
     are added in the order the tiles finish). Sizes around the block size, and a set of nearly equal weights, where a
-    last-bit difference moves low-variance pointers across particles."""
+    last-bit difference moves low-variance pointers across particles, and weights over many orders of magnitude, where
+    a GPU's tile scan rounded a sum below the one before it (H200, 39,511 weights exp(N(0, 2)))."""
     from irmcl_warp.kernels.resample import SCAN_TILE, ordered_scan
 
-    for n in (1, SCAN_TILE - 1, SCAN_TILE, SCAN_TILE + 1, int(rng.integers(3 * SCAN_TILE, 40 * SCAN_TILE))):
-        w = (1.0 + 1e-3 * rng.random(n)).astype(np.float32) if n > SCAN_TILE else rng.random(n).astype(np.float32)
+    large = int(rng.integers(3 * SCAN_TILE, 40 * SCAN_TILE))
+    for n, spread in ((1, 0), (SCAN_TILE - 1, 0), (SCAN_TILE, 0), (SCAN_TILE + 1, 0), (large, 0), (large, 4.0)):
+        if spread:
+            w = np.exp(rng.normal(0, spread, n)).astype(np.float32)
+        elif n > SCAN_TILE:
+            w = (1.0 + 1e-3 * rng.random(n)).astype(np.float32)
+        else:
+            w = rng.random(n).astype(np.float32)
         wd = wp.array(w, dtype=wp.float32, device=DEVICE)
         totals = wp.zeros(n, dtype=wp.float32, device=DEVICE)
         outs = []
