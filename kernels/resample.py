@@ -11,7 +11,6 @@ weighted mean pose (circular mean for yaw). Numpy twins: irmcl_warp/reference/re
 from __future__ import annotations
 
 import math
-import typing
 
 import numpy as np
 import warp as wp
@@ -95,29 +94,25 @@ def accumulate_max_kernel(
 
 
 SCAN_TILE = 1024  # elements a block scans at once on a GPU (``ordered_scan``)
-
-
-@wp.func
-def monotone_scan(t: typing.Any):
-    """A tile's inclusive prefix sums, then their running maximum. A GPU's tile scan adds each element's prefix in
-    its own order (a tree of warp shuffles), so for non-negative terms a sum can round below the one before it where
-    the next term is tiny against it (H200, 39,511 weights exp(N(0, 2)): the cdf stepped down by a last bit). The
-    running maximum is exact in any order, so the scan stays the same bits on every run, and never decreases."""
-    return wp.tile_scan_max_inclusive(wp.tile_scan_inclusive(t))
+# Every tile scan of the cdf is followed by a running maximum (``wp.tile_scan_max_inclusive``). A GPU's tile scan adds
+# each element's prefix in its own order (a tree of warp shuffles), so for non-negative terms a sum can round below the
+# one before it where the next term is tiny against it (H200, 39,511 weights exp(N(0, 2)): the cdf stepped down by a
+# last bit). The maximum is exact in any order, so the scan keeps the same bits on every run and never decreases.
+# (Inlined, not a generic wp.func: Warp cached such a func's tile type across the module's builds for two block sizes.)
 
 
 @wp.kernel
 def block_scan_kernel(
     w: wp.array(dtype=wp.float32), cdf: wp.array(dtype=wp.float32), totals: wp.array(dtype=wp.float32)
 ):
-    """Each block's inclusive prefix sums of ``w`` into ``cdf`` (a tile scan: a fixed order, made monotone by
-    ``monotone_scan``) and its total."""
+    """Each block's inclusive prefix sums of ``w`` into ``cdf`` (a tile scan: a fixed order, then its running maximum:
+    SCAN_TILE's note) and its total."""
     b, lane = wp.tid()
     i = b * wp.block_dim() + lane
     v = float(0.0)
     if i < w.shape[0]:
         v = w[i]
-    mine = wp.untile(monotone_scan(wp.tile(v)))
+    mine = wp.untile(wp.tile_scan_max_inclusive(wp.tile_scan_inclusive(wp.tile(v))))
     if i < w.shape[0]:
         cdf[i] = mine
     if lane == wp.block_dim() - 1:
@@ -140,7 +135,7 @@ def totals_tile_scan_kernel(totals: wp.array(dtype=wp.float32), count: int):
     v = float(0.0)
     if lane < count:
         v = totals[lane]
-    mine = wp.untile(monotone_scan(wp.tile(v)))
+    mine = wp.untile(wp.tile_scan_max_inclusive(wp.tile_scan_inclusive(wp.tile(v))))
     if lane < count:
         totals[lane] = mine
 
@@ -235,7 +230,7 @@ def weigh_scan_kernel(
         x = p[0] - centre[0]
         y = p[1] - centre[1]
         acc = vec8(v * v, v * x, v * y, v * wp.cos(p[2]), v * wp.sin(p[2]), v, v * x * x, v * y * y)
-    mine = wp.untile(monotone_scan(wp.tile(v)))
+    mine = wp.untile(wp.tile_scan_max_inclusive(wp.tile_scan_inclusive(wp.tile(v))))
     if i < log_w.shape[0]:
         cdf[i] = mine
     if lane == wp.block_dim() - 1:
@@ -269,7 +264,7 @@ def weigh_finish_kernel(
         own += totals[j]
         acc += partials[j]
     if run == 1:  # one block a thread: an inclusive tile scan of the totals themselves
-        mine = wp.untile(monotone_scan(wp.tile(own)))
+        mine = wp.untile(wp.tile_scan_max_inclusive(wp.tile_scan_inclusive(wp.tile(own))))
         if lo < hi:
             totals[lo] = mine
     elif lane == 0:  # more blocks than threads: one thread adds them in order (``totals_scan_kernel``, to the bit)
