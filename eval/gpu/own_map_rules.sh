@@ -11,8 +11,9 @@
 # (irmcl_warp/mcl/calibration/likelihood_field.json at 20k): two calibrations side by side are two calls, each
 # with its own OUT; the runs' identity includes the file, so they never share a folder.
 # SLAM_ARGS as in eval/gpu/own_slam_map.sh (MIT Killian's converged map: seed 6, 60 particles, gmapping_code).
-# Results: $OUT/own_slam_map-<log>-rule<v>.json and $OUT/own_map_rule<v>.tgz (the runs' trajectories, metrics and
-# settings) per threshold. OUT must be an absolute path (the runs start inside the copies).
+# Results: $OUT/own_slam_map-<log>-rule<v>.json and $OUT/own_map_rule<v>.tgz (the runs' trajectories, metrics,
+# settings and spread.csv, the confidence per scan that eval.analyses.reference_fit scores) per threshold.
+# OUT must be an absolute path (the runs start inside the copies).
 set -uo pipefail
 [ -f .gpu/b/source_env.sh ] && source .gpu/b/source_env.sh
 export PYTHONUNBUFFERED=1 TQDM_DISABLE=1
@@ -55,5 +56,5 @@ for v in $RULES; do
   (cd "$tree" && python -m eval.analyses.own_slam_map --slam "$ROOT/$slam" --runs $runs \
     --out "$OUT/own_slam_map-$LOG-rule$v.json" | tail -4)
   (cd "$tree" && find outputs -path "*/localize/*-in-map-*" \( -name trajectory.tum -o -name metrics.json \
-    -o -name config.yaml -o -name manifest.json \) | tar czf "$OUT/own_map_rule$v.tgz" -T -)
+    -o -name config.yaml -o -name manifest.json -o -name spread.csv \) | tar czf "$OUT/own_map_rule$v.tgz" -T -)
 done
