@@ -339,18 +339,23 @@ def facts(slam: list, released: dict, nof: dict, pipe: list = (), verdicts: list
         out[f"worlds_twins_{name}_wrong_against"] = f"{sum(r['evidence'] <= 0 for r in wrong)} of the {len(wrong)}"
     out.update(_kidnap_evidence())
     out.update(_alarms_reference_fit())
-    real = RESULTS / "checks" / "calibration_mixed_real_logs.json"  # the new calibration on real logs, poses unchanged
-    if real.is_file():
+    # the calibration fitted among objects against the one fitted on clean drives, on real logs, poses unchanged:
+    # calibration_mixed_real_logs.json at 20k, calibration_mixed_100k_real_logs.json at 100k
+    for real in sorted((RESULTS / "checks").glob("calibration_mixed*_real_logs.json")):
+        count = real.stem[len("calibration_mixed") : -len("_real_logs")]  # "" or "_100k"
         for log, sides in json.loads(real.read_text())["logs"].items():
             new, old = sides["mixed"]["confidence"]["auroc"], sides["shipped"]["confidence"]["auroc"]
-            out[f"calibration_mixed_{log}_auroc"] = f"{new:.3f} against {old:.3f}"
+            out[f"calibration_mixed{count}_{log}_auroc"] = f"{new:.3f} against {old:.3f}"
             a, b = sides["mixed"]["false_alarms"], sides["shipped"]["false_alarms"]
             p = rates_exact(a["false"], a["hours_right"], b["false"], b["hours_right"])
-            out[f"calibration_mixed_{log}_false_alarms"] = (
+            out[f"calibration_mixed{count}_{log}_false_alarms"] = (
                 f"{a['false']} against {b['false']} in {a['hours_right']:.2f} h of right tracking "
                 f"({a['per_hour_right']:.1f} against {b['per_hour_right']:.1f} an hour; exact test of two Poisson "
                 f"rates p = {p:.2g})"
             )
+            out[f"calibration_mixed{count}_{log}_successes"] = f"{sides['mixed']['successes']}/{sides['mixed']['of']}"
+            wrong = sides["shipped"]["confidence"]["above_threshold_when_wrong"]
+            out[f"calibration_mixed{count}_{log}_confident_when_wrong"] = f"{100 * wrong:.0f} %"
     for name, paired in _paired_worlds().items():  # KLD-sampling against the fixed count, drive by drive
         for key, value in paired.items():
             out[f"worlds_{name}_{key}"] = value
