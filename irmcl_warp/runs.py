@@ -488,6 +488,24 @@ class Run:
     done: bool  # ``path`` already held this run: nothing to do
     upstream: dict = field(default_factory=dict)
     started: float = field(default_factory=time.time)
+    # the commit of the code the run loaded, read when it opens: a run of twenty minutes that read it at its end
+    # named a commit made while it ran (thirty-ninth session, an MIT Killian run on the CPU)
+    git_sha: str = field(default_factory=lambda: _git_sha())
+
+    def _checkout_changed(self) -> dict:
+        """``git_sha_at_finish`` and a loud warning where the checkout's commit (or its uncommitted changes) changed
+        while the run ran: the manifest keeps the one it started from, the code Python had loaded."""
+        import warnings
+
+        now = _git_sha()
+        if now == self.git_sha:
+            return {}
+        warnings.warn(
+            f"{self.path}: the checkout changed while this run ran ({self.git_sha} at its start, {now} now); its "
+            "manifest names the commit it started from",
+            stacklevel=3,
+        )
+        return {"git_sha_at_finish": now}
 
     def finish(self, metrics: dict | None, device: str, extra: dict | None = None) -> Path:
         """Write metrics.json (when given), config.yaml and manifest.json, then swap the folder in."""
@@ -502,7 +520,8 @@ class Run:
             "exp": self.ident.exp,
             "label": self.ident.label,
             "package": {"name": "irmcl-warp", "version": package_version()},
-            "git_sha": _git_sha(),
+            "git_sha": self.git_sha,
+            **self._checkout_changed(),
             "python": platform.python_version(),
             "versions": _versions(),
             "device": device,

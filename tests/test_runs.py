@@ -417,6 +417,25 @@ def test_a_finished_run_reused_by_other_code_is_a_loud_warning(tmp_path, monkeyp
     assert entry["manifest"]["git_sha"] == "1111111-dirty" and entry["manifest"]["device"] == "cpu"
 
 
+def test_a_run_records_the_commit_it_started_from_and_says_when_the_checkout_moved(tmp_path, monkeypatch):
+    """The manifest names the commit the run's code was loaded from, read when the run opens: a commit made while
+    it runs is no longer recorded as its code; it is kept beside it (``git_sha_at_finish``) with a warning naming
+    both. A run whose checkout did not change gets neither."""
+    cfg = _cfg(*SMALL)
+    monkeypatch.setenv("IRMCL_GIT_SHA", "aaaa111")
+    with runs.start(cfg, "inspect", tmp_path) as run:
+        monkeypatch.setenv("IRMCL_GIT_SHA", "bbbb222")  # committed while the run ran
+        with pytest.warns(UserWarning, match="aaaa111 at its start, bbbb222 now"):
+            folder = run.finish({"made": "by the test"}, "cpu")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert manifest["git_sha"] == "aaaa111" and manifest["git_sha_at_finish"] == "bbbb222"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        other = _finish(_cfg(*SMALL, "sim.path_seed=2"), "inspect", tmp_path)
+    manifest = json.loads((other / "manifest.json").read_text())
+    assert manifest["git_sha"] == "bbbb222" and "git_sha_at_finish" not in manifest
+
+
 def test_a_copy_without_its_history_records_the_commit_it_was_made_from(tmp_path, monkeypatch):
     """A lent GPU machine runs a copy of the working tree with a stale history: IRMCL_GIT_SHA (written here by
     eval/gpu/stamp_source.sh) is what a run records; without it, this checkout's own HEAD (and -dirty when tracked
