@@ -98,7 +98,7 @@ SCAN_TILE = 1024  # elements a block scans at once on a GPU (``ordered_scan``)
 # each element's prefix in its own order (a tree of warp shuffles), so for non-negative terms a sum can round below the
 # one before it where the next term is tiny against it (H200, 39,511 weights exp(N(0, 2)): the cdf stepped down by a
 # last bit). The maximum is exact in any order, so the scan keeps the same bits on every run and never decreases.
-# (Inlined, not a generic wp.func: Warp cached such a func's tile type across the module's builds for two block sizes.)
+# (Inlined: a generic wp.func holding the two failed to build on the H200 once, a 1024-wide tile in a 256-wide build.)
 
 
 @wp.kernel
