@@ -614,8 +614,9 @@ def start(cfg, stage: str, root=OUTPUTS) -> Iterator[Run]:
         ok, why = intact(final, ident.id)
         if ok:
             print(f"{final}: up to date (a finished run of these settings and inputs)")
-            warn_if_other_code(final)
-            yield Run(ident, restricted(ident.settings), final, final, True, upstream)
+            now = _git_sha()  # read once: the reuse's warning and the Run's record
+            warn_if_other_code(final, now)
+            yield Run(ident, restricted(ident.settings), final, final, True, upstream, git_sha=now)
             return
         if final.exists():
             print(f"{final}: redoing ({why})")
@@ -627,15 +628,16 @@ def start(cfg, stage: str, root=OUTPUTS) -> Iterator[Run]:
         yield run
 
 
-def warn_if_other_code(folder: Path) -> str | None:
+def warn_if_other_code(folder: Path, now: str | None = None) -> str | None:
     """A finished run reused by code other than the code that made it (another commit, or either checkout with
     uncommitted changes) is a loud warning: a run's identity is what it reads, not its code, so a changed program
     finds the old result "up to date" (the thirty-sixth session kept four runs made by uncommitted code under ids
-    the committed code reuses, with other drives). Returns the warning, or None."""
+    the committed code reuses, with other drives). ``now``: this code's commit, when the caller has read it already.
+    Returns the warning, or None."""
     import warnings
 
     made = json.loads((Path(folder) / "manifest.json").read_text()).get("git_sha", "unknown")
-    now = _git_sha()
+    now = _git_sha() if now is None else now
     if (made == now and not now.endswith("-dirty")) or "unknown" in (made, now):
         return None
     why = "with uncommitted changes" if made == now else f"by {made}; this code is {now}"
